@@ -1,0 +1,24 @@
+#!/usr/bin/env bash
+# Peer-comparison benchmark: make a venv (bench/peers/.venv, gitignored),
+# install the pinned PyPI requirements, run cloth_peers.py.
+# Usage: bench/peers/run.sh [--framework taichi|numpy|newton|all] [--steps N] [--repeats N] [--warmup N]
+# Env: PYTHON (default python3.11, else python3), VENV (default bench/peers/.venv).
+set -euo pipefail
+here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
+py="${PYTHON:-$(command -v python3.11 || command -v python3)}"
+venv="${VENV:-$here/.venv}"
+
+if [ ! -x "$venv/bin/python" ]; then
+    "$py" -m venv "$venv"
+    "$venv/bin/python" -m pip install --quiet --upgrade pip
+fi
+stamp="$venv/.requirements.installed"
+if ! cmp -s "$here/requirements.txt" "$stamp"; then
+    "$venv/bin/python" -m pip install --quiet -r "$here/requirements.txt"
+    cp "$here/requirements.txt" "$stamp"
+fi
+
+# one thread everywhere (Taichi and Warp are set up single-threaded in the script)
+export OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1
+cd "$here"
+exec "$venv/bin/python" cloth_peers.py "$@"

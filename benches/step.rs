@@ -1,0 +1,53 @@
+//! Cost of one step for square cloths of 16² … 256² nodes and every
+//! integrator, on the hanging scene's fabric. Criterion reports time per step
+//! and, as throughput, spring evaluations per second (springs × force
+//! evaluations per step).
+//!
+//! dt is set per size to half the predicted limit of symplectic Euler (the
+//! same for every integrator, so explicit Euler is run forced): the cost of a
+//! step does not depend on dt, except for implicit Euler's CG iterations,
+//! which this choice keeps at a realistic count.
+
+use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
+use lodcloth::scene::Scene;
+use lodcloth::sim::{Integrator, StabilityCheck};
+
+const SCENE: &str = include_str!("../config/scenes/hanging.toml");
+
+fn bench_step(c: &mut Criterion) {
+    let base = Scene::from_toml(SCENE, "hanging.toml").expect("shipped scene is valid");
+    let sizes: Vec<usize> = std::env::var("LODCLOTH_BENCH_SIZES")
+        .ok()
+        .map(|s| s.split(',').filter_map(|x| x.trim().parse().ok()).collect())
+        .unwrap_or_else(|| vec![16, 32, 64, 128, 256]);
+    for integrator in Integrator::ALL {
+        let mut group = c.benchmark_group(format!("step/{integrator}"));
+        for &n in &sizes {
+            let mut scene = base.clone();
+            scene.params.integrator = Integrator::SymplecticEuler;
+            let probe = scene.build_at(n, n).map(|s| s.dt_limit());
+            let Ok(limit) = probe else { continue };
+            scene.params.dt = 0.5 * limit;
+            scene.params.integrator = integrator;
+            scene.stability = StabilityCheck::Force;
+            let mut sim = scene.build_at(n, n).expect("builds");
+            // Let it fall for a moment so springs are stretched and moving.
+            for _ in 0..20 {
+                sim.step();
+            }
+            let springs = sim.topology().spring_count() as u64;
+            group.throughput(Throughput::Elements(springs * u64::from(integrator.force_evaluations())));
+            group.bench_with_input(BenchmarkId::from_parameter(n), &n, |b, _| {
+                b.iter(|| sim.step());
+            });
+        }
+        group.finish();
+    }
+}
+
+criterion_group! {
+    name = benches;
+    config = Criterion::default().sample_size(20).warm_up_time(std::time::Duration::from_millis(500)).measurement_time(std::time::Duration::from_secs(2));
+    targets = bench_step
+}
+criterion_main!(benches);

@@ -1,0 +1,21 @@
+//! lodcloth: mass-spring cloth at several levels of detail, stepping in real
+//! time, with behaviour kept coherent across levels.
+//!
+//! # Layout
+//! Dependencies point one way: `main → {output, scene} → sim`.
+//!
+//! - [`sim`] — the pure core: topology (springs by type in a fixed order),
+//!   state (flat arrays), forces (Sung 2018 eq. 1), integrators (explicit,
+//!   symplectic and implicit Euler, RK4), strain control, stability
+//!   prediction. No I/O, no threads, no allocation per step.
+//! - [`scene`] — scene files (TOML): cloth size and resolution, material,
+//!   pins, forces over time, wind; validated into ready-to-run simulations at
+//!   any resolution.
+//! - [`output`] — trajectory files, CSV reports, pictures (PNG render, SVG charts).
+//! - [`experiments`] — longer studies built on the core (stability sweeps).
+//! - `main.rs` — the `lodcloth` command line.
+
+pub mod experiments;
+pub mod output;
+pub mod scene;
+pub mod sim;

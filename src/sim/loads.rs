@@ -1,0 +1,171 @@
+//! External loads and kinematic constraints, already resolved to node indices:
+//! time profiles, forces on node sets, wind, and pins moving along paths.
+//! The scene module builds these from config for a given resolution.
+
+use std::f64::consts::TAU;
+
+/// A dimensionless time profile s(t) that scales a load.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Profile {
+    /// s = 1.
+    Constant,
+    /// 0 before `start`, rising linearly to 1 at `end`, 1 after.
+    Ramp { start: f64, end: f64 },
+    /// 1 for `start ≤ t < start + duration`, else 0.
+    Pulse { start: f64, duration: f64 },
+    /// s = offset + amplitude · sin(2π·frequency·t + phase).
+    Sine { frequency: f64, phase: f64, amplitude: f64, offset: f64 },
+}
+
+impl Profile {
+    /// Value of the profile at time `t` (s).
+    pub fn at(&self, t: f64) -> f64 {
+        match *self {
+            Profile::Constant => 1.0,
+            Profile::Ramp { start, end } => {
+                if t <= start {
+                    0.0
+                } else if t >= end {
+                    1.0
+                } else {
+                    (t - start) / (end - start)
+                }
+            }
+            Profile::Pulse { start, duration } => {
+                if t >= start && t < start + duration {
+                    1.0
+                } else {
+                    0.0
+                }
+            }
+            Profile::Sine { frequency, phase, amplitude, offset } => {
+                offset + amplitude * (TAU * frequency * t + phase).sin()
+            }
+        }
+    }
+}
+
+/// A force on a set of nodes, `force · profile(t)` in total, split between
+/// the nodes by `shares` (which sum to 1; the scene uses the nodes' areas, so
+/// the same physical load acts at every resolution).
+#[derive(Debug, Clone, PartialEq)]
+pub struct NodeLoad {
+    /// Loaded nodes.
+    pub nodes: Vec<u32>,
+    /// Fraction of the total force on each node.
+    pub shares: Vec<f64>,
+    /// Total force in newtons at profile value 1.
+    pub force: [f64; 3],
+    /// Time profile.
+    pub profile: Profile,
+}
+
+/// Wind: quadratic aerodynamic drag on the normal component of the air
+/// velocity relative to each node, F = ½ ρ C_d A |w_n| w_n n̂, with
+/// w_n = (w − v)·n̂, A the node's rest area and n̂ its area-weighted normal.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Wind {
+    /// Air velocity (m/s) at profile value 1.
+    pub velocity: [f64; 3],
+    /// Time profile of the air velocity.
+    pub profile: Profile,
+    /// Air density ρ (kg/m³), 1.2 at sea level.
+    pub air_density: f64,
+    /// Drag coefficient C_d (dimensionless), about 1 for a flat plate.
+    pub drag_coefficient: f64,
+}
+
+/// How a pinned node moves.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum PinPath {
+    /// Held at its anchor.
+    Fixed,
+    /// anchor + velocity·(clamp(t, start, end) − start): moves at constant
+    /// velocity during [start, end], at rest before and after.
+    Linear { velocity: [f64; 3], start: f64, end: f64 },
+    /// anchor + amplitude · sin(2π·frequency·t): oscillates about the anchor.
+    Sine { amplitude: [f64; 3], frequency: f64 },
+}
+
+impl PinPath {
+    /// Position offset from the anchor and velocity at time `t`.
+    pub fn at(&self, t: f64) -> ([f64; 3], [f64; 3]) {
+        match *self {
+            PinPath::Fixed => ([0.0; 3], [0.0; 3]),
+            PinPath::Linear { velocity, start, end } => {
+                let tc = t.clamp(start, end) - start;
+                let moving = t >= start && t < end;
+                (velocity.map(|v| v * tc), if moving { velocity } else { [0.0; 3] })
+            }
+            PinPath::Sine { amplitude, frequency } => {
+                let w = TAU * frequency;
+                let (s, c) = (w * t).sin_cos();
+                (amplitude.map(|a| a * s), amplitude.map(|a| a * w * c))
+            }
+        }
+    }
+}
+
+/// A node whose position is prescribed: it feels no force and follows its path.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Pin {
+    /// Node index.
+    pub node: u32,
+    /// Position at t = 0 (and for a fixed pin, always).
+    pub anchor: [f64; 3],
+    /// Motion relative to the anchor.
+    pub path: PinPath,
+}
+
+impl Pin {
+    /// Prescribed position and velocity at time `t`.
+    pub fn at(&self, t: f64) -> ([f64; 3], [f64; 3]) {
+        let (d, v) = self.path.at(t);
+        ([self.anchor[0] + d[0], self.anchor[1] + d[1], self.anchor[2] + d[2]], v)
+    }
+}
+
+/// All external influences on a cloth except gravity and drag.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Loads {
+    /// Forces on node sets.
+    pub forces: Vec<NodeLoad>,
+    /// Optional wind.
+    pub wind: Option<Wind>,
+    /// Pinned nodes (at most one pin per node).
+    pub pins: Vec<Pin>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ramp_and_pulse_have_the_documented_shape() {
+        let r = Profile::Ramp { start: 1.0, end: 3.0 };
+        assert_eq!(r.at(0.5), 0.0);
+        assert!((r.at(2.0) - 0.5).abs() < 1e-15);
+        assert_eq!(r.at(4.0), 1.0);
+        let p = Profile::Pulse { start: 1.0, duration: 0.5 };
+        assert_eq!([p.at(0.99), p.at(1.0), p.at(1.49), p.at(1.5)], [0.0, 1.0, 1.0, 0.0]);
+    }
+
+    #[test]
+    fn pin_velocity_is_the_derivative_of_its_position() {
+        let paths = [
+            PinPath::Linear { velocity: [0.1, -0.2, 0.3], start: 0.5, end: 2.0 },
+            PinPath::Sine { amplitude: [0.05, 0.0, -0.02], frequency: 1.5 },
+        ];
+        let h = 1e-6;
+        for path in paths {
+            for t in [0.7, 1.1, 1.9] {
+                let (p1, _) = path.at(t + h);
+                let (p0, _) = path.at(t - h);
+                let (_, v) = path.at(t);
+                for c in 0..3 {
+                    assert!(((p1[c] - p0[c]) / (2.0 * h) - v[c]).abs() < 1e-6);
+                }
+            }
+        }
+    }
+}

@@ -1,0 +1,584 @@
+//! The pure simulation core: no I/O, no threads, no clock, no allocation per
+//! step. A [`Simulation`] owns a cloth's topology, masses, parameters, loads
+//! and [`State`]; [`Simulation::step`] advances it by exactly one fixed `dt`
+//! and returns a [`StepReport`]. Numerical trouble comes back as data
+//! (`report.finite == false`), never as a panic or an error.
+
+mod forces;
+mod implicit;
+mod loads;
+mod params;
+mod stability;
+mod state;
+mod strain;
+mod topology;
+
+use std::sync::Arc;
+
+pub use forces::SpringTotals;
+pub use loads::{Loads, NodeLoad, Pin, PinPath, Profile, Wind};
+pub use params::{
+    CgSettings, Integrator, Material, SimParams, SpringCoeffs, SpringKind, StiffnessAdjustment, StrainLimit,
+};
+pub use stability::{amplification, dt_limit, modal_estimate, ModalEstimate};
+pub use state::State;
+pub use strain::StrainOutcome;
+pub use topology::{GridShape, Orientation, Run, SpringGroup, Topology};
+
+use forces::KernelScratch;
+use implicit::{ImplicitInputs, ImplicitWorkspace};
+use strain::StrainWorkspace;
+
+/// Why a simulation could not be built or changed. Every variant names what
+/// was wrong.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SimError {
+    /// A scalar parameter is out of its valid range.
+    #[error("{name} = {value}: {reason}")]
+    InvalidParameter { name: String, value: f64, reason: &'static str },
+    /// Array sizes do not match the topology.
+    #[error("{what} has {got} entries, the cloth has {expected} nodes")]
+    SizeMismatch { what: &'static str, got: usize, expected: usize },
+    /// A node index is outside the cloth.
+    #[error("{what}: node {node} does not exist (the cloth has {n_nodes} nodes)")]
+    NodeOutOfRange { what: &'static str, node: u32, n_nodes: usize },
+    /// A node is pinned twice.
+    #[error("node {node} is pinned more than once")]
+    DuplicatePin { node: u32 },
+    /// dt is beyond the predicted stability limit of the integrator.
+    #[error(
+        "dt = {dt:e} s is beyond the predicted stability limit of {integrator} ({limit:e} s; \
+         ω_max = {omega_max:.1} rad/s, damping rate {damping_rate:.3} 1/s); \
+         lower dt, soften the springs, choose another integrator, or force it"
+    )]
+    UnstableTimeStep {
+        integrator: Integrator,
+        dt: f64,
+        limit: f64,
+        omega_max: f64,
+        damping_rate: f64,
+    },
+}
+
+/// What one step did and what the new state looks like.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StepReport {
+    /// Steps taken so far (after this one).
+    pub step: u64,
+    /// Simulated time after this step (s).
+    pub time: f64,
+    /// False when any position or velocity is NaN or infinite: the simulation
+    /// has diverged and will not step again until its state is replaced.
+    pub finite: bool,
+    /// Σ ½ m |v|² over free nodes (J).
+    pub kinetic_energy: f64,
+    /// Σ ½ K (L − L0)² over all springs (J).
+    pub elastic_energy: f64,
+    /// Σ −m g·x over free nodes (J), zero at the origin.
+    pub gravity_energy: f64,
+    /// Largest strain L/L0 − 1 per spring kind ([`SpringKind::index`]).
+    pub max_strain: [f64; 3],
+    /// Conjugate-gradient iterations (implicit Euler only).
+    pub solver_iterations: u32,
+    /// Final relative residual of the CG solve (implicit Euler only).
+    pub solver_residual: f64,
+    /// Strain-limiting sweeps that corrected something.
+    pub strain_iterations: u32,
+}
+
+impl StepReport {
+    /// Kinetic + elastic + gravitational energy (J).
+    pub fn total_energy(&self) -> f64 {
+        self.kinetic_energy + self.elastic_energy + self.gravity_energy
+    }
+
+    /// Largest strain over all spring kinds.
+    pub fn max_strain_overall(&self) -> f64 {
+        self.max_strain.iter().copied().fold(f64::NEG_INFINITY, f64::max)
+    }
+}
+
+/// How strictly [`Simulation::new`] checks stability.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum StabilityCheck {
+    /// Refuse a dt beyond the predicted limit of the integrator.
+    #[default]
+    Enforce,
+    /// Accept it anyway (for stability experiments).
+    Force,
+}
+
+/// Scratch buffers; allocated once when the simulation is built.
+#[derive(Debug, Clone)]
+struct Workspace {
+    kernel: KernelScratch,
+    force: Vec<f64>,
+    normals: Vec<f64>,
+    /// RK4: stage position/velocity, accumulated increments, stage acceleration.
+    stage_pos: Vec<f64>,
+    stage_vel: Vec<f64>,
+    sum_pos: Vec<f64>,
+    sum_vel: Vec<f64>,
+    stage_acc: Vec<f64>,
+    implicit: Option<ImplicitWorkspace>,
+    strain: Option<StrainWorkspace>,
+}
+
+impl Workspace {
+    fn new(topology: &Topology, params: &SimParams, loads: &Loads) -> Workspace {
+        let n3 = 3 * topology.n_nodes;
+        let rk = if params.integrator == Integrator::Rk4 { n3 } else { 0 };
+        Workspace {
+            kernel: KernelScratch::new(topology),
+            force: vec![0.0; n3],
+            normals: if loads.wind.is_some() { vec![0.0; n3] } else { Vec::new() },
+            stage_pos: vec![0.0; rk],
+            stage_vel: vec![0.0; rk],
+            sum_pos: vec![0.0; rk],
+            sum_vel: vec![0.0; rk],
+            stage_acc: vec![0.0; rk],
+            implicit: (params.integrator == Integrator::ImplicitEuler).then(|| ImplicitWorkspace::new(topology)),
+            strain: params.strain_limit.map(|_| StrainWorkspace::new(topology)),
+        }
+    }
+}
+
+/// Read-only model data shared by every force evaluation.
+#[derive(Debug, Clone)]
+struct Model {
+    topology: Arc<Topology>,
+    masses: Vec<f64>,
+    /// 1/m for free nodes, 0 for pinned ones.
+    inv_mass: Vec<f64>,
+    /// 1 for free nodes, 0 for pinned ones.
+    free: Vec<f64>,
+    params: SimParams,
+    loads: Loads,
+}
+
+impl Model {
+    fn adjust_ratio(&self) -> f64 {
+        self.params
+            .stiffness_adjustment
+            .map_or(f64::INFINITY, |a| 1.0 + a.allowed)
+    }
+
+    /// Accelerations at (t, pos, vel) into `acc`; returns the spring by-products.
+    fn accelerations(&self, t: f64, pos: &[f64], vel: &[f64], acc: &mut [f64], ws: &mut Workspace) -> SpringTotals {
+        let topo = &*self.topology;
+        let n = topo.n_nodes;
+        let f = &mut ws.force;
+        f.fill(0.0);
+        let totals = forces::spring_forces(topo, &self.params.material, self.adjust_ratio(), pos, vel, f, &mut ws.kernel);
+        for load in &self.loads.forces {
+            let s = load.profile.at(t);
+            for (&k, &share) in load.nodes.iter().zip(&load.shares) {
+                for c in 0..3 {
+                    f[c * n + k as usize] += share * s * load.force[c];
+                }
+            }
+        }
+        if let Some(wind) = &self.loads.wind {
+            forces::node_normals(topo, pos, &mut ws.normals);
+            let s = wind.profile.at(t);
+            let half_rho_cd = 0.5 * wind.air_density * wind.drag_coefficient;
+            let nr = &ws.normals;
+            for k in 0..n {
+                let nk = [nr[k], nr[n + k], nr[2 * n + k]];
+                let rel = [
+                    s * wind.velocity[0] - vel[k],
+                    s * wind.velocity[1] - vel[n + k],
+                    s * wind.velocity[2] - vel[2 * n + k],
+                ];
+                let wn = rel[0] * nk[0] + rel[1] * nk[1] + rel[2] * nk[2];
+                let mag = half_rho_cd * topo.node_areas[k] * wn.abs() * wn;
+                for c in 0..3 {
+                    f[c * n + k] += mag * nk[c];
+                }
+            }
+        }
+        let g = self.params.gravity;
+        let drag = self.params.drag;
+        for c in 0..3 {
+            let (fc, vc, ac) = (&f[c * n..(c + 1) * n], &vel[c * n..(c + 1) * n], &mut acc[c * n..(c + 1) * n]);
+            for k in 0..n {
+                ac[k] = fc[k] * self.inv_mass[k] + self.free[k] * (g[c] - drag * vc[k]);
+            }
+        }
+        totals
+    }
+}
+
+/// A cloth being simulated. See the module docs.
+#[derive(Debug, Clone)]
+pub struct Simulation {
+    model: Model,
+    state: State,
+    ws: Workspace,
+    /// Acceleration at `state`; valid while `cached` is true.
+    acc: Vec<f64>,
+    totals: SpringTotals,
+    cached: bool,
+    modal: ModalEstimate,
+    last: Option<StepReport>,
+}
+
+impl Simulation {
+    /// Build a simulation starting from `state` (use [`State::at_rest`] for the
+    /// rest shape). Validates every input; with [`StabilityCheck::Enforce`]
+    /// refuses a dt beyond the integrator's predicted limit.
+    pub fn new(
+        topology: Arc<Topology>,
+        masses: Vec<f64>,
+        params: SimParams,
+        loads: Loads,
+        state: State,
+        check: StabilityCheck,
+    ) -> Result<Simulation, SimError> {
+        let n = topology.n_nodes;
+        validate_params(&params)?;
+        if masses.len() != n {
+            return Err(SimError::SizeMismatch { what: "masses", got: masses.len(), expected: n });
+        }
+        if let Some((k, &m)) = masses.iter().enumerate().find(|(_, m)| !(m.is_finite() && **m > 0.0)) {
+            return Err(SimError::InvalidParameter {
+                name: format!("masses[{k}]"),
+                value: m,
+                reason: "node masses must be positive and finite",
+            });
+        }
+        if state.pos.len() != 3 * n || state.vel.len() != 3 * n {
+            return Err(SimError::SizeMismatch { what: "state", got: state.pos.len() / 3, expected: n });
+        }
+        validate_loads(&loads, n)?;
+        let mut pinned = vec![false; n];
+        for pin in &loads.pins {
+            if std::mem::replace(&mut pinned[pin.node as usize], true) {
+                return Err(SimError::DuplicatePin { node: pin.node });
+            }
+        }
+        let modal = modal_estimate(&topology, &params.material, &masses, &pinned, params.drag);
+        let limit = modal.dt_limit(params.integrator);
+        if check == StabilityCheck::Enforce && params.dt > limit {
+            return Err(SimError::UnstableTimeStep {
+                integrator: params.integrator,
+                dt: params.dt,
+                limit,
+                omega_max: modal.omega_max,
+                damping_rate: modal.damping_rate,
+            });
+        }
+        let inv_mass = (0..n).map(|k| if pinned[k] { 0.0 } else { 1.0 / masses[k] }).collect();
+        let free = (0..n).map(|k| if pinned[k] { 0.0 } else { 1.0 }).collect();
+        let ws = Workspace::new(&topology, &params, &loads);
+        let mut sim = Simulation {
+            model: Model { topology, masses, inv_mass, free, params, loads },
+            acc: vec![0.0; 3 * n],
+            state,
+            ws,
+            totals: SpringTotals::default(),
+            cached: false,
+            modal,
+            last: None,
+        };
+        sim.apply_pins();
+        Ok(sim)
+    }
+
+    /// The current state.
+    pub fn state(&self) -> &State {
+        &self.state
+    }
+
+    /// Replace the state (same node count), e.g. after a level switch or a
+    /// rollback. Clears a divergence.
+    pub fn set_state(&mut self, state: State) -> Result<(), SimError> {
+        let n = self.model.topology.n_nodes;
+        if state.pos.len() != 3 * n || state.vel.len() != 3 * n {
+            return Err(SimError::SizeMismatch { what: "state", got: state.pos.len() / 3, expected: n });
+        }
+        self.state = state;
+        self.cached = false;
+        self.last = None;
+        self.apply_pins();
+        Ok(())
+    }
+
+    /// The topology.
+    pub fn topology(&self) -> &Arc<Topology> {
+        &self.model.topology
+    }
+
+    /// Node masses (kg).
+    pub fn masses(&self) -> &[f64] {
+        &self.model.masses
+    }
+
+    /// Parameters in force.
+    pub fn params(&self) -> &SimParams {
+        &self.model.params
+    }
+
+    /// Loads and pins in force.
+    pub fn loads(&self) -> &Loads {
+        &self.model.loads
+    }
+
+    /// Modal estimate computed when the simulation was built.
+    pub fn modal(&self) -> &ModalEstimate {
+        &self.modal
+    }
+
+    /// Predicted largest stable dt of the configured integrator.
+    pub fn dt_limit(&self) -> f64 {
+        self.modal.dt_limit(self.model.params.integrator)
+    }
+
+    /// Report of the last step, if any since the state was last set.
+    pub fn last_report(&self) -> Option<&StepReport> {
+        self.last.as_ref()
+    }
+
+    /// True when the last step produced a non-finite value.
+    pub fn diverged(&self) -> bool {
+        self.last.is_some_and(|r| !r.finite)
+    }
+
+    /// Acceleration at the current state, [x…, y…, z…] (m/s²).
+    pub fn accelerations(&mut self) -> &[f64] {
+        self.ensure_cache();
+        &self.acc
+    }
+
+    /// Advance by one `dt`. Never fails and never allocates. After a
+    /// divergence it does nothing and returns the divergence report again.
+    pub fn step(&mut self) -> StepReport {
+        if let Some(last) = self.last.filter(|r| !r.finite) {
+            return last;
+        }
+        self.ensure_cache();
+        let dt = self.model.params.dt;
+        let t0 = self.state.time;
+        let mut solver = (0, 0.0);
+        match self.model.params.integrator {
+            Integrator::ExplicitEuler => {
+                for ((x, v), a) in self.state.pos.iter_mut().zip(&mut self.state.vel).zip(&self.acc) {
+                    *x += dt * *v;
+                    *v += dt * a;
+                }
+            }
+            Integrator::SymplecticEuler => {
+                for ((x, v), a) in self.state.pos.iter_mut().zip(&mut self.state.vel).zip(&self.acc) {
+                    *v += dt * a;
+                    *x += dt * *v;
+                }
+            }
+            Integrator::Rk4 => self.rk4(t0, dt),
+            Integrator::ImplicitEuler => {
+                let m = &self.model;
+                let inputs = ImplicitInputs {
+                    topology: &m.topology,
+                    material: &m.params.material,
+                    adjust_ratio: m.adjust_ratio(),
+                    masses: &m.masses,
+                    free: &m.free,
+                    drag: m.params.drag,
+                    dt,
+                    cg: m.params.cg,
+                };
+                let ws = self.ws.implicit.as_mut().expect("implicit workspace exists for implicit Euler");
+                let out = implicit::step(&inputs, &mut self.state.pos, &mut self.state.vel, &self.acc, ws);
+                solver = (out.iterations, out.relative_residual);
+            }
+        }
+        self.state.step += 1;
+        // Time from the step count, not by accumulation: no drift over long runs.
+        self.state.time = self.state.step as f64 * dt;
+        self.apply_pins();
+        self.cached = false;
+        self.ensure_cache();
+
+        let mut strain_iterations = 0;
+        if let (Some(limit), Some(ws)) = (&self.model.params.strain_limit, self.ws.strain.as_mut()) {
+            let accept = limit.max_strain * (1.0 + limit.tolerance);
+            let over = (0..3).any(|k| limit.kinds[k] && self.totals.max_strain[k] > accept);
+            if over {
+                let out = strain::limit(
+                    &self.model.topology,
+                    &self.model.inv_mass,
+                    limit,
+                    dt,
+                    &mut self.state.pos,
+                    &mut self.state.vel,
+                    ws,
+                );
+                strain_iterations = out.iterations;
+                self.cached = false;
+                self.ensure_cache();
+            }
+        }
+
+        let report = self.measure(solver, strain_iterations);
+        self.last = Some(report);
+        report
+    }
+
+    /// Overwrite pinned nodes with their prescribed position and velocity at the current time.
+    fn apply_pins(&mut self) {
+        let t = self.state.time;
+        for pin in &self.model.loads.pins {
+            let (p, v) = pin.at(t);
+            self.state.set_position(pin.node as usize, p);
+            self.state.set_velocity(pin.node as usize, v);
+        }
+    }
+
+    fn ensure_cache(&mut self) {
+        if !self.cached {
+            let s = &self.state;
+            self.totals = self.model.accelerations(s.time, &s.pos, &s.vel, &mut self.acc, &mut self.ws);
+            self.cached = true;
+        }
+    }
+
+    /// Classic RK4 on y = (x, v), y' = (v, a(t, x, v)); k1 is the cached acceleration.
+    fn rk4(&mut self, t0: f64, dt: f64) {
+        let Workspace { stage_pos, stage_vel, sum_pos, sum_vel, stage_acc, .. } = &mut self.ws;
+        let (pos, vel) = (&self.state.pos, &self.state.vel);
+        // k1
+        for i in 0..pos.len() {
+            sum_pos[i] = vel[i];
+            sum_vel[i] = self.acc[i];
+            stage_pos[i] = pos[i] + 0.5 * dt * vel[i];
+            stage_vel[i] = vel[i] + 0.5 * dt * self.acc[i];
+        }
+        let mut stage_pos = std::mem::take(stage_pos);
+        let mut stage_vel = std::mem::take(stage_vel);
+        let mut stage_acc = std::mem::take(stage_acc);
+        // k2, k3 at the midpoint, k4 at the end.
+        for (weight, t_stage, next_scale) in [(2.0, 0.5 * dt, 0.5 * dt), (2.0, 0.5 * dt, dt), (1.0, dt, 0.0)] {
+            self.model.accelerations(t0 + t_stage, &stage_pos, &stage_vel, &mut stage_acc, &mut self.ws);
+            let (sum_pos, sum_vel) = (&mut self.ws.sum_pos, &mut self.ws.sum_vel);
+            for i in 0..pos.len() {
+                sum_pos[i] += weight * stage_vel[i];
+                sum_vel[i] += weight * stage_acc[i];
+                // Next stage state (unused after k4).
+                let sv = stage_vel[i];
+                stage_pos[i] = pos[i] + next_scale * sv;
+                stage_vel[i] = vel[i] + next_scale * stage_acc[i];
+            }
+        }
+        let (pos, vel) = (&mut self.state.pos, &mut self.state.vel);
+        let h6 = dt / 6.0;
+        for i in 0..pos.len() {
+            pos[i] += h6 * self.ws.sum_pos[i];
+            vel[i] += h6 * self.ws.sum_vel[i];
+        }
+        self.ws.stage_pos = stage_pos;
+        self.ws.stage_vel = stage_vel;
+        self.ws.stage_acc = stage_acc;
+    }
+
+    fn measure(&self, solver: (u32, f64), strain_iterations: u32) -> StepReport {
+        let n = self.model.topology.n_nodes;
+        let (pos, vel) = (&self.state.pos, &self.state.vel);
+        let g = self.model.params.gravity;
+        let (mut ke, mut pe) = (0.0, 0.0);
+        for k in 0..n {
+            let m = self.model.masses[k] * self.model.free[k];
+            let v2 = vel[k] * vel[k] + vel[n + k] * vel[n + k] + vel[2 * n + k] * vel[2 * n + k];
+            ke += 0.5 * m * v2;
+            pe -= m * (g[0] * pos[k] + g[1] * pos[n + k] + g[2] * pos[2 * n + k]);
+        }
+        let finite = self.state.is_finite() && ke.is_finite() && self.totals.elastic_energy.is_finite();
+        StepReport {
+            step: self.state.step,
+            time: self.state.time,
+            finite,
+            kinetic_energy: ke,
+            elastic_energy: self.totals.elastic_energy,
+            gravity_energy: pe,
+            max_strain: self.totals.max_strain,
+            solver_iterations: solver.0,
+            solver_residual: solver.1,
+            strain_iterations,
+        }
+    }
+}
+
+fn invalid(name: impl Into<String>, value: f64, reason: &'static str) -> SimError {
+    SimError::InvalidParameter { name: name.into(), value, reason }
+}
+
+fn validate_params(p: &SimParams) -> Result<(), SimError> {
+    if !(p.dt.is_finite() && p.dt > 0.0) {
+        return Err(invalid("dt", p.dt, "the time step must be positive and finite"));
+    }
+    for kind in SpringKind::ALL {
+        let c = p.material.get(kind);
+        if !(c.k.is_finite() && c.k >= 0.0) {
+            return Err(invalid(format!("{kind}.k"), c.k, "stiffness must be finite and ≥ 0"));
+        }
+        if !(c.c.is_finite() && c.c >= 0.0) {
+            return Err(invalid(format!("{kind}.c"), c.c, "damping must be finite and ≥ 0"));
+        }
+    }
+    if let Some((c, &g)) = p.gravity.iter().enumerate().find(|(_, g)| !g.is_finite()) {
+        return Err(invalid(format!("gravity[{c}]"), g, "gravity must be finite"));
+    }
+    if !(p.drag.is_finite() && p.drag >= 0.0) {
+        return Err(invalid("drag", p.drag, "drag must be finite and ≥ 0"));
+    }
+    if let Some(a) = p.stiffness_adjustment {
+        if !(a.allowed.is_finite() && a.allowed >= 0.0) {
+            return Err(invalid("stiffness_adjustment.allowed", a.allowed, "allowed strain must be finite and ≥ 0"));
+        }
+    }
+    if let Some(l) = p.strain_limit {
+        if !(l.max_strain.is_finite() && l.max_strain >= 0.0) {
+            return Err(invalid("strain_limit.max_strain", l.max_strain, "maximum strain must be finite and ≥ 0"));
+        }
+        if !(l.tolerance.is_finite() && l.tolerance >= 0.0) {
+            return Err(invalid("strain_limit.tolerance", l.tolerance, "tolerance must be finite and ≥ 0"));
+        }
+    }
+    if !(p.cg.tolerance.is_finite() && p.cg.tolerance > 0.0) {
+        return Err(invalid("cg.tolerance", p.cg.tolerance, "CG tolerance must be positive"));
+    }
+    if p.cg.max_iterations == 0 {
+        return Err(invalid("cg.max_iterations", 0.0, "CG needs at least one iteration"));
+    }
+    Ok(())
+}
+
+fn validate_loads(loads: &Loads, n: usize) -> Result<(), SimError> {
+    for (i, load) in loads.forces.iter().enumerate() {
+        if load.nodes.len() != load.shares.len() {
+            return Err(SimError::SizeMismatch { what: "load shares", got: load.shares.len(), expected: load.nodes.len() });
+        }
+        if let Some(&k) = load.nodes.iter().find(|&&k| k as usize >= n) {
+            return Err(SimError::NodeOutOfRange { what: "force", node: k, n_nodes: n });
+        }
+        if let Some(&f) = load.force.iter().chain(&load.shares).find(|f| !f.is_finite()) {
+            return Err(invalid(format!("forces[{i}]"), f, "force components and shares must be finite"));
+        }
+    }
+    if let Some(w) = &loads.wind {
+        let all = w.velocity.iter().chain([&w.air_density, &w.drag_coefficient]);
+        if let Some(&x) = all.clone().find(|x| !x.is_finite()) {
+            return Err(invalid("wind", x, "wind values must be finite"));
+        }
+        if w.air_density < 0.0 || w.drag_coefficient < 0.0 {
+            return Err(invalid("wind", w.air_density.min(w.drag_coefficient), "air density and drag coefficient must be ≥ 0"));
+        }
+    }
+    for pin in &loads.pins {
+        if pin.node as usize >= n {
+            return Err(SimError::NodeOutOfRange { what: "pin", node: pin.node, n_nodes: n });
+        }
+        if pin.anchor.iter().any(|x| !x.is_finite()) {
+            return Err(invalid(format!("pin on node {}", pin.node), f64::NAN, "pin anchor must be finite"));
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,247 @@
+//! Where each integrator goes unstable: the highest natural frequency of a
+//! cloth (Gershgorin bound and power iteration) and the largest stable time
+//! step of each integrator for that mode (`REFERENCE.md`, last section).
+
+use super::params::{Integrator, Material};
+use super::topology::Topology;
+
+/// Modal estimate of a cloth about its rest shape.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ModalEstimate {
+    /// Upper bound on ω_max from Gershgorin's theorem: max_i √(2 Σ_j k_ij / m_i) (rad/s).
+    pub omega_gershgorin: f64,
+    /// ω_max from power iteration on M^{-1/2} K M^{-1/2} (rad/s); a lower bound
+    /// that converges to the truth.
+    pub omega_max: f64,
+    /// Damping rate 2ζω of the highest mode (1/s): the Rayleigh quotient of
+    /// the damping matrix (spring C plus drag) with that mode.
+    pub damping_rate: f64,
+    /// Power iterations used.
+    pub iterations: u32,
+}
+
+impl ModalEstimate {
+    /// Predicted largest stable dt of `integrator` on the highest mode
+    /// (∞ for implicit Euler, 0 for undamped explicit Euler).
+    pub fn dt_limit(&self, integrator: Integrator) -> f64 {
+        dt_limit(integrator, self.omega_max, self.damping_rate)
+    }
+}
+
+/// Estimate ω_max and its damping for `topology` with `material`, node
+/// `masses` and global `drag` (1/s). Pinned nodes (`pinned[k]`) are held
+/// fixed and excluded. Deterministic: the start vector comes from a fixed
+/// pseudo-random sequence.
+pub fn modal_estimate(
+    topology: &Topology,
+    material: &Material,
+    masses: &[f64],
+    pinned: &[bool],
+    drag: f64,
+) -> ModalEstimate {
+    let n = topology.n_nodes;
+    // Gershgorin: row i of M^{-1}K has |diag| + Σ|offdiag| ≤ 2 Σ_j k_ij / m_i.
+    let mut ksum = vec![0.0; n];
+    for g in &topology.groups {
+        let k = material.get(g.kind).k;
+        for s in 0..g.len() {
+            ksum[g.a[s] as usize] += k;
+            ksum[g.b[s] as usize] += k;
+        }
+    }
+    let omega_gershgorin = (0..n)
+        .filter(|&i| !pinned[i])
+        .map(|i| 2.0 * ksum[i] / masses[i])
+        .fold(0.0, f64::max)
+        .sqrt();
+
+    // Unit spring directions at rest.
+    let dirs: Vec<Vec<[f64; 3]>> = topology
+        .groups
+        .iter()
+        .map(|g| {
+            (0..g.len())
+                .map(|s| {
+                    let (pa, pb) = (topology.rest_positions[g.a[s] as usize], topology.rest_positions[g.b[s] as usize]);
+                    let d = [pb[0] - pa[0], pb[1] - pa[1], pb[2] - pa[2]];
+                    let l = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+                    d.map(|x| x / l)
+                })
+                .collect()
+        })
+        .collect();
+    let inv_sqrt_m: Vec<f64> = (0..n).map(|i| if pinned[i] { 0.0 } else { 1.0 / masses[i].sqrt() }).collect();
+
+    // y = M^{-1/2} L M^{-1/2} w, with L the spring Laplacian of coefficient `coef`.
+    let apply = |w: &[[f64; 3]], y: &mut [[f64; 3]], coef: &dyn Fn(usize) -> f64| {
+        for v in y.iter_mut() {
+            *v = [0.0; 3];
+        }
+        for (gi, g) in topology.groups.iter().enumerate() {
+            let k = coef(gi);
+            for s in 0..g.len() {
+                let (a, b) = (g.a[s] as usize, g.b[s] as usize);
+                let u = dirs[gi][s];
+                let (sa, sb) = (inv_sqrt_m[a], inv_sqrt_m[b]);
+                let d = [w[a][0] * sa - w[b][0] * sb, w[a][1] * sa - w[b][1] * sb, w[a][2] * sa - w[b][2] * sb];
+                let f = k * (u[0] * d[0] + u[1] * d[1] + u[2] * d[2]);
+                for c in 0..3 {
+                    y[a][c] += f * u[c] * sa;
+                    y[b][c] -= f * u[c] * sb;
+                }
+            }
+        }
+    };
+    let stiff = |gi: usize| material.get(topology.groups[gi].kind).k;
+    let damp = |gi: usize| material.get(topology.groups[gi].kind).c;
+
+    let mut seed = 0x9E37_79B9_7F4A_7C15u64;
+    let mut rnd = move || {
+        seed ^= seed << 13;
+        seed ^= seed >> 7;
+        seed ^= seed << 17;
+        (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+    };
+    let mut w: Vec<[f64; 3]> = (0..n)
+        .map(|i| if pinned[i] { [0.0; 3] } else { [rnd(), rnd(), rnd()] })
+        .collect();
+    let mut y = vec![[0.0; 3]; n];
+    let norm = |v: &[[f64; 3]]| v.iter().map(|p| p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sum::<f64>().sqrt();
+    let mut lambda = 0.0;
+    let mut iterations = 0;
+    let max_iter = 2000;
+    while iterations < max_iter {
+        iterations += 1;
+        let nw = norm(&w);
+        if nw == 0.0 {
+            break;
+        }
+        for v in w.iter_mut() {
+            *v = v.map(|x| x / nw);
+        }
+        apply(&w, &mut y, &stiff);
+        let rq: f64 = w.iter().zip(&y).map(|(a, b)| a[0] * b[0] + a[1] * b[1] + a[2] * b[2]).sum();
+        std::mem::swap(&mut w, &mut y);
+        let converged = (rq - lambda).abs() <= 1e-7 * rq.abs();
+        lambda = rq;
+        if converged && iterations > 20 {
+            break;
+        }
+    }
+    // Damping Rayleigh quotient with the (normalised) top mode.
+    let nw = norm(&w);
+    let damping_rate = if nw > 0.0 {
+        for v in w.iter_mut() {
+            *v = v.map(|x| x / nw);
+        }
+        apply(&w, &mut y, &damp);
+        w.iter().zip(&y).map(|(a, b)| a[0] * b[0] + a[1] * b[1] + a[2] * b[2]).sum::<f64>() + drag
+    } else {
+        drag
+    };
+    ModalEstimate {
+        omega_gershgorin,
+        omega_max: lambda.max(0.0).sqrt(),
+        damping_rate,
+        iterations,
+    }
+}
+
+/// Spectral radius of the one-step matrix of `integrator` applied to the
+/// damped oscillator x'' = −ω² x − c x' with step `h`.
+pub fn amplification(integrator: Integrator, omega: f64, c: f64, h: f64) -> f64 {
+    let w2 = omega * omega;
+    let m: [[f64; 2]; 2] = match integrator {
+        Integrator::ExplicitEuler => [[1.0, h], [-h * w2, 1.0 - h * c]],
+        Integrator::SymplecticEuler => [[1.0 - h * h * w2, h * (1.0 - h * c)], [-h * w2, 1.0 - h * c]],
+        Integrator::Rk4 => {
+            let a = [[0.0, h], [-h * w2, -h * c]];
+            let mul = |x: [[f64; 2]; 2], y: [[f64; 2]; 2]| {
+                [
+                    [x[0][0] * y[0][0] + x[0][1] * y[1][0], x[0][0] * y[0][1] + x[0][1] * y[1][1]],
+                    [x[1][0] * y[0][0] + x[1][1] * y[1][0], x[1][0] * y[0][1] + x[1][1] * y[1][1]],
+                ]
+            };
+            // Horner: I + A(I + A/2 (I + A/3 (I + A/4))).
+            let add_id_scaled = |x: [[f64; 2]; 2], s: f64| {
+                [[1.0 + s * x[0][0], s * x[0][1]], [s * x[1][0], 1.0 + s * x[1][1]]]
+            };
+            let mut p = add_id_scaled(a, 0.25);
+            p = add_id_scaled(mul(a, p), 1.0 / 3.0);
+            p = add_id_scaled(mul(a, p), 0.5);
+            p = add_id_scaled(mul(a, p), 1.0);
+            p
+        }
+        Integrator::ImplicitEuler => {
+            // (I − hA)^{-1} with A = [[0, 1], [−ω², −c]].
+            let (a, b, cc, d) = (1.0, -h, h * w2, 1.0 + h * c);
+            let det = a * d - b * cc;
+            [[d / det, -b / det], [-cc / det, a / det]]
+        }
+    };
+    spectral_radius(m)
+}
+
+fn spectral_radius(m: [[f64; 2]; 2]) -> f64 {
+    let tr = m[0][0] + m[1][1];
+    let det = m[0][0] * m[1][1] - m[0][1] * m[1][0];
+    let disc = 0.25 * tr * tr - det;
+    if disc >= 0.0 {
+        let s = disc.sqrt();
+        (0.5 * tr + s).abs().max((0.5 * tr - s).abs())
+    } else {
+        det.abs().sqrt()
+    }
+}
+
+/// Largest h with spectral radius ≤ 1 for the damped oscillator (ω, c = 2ζω).
+/// ∞ when no limit exists (implicit Euler), 0 when no h > 0 is stable.
+pub fn dt_limit(integrator: Integrator, omega: f64, damping_rate: f64) -> f64 {
+    if integrator == Integrator::ImplicitEuler || omega <= 0.0 {
+        return f64::INFINITY;
+    }
+    let stable = |h: f64| amplification(integrator, omega, damping_rate, h) <= 1.0 + 1e-12;
+    // Smallest meaningful step: below it, call the method unconditionally unstable.
+    let h_min = 1e-6 / omega;
+    if !stable(h_min) {
+        return 0.0;
+    }
+    let mut hi = h_min;
+    while stable(hi) {
+        hi *= 2.0;
+        if hi > 1e6 / omega {
+            return f64::INFINITY;
+        }
+    }
+    let mut lo = hi / 2.0;
+    for _ in 0..80 {
+        let mid = 0.5 * (lo + hi);
+        if stable(mid) {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    lo
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn undamped_limits_match_the_textbook_values() {
+        let w = 3.0;
+        assert!((dt_limit(Integrator::SymplecticEuler, w, 0.0) * w - 2.0).abs() < 1e-9);
+        assert!((dt_limit(Integrator::Rk4, w, 0.0) * w - 2.0 * 2f64.sqrt()).abs() < 1e-6);
+        assert_eq!(dt_limit(Integrator::ExplicitEuler, w, 0.0), 0.0);
+        assert_eq!(dt_limit(Integrator::ImplicitEuler, w, 0.0), f64::INFINITY);
+    }
+
+    #[test]
+    fn damped_explicit_euler_limit_is_two_zeta_over_omega() {
+        // |1 + λh| ≤ 1 with λ = −ζω ± iω√(1−ζ²) gives h ≤ 2ζ/ω = c/ω².
+        let (w, c) = (10.0, 0.4);
+        assert!((dt_limit(Integrator::ExplicitEuler, w, c) - c / (w * w)).abs() < 1e-9);
+    }
+}
