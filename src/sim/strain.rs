@@ -11,6 +11,8 @@ use super::topology::Topology;
 pub(crate) struct StrainWorkspace {
     corr: Vec<f64>,
     count: Vec<f64>,
+    /// Springs found over the limit by the last full pass: (a, b, rest).
+    active: Vec<(u32, u32, f64)>,
 }
 
 impl StrainWorkspace {
@@ -18,6 +20,7 @@ impl StrainWorkspace {
         StrainWorkspace {
             corr: vec![0.0; 3 * topology.n_nodes],
             count: vec![0.0; topology.n_nodes],
+            active: Vec::with_capacity(topology.spring_count()),
         }
     }
 }
@@ -25,16 +28,25 @@ impl StrainWorkspace {
 /// Outcome of one limiting pass.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct StrainOutcome {
-    /// Sweeps that found a violation and corrected it.
+    /// Jacobi sweeps that corrected something.
     pub iterations: u32,
-    /// Largest strain of a limited spring after the last sweep.
+    /// Largest strain of a limited spring at the last full check.
     pub max_strain: f64,
 }
+
+/// Full passes over all limited springs at most; each is followed by Jacobi
+/// sweeps over just the springs it found too long (usually a few near pins).
+const FULL_PASSES: u32 = 8;
 
 /// Shorten every limited spring longer than `(1 + max_strain)·L0` back to that
 /// length. Each end moves in proportion to its inverse mass (pins have 0 and
 /// never move); the same displacement divided by `dt` is added to the node's
 /// velocity, which removes the stretching velocity that caused the overshoot.
+///
+/// A full pass collects the violated springs; Jacobi sweeps then iterate on
+/// that active set only until it is satisfied, and a new full pass checks
+/// whether the corrections stretched any other spring. Never allocates (the
+/// active list has capacity for every spring).
 pub(crate) fn limit(
     topology: &Topology,
     inv_mass: &[f64],
@@ -48,58 +60,87 @@ pub(crate) fn limit(
     let accept = 1.0 + limit.max_strain * (1.0 + limit.tolerance);
     let target = 1.0 + limit.max_strain;
     let mut outcome = StrainOutcome::default();
-    for sweep in 0..=limit.max_iterations {
-        ws.corr.fill(0.0);
-        ws.count.fill(0.0);
-        let mut worst: f64 = f64::NEG_INFINITY;
-        let mut violated = false;
+    for _ in 0..FULL_PASSES {
+        ws.active.clear();
+        let mut worst = f64::NEG_INFINITY;
         for g in topology.groups.iter().filter(|g| limit.kinds[g.kind.index()]) {
             for s in 0..g.len() {
                 let (a, b) = (g.a[s] as usize, g.b[s] as usize);
                 let d = [pos[b] - pos[a], pos[n + b] - pos[n + a], pos[2 * n + b] - pos[2 * n + a]];
-                let l = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-                let ratio = l * g.inv_rest[s];
+                let ratio = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt() * g.inv_rest[s];
                 worst = worst.max(ratio);
-                if ratio <= accept {
-                    continue;
-                }
-                let (wa, wb) = (inv_mass[a], inv_mass[b]);
-                let wsum = wa + wb;
-                if wsum == 0.0 {
-                    continue;
-                }
-                violated = true;
-                // Move a towards b and b towards a by the excess, split by inverse mass.
-                let excess = l - target * g.rest[s];
-                let scale = excess / (l * wsum);
-                for c in 0..3 {
-                    ws.corr[c * n + a] += wa * scale * d[c];
-                    ws.corr[c * n + b] -= wb * scale * d[c];
-                }
-                if wa > 0.0 {
-                    ws.count[a] += 1.0;
-                }
-                if wb > 0.0 {
-                    ws.count[b] += 1.0;
+                if ratio > accept && inv_mass[a] + inv_mass[b] > 0.0 {
+                    ws.active.push((g.a[s], g.b[s], g.rest[s]));
                 }
             }
         }
         outcome.max_strain = worst - 1.0;
-        if !violated || sweep == limit.max_iterations {
+        if ws.active.is_empty() {
             break;
         }
-        outcome.iterations += 1;
-        let inv_dt = 1.0 / dt;
-        for k in 0..n {
+        for _ in 0..limit.max_iterations {
+            if !jacobi_sweep(n, inv_mass, accept, target, dt, pos, vel, ws) {
+                break;
+            }
+            outcome.iterations += 1;
+        }
+    }
+    outcome
+}
+
+/// One Jacobi sweep over the active springs; false when none was violated.
+#[allow(clippy::too_many_arguments)]
+fn jacobi_sweep(
+    n: usize,
+    inv_mass: &[f64],
+    accept: f64,
+    target: f64,
+    dt: f64,
+    pos: &mut [f64],
+    vel: &mut [f64],
+    ws: &mut StrainWorkspace,
+) -> bool {
+    let mut violated = false;
+    for &(a, b, rest) in &ws.active {
+        let (a, b) = (a as usize, b as usize);
+        let d = [pos[b] - pos[a], pos[n + b] - pos[n + a], pos[2 * n + b] - pos[2 * n + a]];
+        let l = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+        if l <= accept * rest {
+            continue;
+        }
+        violated = true;
+        let (wa, wb) = (inv_mass[a], inv_mass[b]);
+        // Move a towards b and b towards a by the excess, split by inverse mass.
+        let scale = (l - target * rest) / (l * (wa + wb));
+        for c in 0..3 {
+            ws.corr[c * n + a] += wa * scale * d[c];
+            ws.corr[c * n + b] -= wb * scale * d[c];
+        }
+        if wa > 0.0 {
+            ws.count[a] += 1.0;
+        }
+        if wb > 0.0 {
+            ws.count[b] += 1.0;
+        }
+    }
+    if !violated {
+        return false;
+    }
+    // Apply the per-node average and reset only the touched entries.
+    let inv_dt = 1.0 / dt;
+    for &(a, b, _) in &ws.active {
+        for k in [a as usize, b as usize] {
             if ws.count[k] > 0.0 {
                 let w = 1.0 / ws.count[k];
                 for c in 0..3 {
                     let dx = ws.corr[c * n + k] * w;
                     pos[c * n + k] += dx;
                     vel[c * n + k] += dx * inv_dt;
+                    ws.corr[c * n + k] = 0.0;
                 }
+                ws.count[k] = 0.0;
             }
         }
     }
-    outcome
+    true
 }
