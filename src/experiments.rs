@@ -65,7 +65,12 @@ pub fn perturbed_free_cloth(
     integrator: Integrator,
     dt: f64,
 ) -> Simulation {
-    let shape = GridShape { nx: n, ny: n, width: side, height: side };
+    let shape = GridShape {
+        nx: n,
+        ny: n,
+        width: side,
+        height: side,
+    };
     let topology = Arc::new(Topology::grid(shape, Orientation::Horizontal));
     let masses: Vec<f64> = topology.node_areas.iter().map(|a| a * areal_density).collect();
     let mut state = State::at_rest(&topology);

@@ -114,30 +114,43 @@ enum Command {
 
 fn main() -> Result<()> {
     tracing_subscriber::fmt()
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()),
-        )
+        .with_env_filter(tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()))
         .with_writer(std::io::stderr)
         .init();
     match Cli::parse().command {
-        Command::Simulate { scene, nx, ny, integrator, dt, duration, out, fps, f64, velocities, force_unstable } => {
-            simulate(SimulateArgs {
-                scene,
-                nx,
-                ny,
-                integrator: integrator.map(Into::into),
-                dt,
-                duration,
-                out,
-                fps,
-                precision: if f64 { Precision::F64 } else { Precision::F32 },
-                velocities,
-                force_unstable,
-            })
-        }
-        Command::Stability { scene, sizes, factors, steps, bisections, out } => {
-            stability(&scene, sizes, factors, steps, bisections, &out)
-        }
+        Command::Simulate {
+            scene,
+            nx,
+            ny,
+            integrator,
+            dt,
+            duration,
+            out,
+            fps,
+            f64,
+            velocities,
+            force_unstable,
+        } => simulate(SimulateArgs {
+            scene,
+            nx,
+            ny,
+            integrator: integrator.map(Into::into),
+            dt,
+            duration,
+            out,
+            fps,
+            precision: if f64 { Precision::F64 } else { Precision::F32 },
+            velocities,
+            force_unstable,
+        }),
+        Command::Stability {
+            scene,
+            sizes,
+            factors,
+            steps,
+            bisections,
+            out,
+        } => stability(&scene, sizes, factors, steps, bisections, &out),
         Command::Inspect { file } => inspect(&file),
     }
 }
@@ -266,22 +279,62 @@ fn simulate(a: SimulateArgs) -> Result<()> {
     let svg = out.join("energy.svg");
     line_chart_svg(
         &svg,
-        &format!("{} — energy ({}, dt = {:e} s, {}×{})", scene.name, sim.params().integrator, dt, nx, ny),
+        &format!(
+            "{} — energy ({}, dt = {:e} s, {}×{})",
+            scene.name,
+            sim.params().integrator,
+            dt,
+            nx,
+            ny
+        ),
         "time (s)",
         "energy (J)",
         &[
-            Series { name: "kinetic", points: energy[0].clone(), markers: false, color: PALETTE[0] },
-            Series { name: "elastic", points: energy[1].clone(), markers: false, color: PALETTE[1] },
-            Series { name: "total − initial", points: energy[2].clone(), markers: false, color: PALETTE[2] },
+            Series {
+                name: "kinetic",
+                points: energy[0].clone(),
+                markers: false,
+                color: PALETTE[0],
+            },
+            Series {
+                name: "elastic",
+                points: energy[1].clone(),
+                markers: false,
+                color: PALETTE[1],
+            },
+            Series {
+                name: "total − initial",
+                points: energy[2].clone(),
+                markers: false,
+                color: PALETTE[2],
+            },
         ],
         false,
         false,
     )?;
     let r = last.context("the run has no step (duration shorter than dt)")?;
-    println!("scene            {} ({}×{}, {} springs)", scene.name, nx, ny, sim.topology().spring_count());
-    println!("integrator       {} at dt = {:e} s (predicted limit {:.3e} s)", sim.params().integrator, dt, sim.dt_limit());
-    println!("steps            {} ({:.3} s simulated) in {:.3} s wall", steps, r.time, wall);
-    println!("cost             {:.1} µs/step, real-time factor {:.2}", wall * 1e6 / steps as f64, r.time / wall);
+    println!(
+        "scene            {} ({}×{}, {} springs)",
+        scene.name,
+        nx,
+        ny,
+        sim.topology().spring_count()
+    );
+    println!(
+        "integrator       {} at dt = {:e} s (predicted limit {:.3e} s)",
+        sim.params().integrator,
+        dt,
+        sim.dt_limit()
+    );
+    println!(
+        "steps            {} ({:.3} s simulated) in {:.3} s wall",
+        steps, r.time, wall
+    );
+    println!(
+        "cost             {:.1} µs/step, real-time factor {:.2}",
+        wall * 1e6 / steps as f64,
+        r.time / wall
+    );
     println!(
         "final energy     kinetic {:.4e} J, elastic {:.4e} J, gravity {:.4e} J",
         r.kinetic_energy, r.elastic_energy, r.gravity_energy
@@ -293,11 +346,23 @@ fn simulate(a: SimulateArgs) -> Result<()> {
         100.0 * r.max_strain[2]
     );
     println!("wrote            {} ({} frames)", traj_path.display(), header.n_frames);
-    println!("                 {}, {}, {}", csv_path.display(), svg.display(), png.display());
+    println!(
+        "                 {}, {}, {}",
+        csv_path.display(),
+        svg.display(),
+        png.display()
+    );
     Ok(())
 }
 
-fn stability(scene_path: &Path, sizes: Vec<usize>, factors: Vec<f64>, steps: u32, bisections: u32, out: &Path) -> Result<()> {
+fn stability(
+    scene_path: &Path,
+    sizes: Vec<usize>,
+    factors: Vec<f64>,
+    steps: u32,
+    bisections: u32,
+    out: &Path,
+) -> Result<()> {
     let scene = Scene::load(scene_path)?;
     if sizes.iter().any(|&n| n < 2) {
         bail!("--sizes: every size must be at least 2");
@@ -336,7 +401,11 @@ fn stability(scene_path: &Path, sizes: Vec<usize>, factors: Vec<f64>, steps: u32
     );
     for r in &rows {
         // Implicit Euler has no predicted limit: no ratio (NaN in the CSV).
-        let ratio = if r.predicted_dt.is_finite() { r.measured_dt() / r.predicted_dt } else { f64::NAN };
+        let ratio = if r.predicted_dt.is_finite() {
+            r.measured_dt() / r.predicted_dt
+        } else {
+            f64::NAN
+        };
         csv.push_str(&format!(
             "{},{},{},{:.6e},{:.6e},{:.6e},{:.6e},{:.6e},{:.6e},{:.4}\n",
             r.integrator,
@@ -423,7 +492,10 @@ fn inspect(file: &Path) -> Result<()> {
         .zip(&last.positions)
         .map(|(a, b)| ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt())
         .fold(0.0, f64::max);
-    println!("time        {:.4} s … {:.4} s (steps {} … {})", first.time, last.time, first.step, last.step);
+    println!(
+        "time        {:.4} s … {:.4} s (steps {} … {})",
+        first.time, last.time, first.step, last.step
+    );
     println!("largest displacement first → last frame: {max_disp:.4} m");
     Ok(())
 }

@@ -44,7 +44,10 @@ pub enum OutputError {
 }
 
 fn io_err(path: &Path) -> impl Fn(std::io::Error) -> OutputError + '_ {
-    move |source| OutputError::Io { path: path.display().to_string(), source }
+    move |source| OutputError::Io {
+        path: path.display().to_string(),
+        source,
+    }
 }
 
 /// Value precision in a trajectory file.
@@ -133,7 +136,10 @@ impl TrajectoryWriter {
         h.extend_from_slice(&0u32.to_le_bytes());
         h.extend_from_slice(&0u64.to_le_bytes());
         debug_assert_eq!(h.len() as u64, HEADER_LEN);
-        w.out.write_all(&h).map_err(|source| OutputError::Io { path: w.path.clone(), source })?;
+        w.out.write_all(&h).map_err(|source| OutputError::Io {
+            path: w.path.clone(),
+            source,
+        })?;
         Ok(w)
     }
 
@@ -158,9 +164,10 @@ impl TrajectoryWriter {
         if self.header.velocities {
             put(&state.vel);
         }
-        self.out
-            .write_all(&self.buf)
-            .map_err(|source| OutputError::Io { path: self.path.clone(), source })?;
+        self.out.write_all(&self.buf).map_err(|source| OutputError::Io {
+            path: self.path.clone(),
+            source,
+        })?;
         self.header.n_frames += 1;
         Ok(())
     }
@@ -168,7 +175,10 @@ impl TrajectoryWriter {
     /// Flush and record the frame count in the header.
     pub fn finish(mut self) -> Result<TrajectoryHeader, OutputError> {
         let path = self.path.clone();
-        let e = |source| OutputError::Io { path: path.clone(), source };
+        let e = |source| OutputError::Io {
+            path: path.clone(),
+            source,
+        };
         self.out.flush().map_err(e)?;
         let mut file = self.out.into_inner().map_err(|e2| e(e2.into_error()))?;
         file.seek(SeekFrom::Start(48)).map_err(e)?;
@@ -201,9 +211,14 @@ impl TrajectoryReader {
         let file = File::open(path).map_err(io_err(path))?;
         let size = file.metadata().map_err(io_err(path))?.len();
         let mut input = BufReader::new(file);
-        let bad = |reason: String| OutputError::Format { path: path.display().to_string(), reason };
+        let bad = |reason: String| OutputError::Format {
+            path: path.display().to_string(),
+            reason,
+        };
         if size < HEADER_LEN {
-            return Err(bad(format!("{size} bytes is shorter than the {HEADER_LEN}-byte header")));
+            return Err(bad(format!(
+                "{size} bytes is shorter than the {HEADER_LEN}-byte header"
+            )));
         }
         let mut h = [0u8; HEADER_LEN as usize];
         input.read_exact(&mut h).map_err(io_err(path))?;
@@ -234,15 +249,26 @@ impl TrajectoryReader {
             return Err(bad(format!("implausible node count {}", header.n_nodes)));
         }
         if header.nx != 0 && u64::from(header.nx) * u64::from(header.ny) != header.n_nodes {
-            return Err(bad(format!("grid {}×{} does not have {} nodes", header.nx, header.ny, header.n_nodes)));
+            return Err(bad(format!(
+                "grid {}×{} does not have {} nodes",
+                header.nx, header.ny, header.n_nodes
+            )));
         }
         let whole = (size - HEADER_LEN) / header.frame_len();
         if header.n_frames == 0 {
             header.n_frames = whole; // the writer stopped early: keep every complete frame
         } else if header.n_frames > whole {
-            return Err(bad(format!("header says {} frames, the file holds {whole}", header.n_frames)));
+            return Err(bad(format!(
+                "header says {} frames, the file holds {whole}",
+                header.n_frames
+            )));
         }
-        Ok(TrajectoryReader { input, header, next: 0, path: path.display().to_string() })
+        Ok(TrajectoryReader {
+            input,
+            header,
+            next: 0,
+            path: path.display().to_string(),
+        })
     }
 
     /// The header.
@@ -256,9 +282,10 @@ impl TrajectoryReader {
             return Ok(None);
         }
         let mut buf = vec![0u8; self.header.frame_len() as usize];
-        self.input
-            .read_exact(&mut buf)
-            .map_err(|source| OutputError::Io { path: self.path.clone(), source })?;
+        self.input.read_exact(&mut buf).map_err(|source| OutputError::Io {
+            path: self.path.clone(),
+            source,
+        })?;
         self.next += 1;
         let n = self.header.n_nodes as usize;
         let s = self.header.value_size() as usize;
@@ -308,8 +335,17 @@ pub fn report_csv_line(r: &StepReport) -> String {
 
 /// Render the cloth as shaded triangles seen obliquely from the front, pinned
 /// nodes as red dots, to a PNG of `size × size` pixels.
-pub fn render_png(path: &Path, topology: &Topology, state: &State, pinned: &[u32], size: u32) -> Result<(), OutputError> {
-    let draw_err = |e: String| OutputError::Draw { path: path.display().to_string(), reason: e };
+pub fn render_png(
+    path: &Path,
+    topology: &Topology,
+    state: &State,
+    pinned: &[u32],
+    size: u32,
+) -> Result<(), OutputError> {
+    let draw_err = |e: String| OutputError::Draw {
+        path: path.display().to_string(),
+        reason: e,
+    };
     // Camera: azimuth 35° about y, elevation 20°, orthographic.
     let (az, el) = (35f64.to_radians(), 20f64.to_radians());
     let forward = [-el.cos() * az.sin(), -el.sin(), -el.cos() * az.cos()];
@@ -317,7 +353,10 @@ pub fn render_png(path: &Path, topology: &Topology, state: &State, pinned: &[u32
     let up = cross(right, forward);
     let n = topology.n_nodes;
     let pts: Vec<[f64; 3]> = (0..n).map(|k| state.position(k)).collect();
-    let proj: Vec<(f64, f64, f64)> = pts.iter().map(|p| (dot(*p, right), dot(*p, up), dot(*p, forward))).collect();
+    let proj: Vec<(f64, f64, f64)> = pts
+        .iter()
+        .map(|p| (dot(*p, right), dot(*p, up), dot(*p, forward)))
+        .collect();
     let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
     for &(x, y, _) in &proj {
         if x.is_finite() && y.is_finite() {
@@ -334,7 +373,10 @@ pub fn render_png(path: &Path, topology: &Topology, state: &State, pinned: &[u32
     let (cx, cy) = (0.5 * (x0 + x1), 0.5 * (y0 + y1));
     let px = |x: f64, y: f64| -> (i32, i32) {
         let s = f64::from(size);
-        (((x - cx) / span * s + 0.5 * s) as i32, ((cy - y) / span * s + 0.5 * s) as i32)
+        (
+            ((x - cx) / span * s + 0.5 * s) as i32,
+            ((cy - y) / span * s + 0.5 * s) as i32,
+        )
     };
     let root = BitMapBackend::new(path, (size, size)).into_drawing_area();
     root.fill(&WHITE).map_err(|e| draw_err(e.to_string()))?;
@@ -352,11 +394,13 @@ pub fn render_png(path: &Path, topology: &Topology, state: &State, pinned: &[u32
             .iter()
             .map(|&k| px(proj[k as usize].0, proj[k as usize].1))
             .collect();
-        root.draw(&Polygon::new(poly, color.filled())).map_err(|e| draw_err(e.to_string()))?;
+        root.draw(&Polygon::new(poly, color.filled()))
+            .map_err(|e| draw_err(e.to_string()))?;
     }
     for &k in pinned {
         let (x, y, _) = proj[k as usize];
-        root.draw(&Circle::new(px(x, y), 3, RED.filled())).map_err(|e| draw_err(e.to_string()))?;
+        root.draw(&Circle::new(px(x, y), 3, RED.filled()))
+            .map_err(|e| draw_err(e.to_string()))?;
     }
     root.present().map_err(|e| draw_err(e.to_string()))?;
     Ok(())
@@ -382,9 +426,15 @@ pub fn line_chart_svg(
     log_x: bool,
     log_y: bool,
 ) -> Result<(), OutputError> {
-    let draw_err = |e: String| OutputError::Draw { path: path.display().to_string(), reason: e };
+    let draw_err = |e: String| OutputError::Draw {
+        path: path.display().to_string(),
+        reason: e,
+    };
     let keep = |(x, y): &(f64, f64)| x.is_finite() && y.is_finite() && (!log_x || *x > 0.0) && (!log_y || *y > 0.0);
-    let all: Vec<(f64, f64)> = series.iter().flat_map(|s| s.points.iter().copied().filter(keep)).collect();
+    let all: Vec<(f64, f64)> = series
+        .iter()
+        .flat_map(|s| s.points.iter().copied().filter(keep))
+        .collect();
     if all.is_empty() {
         return Err(draw_err("no finite point to plot".into()));
     }
@@ -440,7 +490,10 @@ pub fn line_chart_svg(
         title: &str,
     ) -> ChartBuilder<'a, 'b, SVGBackend<'b>> {
         let mut b = ChartBuilder::on(root);
-        b.caption(title, ("sans-serif", 22)).margin(15).x_label_area_size(50).y_label_area_size(80);
+        b.caption(title, ("sans-serif", 22))
+            .margin(15)
+            .x_label_area_size(50)
+            .y_label_area_size(80);
         b
     }
     match (log_x, log_y) {
@@ -476,7 +529,11 @@ fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
 }
 
 fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
 }
 
 fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {

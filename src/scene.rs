@@ -16,8 +16,8 @@ use serde::Deserialize;
 
 use crate::sim::{
     CgSettings, GridShape, Integrator, Loads, Material, NodeLoad, Orientation, Pin, PinPath, Profile, SimError,
-    SimParams, Simulation, SpringCoeffs, SpringKind, StabilityCheck, State, StiffnessAdjustment, StrainLimit,
-    Topology, Wind,
+    SimParams, Simulation, SpringCoeffs, SpringKind, StabilityCheck, State, StiffnessAdjustment, StrainLimit, Topology,
+    Wind,
 };
 
 /// Why a scene could not be loaded or built.
@@ -34,7 +34,12 @@ pub enum SceneError {
     Invalid { origin: String, problems: Vec<String> },
     /// The simulation refused the built scene (e.g. an unstable dt).
     #[error("scene {origin} at {nx}×{ny}: {source}")]
-    Sim { origin: String, nx: usize, ny: usize, source: SimError },
+    Sim {
+        origin: String,
+        nx: usize,
+        ny: usize,
+        source: SimError,
+    },
 }
 
 // ---------------------------------------------------------------- raw form
@@ -316,7 +321,10 @@ pub enum Selector {
     /// Rows or columns: (column or row, index from the start) — e.g. top = Row(0).
     Edge(Edge),
     Corner(Edge, Edge),
-    Region { u: [f64; 2], v: [f64; 2] },
+    Region {
+        u: [f64; 2],
+        v: [f64; 2],
+    },
     /// Material coordinates of nodes picked at the reference resolution.
     Points(Vec<(f64, f64)>),
 }
@@ -400,7 +408,10 @@ impl Scene {
         p.positive("simulation.dt", s.dt);
         p.positive("simulation.duration", s.duration);
         if s.dt.is_finite() && s.duration.is_finite() && s.dt > s.duration {
-            p.push(format!("simulation.dt: {} s is longer than the whole run ({} s)", s.dt, s.duration));
+            p.push(format!(
+                "simulation.dt: {} s is longer than the whole run ({} s)",
+                s.dt, s.duration
+            ));
         }
         for (i, g) in s.gravity.iter().enumerate() {
             p.finite(&format!("simulation.gravity[{i}]"), *g);
@@ -423,7 +434,10 @@ impl Scene {
             StiffnessAdjustment { allowed: a.allowed }
         });
         let strain_limit = raw.strain.limit.as_ref().map(|l| {
-            let mut out = StrainLimit { max_strain: l.max_strain, ..StrainLimit::default() };
+            let mut out = StrainLimit {
+                max_strain: l.max_strain,
+                ..StrainLimit::default()
+            };
             p.non_negative("strain.limit.max_strain", l.max_strain);
             if let Some(t) = l.tolerance {
                 p.non_negative("strain.limit.tolerance", t);
@@ -446,7 +460,12 @@ impl Scene {
             out
         });
 
-        let reference = GridShape { nx: c.nx.max(2), ny: c.ny.max(2), width: c.width, height: c.height };
+        let reference = GridShape {
+            nx: c.nx.max(2),
+            ny: c.ny.max(2),
+            width: c.width,
+            height: c.height,
+        };
         let pins = raw
             .pins
             .iter()
@@ -487,7 +506,10 @@ impl Scene {
         });
 
         if !p.0.is_empty() {
-            return Err(SceneError::Invalid { origin: origin.to_string(), problems: p.0 });
+            return Err(SceneError::Invalid {
+                origin: origin.to_string(),
+                problems: p.0,
+            });
         }
         Ok(Scene {
             origin: origin.to_string(),
@@ -514,7 +536,11 @@ impl Scene {
                 cg,
             },
             duration: s.duration,
-            stability: if s.force_unstable { StabilityCheck::Force } else { StabilityCheck::Enforce },
+            stability: if s.force_unstable {
+                StabilityCheck::Force
+            } else {
+                StabilityCheck::Enforce
+            },
             pins,
             forces,
             wind,
@@ -523,7 +549,12 @@ impl Scene {
 
     /// Grid shape at resolution `nx × ny`.
     pub fn shape(&self, nx: usize, ny: usize) -> GridShape {
-        GridShape { nx, ny, width: self.width, height: self.height }
+        GridShape {
+            nx,
+            ny,
+            width: self.width,
+            height: self.height,
+        }
     }
 
     /// Steps in a run of [`Scene::duration`].
@@ -561,7 +592,11 @@ impl Scene {
                 if pins.iter().any(|p: &Pin| p.node == k) {
                     continue; // overlapping pin sets: the first pin wins
                 }
-                pins.push(Pin { node: k, anchor: topology.rest_positions[k as usize], path: *path });
+                pins.push(Pin {
+                    node: k,
+                    anchor: topology.rest_positions[k as usize],
+                    path: *path,
+                });
             }
         }
         let mut forces = Vec::new();
@@ -573,12 +608,24 @@ impl Scene {
                 continue;
             }
             let shares = nodes.iter().map(|&k| topology.node_areas[k as usize] / area).collect();
-            forces.push(NodeLoad { nodes, shares, force: *total, profile: *profile });
+            forces.push(NodeLoad {
+                nodes,
+                shares,
+                force: *total,
+                profile: *profile,
+            });
         }
         if !problems.is_empty() {
-            return Err(SceneError::Invalid { origin: self.origin.clone(), problems });
+            return Err(SceneError::Invalid {
+                origin: self.origin.clone(),
+                problems,
+            });
         }
-        Ok(Loads { forces, wind: self.wind, pins })
+        Ok(Loads {
+            forces,
+            wind: self.wind,
+            pins,
+        })
     }
 
     /// Build the scene at its own resolution.
@@ -591,14 +638,20 @@ impl Scene {
         let mut p = Problems::default();
         p.grid_size("resolution", nx, ny);
         if !p.0.is_empty() {
-            return Err(SceneError::Invalid { origin: self.origin.clone(), problems: p.0 });
+            return Err(SceneError::Invalid {
+                origin: self.origin.clone(),
+                problems: p.0,
+            });
         }
         let topology = Arc::new(Topology::grid(self.shape(nx, ny), self.orientation));
         let masses = self.masses(&topology);
         let loads = self.loads(&topology)?;
         let state = State::at_rest(&topology);
-        Simulation::new(topology, masses, self.params, loads, state, self.stability).map_err(|source| {
-            SceneError::Sim { origin: self.origin.clone(), nx, ny, source }
+        Simulation::new(topology, masses, self.params, loads, state, self.stability).map_err(|source| SceneError::Sim {
+            origin: self.origin.clone(),
+            nx,
+            ny,
+            source,
         })
     }
 }
@@ -674,7 +727,9 @@ impl Problems {
             if n < 2 {
                 self.push(format!("{path}.{name}: {n} nodes per side is below the minimum of 2"));
             } else if n > 4096 {
-                self.push(format!("{path}.{name}: {n} nodes per side is above the maximum of 4096"));
+                self.push(format!(
+                    "{path}.{name}: {n} nodes per side is above the maximum of 4096"
+                ));
             }
         }
     }
@@ -698,12 +753,22 @@ impl Problems {
                 self.positive(&format!("{path}.duration"), duration);
                 Profile::Pulse { start, duration }
             }
-            RawProfile::Sine { frequency, phase, amplitude, offset } => {
+            RawProfile::Sine {
+                frequency,
+                phase,
+                amplitude,
+                offset,
+            } => {
                 self.non_negative(&format!("{path}.frequency"), frequency);
                 self.finite(&format!("{path}.phase"), phase);
                 self.finite(&format!("{path}.amplitude"), amplitude);
                 self.finite(&format!("{path}.offset"), offset);
-                Profile::Sine { frequency, phase, amplitude, offset }
+                Profile::Sine {
+                    frequency,
+                    phase,
+                    amplitude,
+                    offset,
+                }
             }
         }
     }
@@ -730,7 +795,13 @@ impl Problems {
         }
     }
     fn selector(&mut self, path: &str, r: &RawSelector, reference: &GridShape) -> Selector {
-        let given = [r.edge.is_some(), r.corner.is_some(), r.region.is_some(), r.nodes.is_some(), r.all.is_some()];
+        let given = [
+            r.edge.is_some(),
+            r.corner.is_some(),
+            r.region.is_some(),
+            r.nodes.is_some(),
+            r.all.is_some(),
+        ];
         if given.iter().filter(|g| **g).count() != 1 {
             self.push(format!("{path}: give exactly one of edge, corner, region, nodes, all"));
             return Selector::All;
@@ -746,14 +817,20 @@ impl Problems {
             return match edge(e) {
                 Some(e) => Selector::Edge(e),
                 None => {
-                    self.push(format!("{path}.edge: unknown edge {e:?} (expected top, bottom, left or right)"));
+                    self.push(format!(
+                        "{path}.edge: unknown edge {e:?} (expected top, bottom, left or right)"
+                    ));
                     Selector::All
                 }
             };
         }
         if let Some(c) = &r.corner {
             let parts: Vec<_> = c.split('-').collect();
-            return match (parts.as_slice(), parts.first().and_then(|a| edge(a)), parts.get(1).and_then(|b| edge(b))) {
+            return match (
+                parts.as_slice(),
+                parts.first().and_then(|a| edge(a)),
+                parts.get(1).and_then(|b| edge(b)),
+            ) {
                 ([_, _], Some(a @ (Edge::Top | Edge::Bottom)), Some(b @ (Edge::Left | Edge::Right))) => {
                     Selector::Corner(a, b)
                 }
@@ -788,7 +865,9 @@ impl Problems {
             return Selector::Points(pts);
         }
         if r.all == Some(false) {
-            self.push(format!("{path}.all: false selects nothing; remove the pin/force instead"));
+            self.push(format!(
+                "{path}.all: false selects nothing; remove the pin/force instead"
+            ));
         }
         Selector::All
     }

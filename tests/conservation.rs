@@ -35,13 +35,24 @@ fn free_cloth(integrator: Integrator, material: Material, dt_fraction: f64) -> (
         StabilityCheck::Enforce,
     );
     let dt = dt_fraction * probe.dt_limit();
-    let sim = build(topo, masses.clone(), params(dt, integrator, material), Loads::default(), state, StabilityCheck::Enforce);
+    let sim = build(
+        topo,
+        masses.clone(),
+        params(dt, integrator, material),
+        Loads::default(),
+        state,
+        StabilityCheck::Enforce,
+    );
     (sim, masses)
 }
 
 /// Σ m |v|: the scale against which momentum changes are judged.
 fn momentum_scale(state: &State, masses: &[f64]) -> f64 {
-    masses.iter().enumerate().map(|(k, m)| m * norm(state.velocity(k))).sum()
+    masses
+        .iter()
+        .enumerate()
+        .map(|(k, m)| m * norm(state.velocity(k)))
+        .sum()
 }
 
 /// Σ m |x × v|: the scale for angular momentum.
@@ -78,7 +89,11 @@ fn total_momentum_of_a_free_damped_cloth_is_constant_to_1e12_with_symplectic_eul
     let material = uniform_material(50.0, 0.02);
     for integrator in [Integrator::SymplecticEuler, Integrator::Rk4, Integrator::ExplicitEuler] {
         // Explicit Euler is stable here thanks to the damping at a small dt.
-        let fraction = if integrator == Integrator::ExplicitEuler { 0.02 } else { 0.5 };
+        let fraction = if integrator == Integrator::ExplicitEuler {
+            0.02
+        } else {
+            0.5
+        };
         let (mut sim, masses) = free_cloth(integrator, material, fraction);
         let drift = largest_drift(&mut sim, &masses, 3000, momentum, momentum_scale);
         eprintln!("{integrator}: largest relative momentum change over 3000 steps {drift:.2e}");
@@ -107,7 +122,10 @@ fn angular_momentum_drift_of_rk4_is_small_and_falls_with_dt_to_the_fourth() {
         drifts.push(largest_drift(&mut sim, &masses, steps, angular_momentum, angular_scale));
     }
     let ratio = drifts[0] / drifts[1];
-    eprintln!("rk4: angular momentum drift {:.2e} at dt, {:.2e} at dt/2 (same time span): ratio {ratio:.1}", drifts[0], drifts[1]);
+    eprintln!(
+        "rk4: angular momentum drift {:.2e} at dt, {:.2e} at dt/2 (same time span): ratio {ratio:.1}",
+        drifts[0], drifts[1]
+    );
     assert!(drifts[0] < 2e-4, "drift {:e}", drifts[0]);
     assert!(ratio > 8.0, "drift ratio {ratio}");
 }

@@ -13,8 +13,8 @@ use std::sync::Arc;
 use common::{build, fixed_pins, grid, lumped_masses, material, params};
 use lodcloth::sim::{Integrator, Loads, Material, Orientation, StabilityCheck, State, Topology};
 
-/// (structural, shear, bend) coefficients: C = 5e-4 s × K damps the top mesh
-/// mode enough that explicit Euler is stable at every dt used here.
+// (structural, shear, bend) coefficients: C = 5e-4 s × K damps the top mesh
+// mode enough that explicit Euler is stable at every dt used here.
 
 const T: f64 = 0.25;
 const NX: usize = 6;
@@ -26,14 +26,13 @@ fn fabric() -> Material {
 }
 
 fn end_state(topology: &Arc<Topology>, integrator: Integrator, dt: f64) -> State {
-    let mut p = params(
-        dt,
-        integrator,
-        fabric(),
-    );
+    let mut p = params(dt, integrator, fabric());
     p.gravity = [0.0, -9.81, 0.0];
     p.drag = 0.5;
-    let loads = Loads { pins: fixed_pins(topology, &[0, NX - 1]), ..Loads::default() };
+    let loads = Loads {
+        pins: fixed_pins(topology, &[0, NX - 1]),
+        ..Loads::default()
+    };
     let masses = lumped_masses(topology, 0.2);
     let mut sim = build(
         topology.clone(),
@@ -78,7 +77,10 @@ fn omega_dt(dt: f64) -> f64 {
         topo.clone(),
         lumped_masses(&topo, 0.2),
         p,
-        Loads { pins: fixed_pins(&topo, &[0, NX - 1]), ..Loads::default() },
+        Loads {
+            pins: fixed_pins(&topo, &[0, NX - 1]),
+            ..Loads::default()
+        },
         State::at_rest(&topo),
         StabilityCheck::Enforce,
     );
@@ -90,7 +92,11 @@ fn rk4_error_falls_16x_when_dt_halves() {
     let dt0 = 2f64.powi(-9);
     eprintln!("rk4 largest ω_max·dt = {:.2}", omega_dt(dt0));
     let (errs, ratios) = errors(Integrator::Rk4, dt0);
-    assert!(errs[2] > 1e-13, "finest error {:e} is at round-off level: the test measures nothing", errs[2]);
+    assert!(
+        errs[2] > 1e-13,
+        "finest error {:e} is at round-off level: the test measures nothing",
+        errs[2]
+    );
     for r in ratios {
         assert!((12.0..20.0).contains(&r), "RK4 ratio {r}, expected ~16");
     }

@@ -22,7 +22,10 @@ const AMPLITUDE: f64 = 0.02;
 fn oscillator(integrator: Integrator, dt: f64) -> Simulation {
     let rest = vec![[0.0; 3], DIR.map(|d| d * L0)];
     let topology = pairs_topology(rest, &[(0, 1)], SpringKind::Structural);
-    let loads = Loads { pins: fixed_pins(&topology, &[0]), ..Loads::default() };
+    let loads = Loads {
+        pins: fixed_pins(&topology, &[0]),
+        ..Loads::default()
+    };
     let mut state = State::at_rest(&topology);
     state.set_position(1, DIR.map(|d| d * (L0 + AMPLITUDE)));
     let p = params(dt, integrator, uniform_material(K, 0.0));
@@ -118,7 +121,10 @@ fn symplectic_euler_period_error_shrinks_fourfold_when_dt_halves() {
         })
         .collect();
     let ratio = errs[0] / errs[1];
-    eprintln!("symplectic euler period errors {:.3e}, {:.3e}: ratio {ratio:.2}", errs[0], errs[1]);
+    eprintln!(
+        "symplectic euler period errors {:.3e}, {:.3e}: ratio {ratio:.2}",
+        errs[0], errs[1]
+    );
     // Second order in the period (first order in the trajectory): ratio ≈ 4.
     assert!((3.5..4.5).contains(&ratio), "ratio {ratio}");
 }

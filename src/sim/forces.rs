@@ -86,9 +86,7 @@ pub(crate) fn spring_forces(
     {
         if std::is_x86_feature_detected!("avx512f") {
             // SAFETY: the CPU supports AVX-512F, checked just above.
-            return unsafe {
-                spring_forces_avx512(topology, material, adjust_ratio, pos, vel, force, scratch)
-            };
+            return unsafe { spring_forces_avx512(topology, material, adjust_ratio, pos, vel, force, scratch) };
         }
         if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma") {
             // SAFETY: the CPU supports AVX2 and FMA, checked just above.
@@ -145,17 +143,30 @@ fn spring_forces_impl(
     let p = [px, py, pz];
     let v = [vx, vy, vz];
 
-    let mut totals = SpringTotals { elastic_energy: 0.0, max_strain: [f64::NEG_INFINITY; 3] };
+    let mut totals = SpringTotals {
+        elastic_energy: 0.0,
+        max_strain: [f64::NEG_INFINITY; 3],
+    };
     for group in &topology.groups {
         let sc = material.get(group.kind);
-        let coef = Coef { k: sc.k, c: sc.c, adjust_ratio };
-        let mut acc = Acc { energy: [0.0; LANES], max_ratio: [f64::NEG_INFINITY; LANES] };
+        let coef = Coef {
+            k: sc.k,
+            c: sc.c,
+            adjust_ratio,
+        };
+        let mut acc = Acc {
+            energy: [0.0; LANES],
+            max_ratio: [f64::NEG_INFINITY; LANES],
+        };
         match group.stencil_offset {
             Some(offset) => stencil_group(group, offset as usize, p, v, coef, force, scratch, &mut acc),
             None => gather_group(group, p, v, coef, force, scratch, &mut acc),
         }
         totals.elastic_energy += acc.energy.iter().sum::<f64>();
-        let m = acc.max_ratio.iter().fold(f64::NEG_INFINITY, |a, &b| if b > a { b } else { a });
+        let m = acc
+            .max_ratio
+            .iter()
+            .fold(f64::NEG_INFINITY, |a, &b| if b > a { b } else { a });
         let slot = &mut totals.max_strain[group.kind.index()];
         if m - 1.0 > *slot {
             *slot = m - 1.0;
@@ -199,7 +210,11 @@ fn stencil_group(
         if offset >= LANES {
             let (fx, rest_f) = force.split_at_mut(n);
             let (fy, fz) = rest_f.split_at_mut(n);
-            let mut sink = Direct { force: [fx, fy, fz], a0, b0 };
+            let mut sink = Direct {
+                force: [fx, fy, fz],
+                a0,
+                b0,
+            };
             eval_springs(xa, xb, va, vb, rest, inv_rest, coef, &mut sink, acc);
             continue;
         }
@@ -299,7 +314,11 @@ fn eval_springs(
         let r = block::<LANES>(i, xa, xb, va, vb, rest, inv_rest, coef);
         for j in 0..LANES {
             energy[j] += r.energy[j];
-            max_ratio[j] = if r.ratio[j] > max_ratio[j] { r.ratio[j] } else { max_ratio[j] };
+            max_ratio[j] = if r.ratio[j] > max_ratio[j] {
+                r.ratio[j]
+            } else {
+                max_ratio[j]
+            };
         }
         sink.put(i, &r.f);
         i += LANES;
@@ -307,7 +326,11 @@ fn eval_springs(
     while i < len {
         let r = block::<1>(i, xa, xb, va, vb, rest, inv_rest, coef);
         energy[0] += r.energy[0];
-        max_ratio[0] = if r.ratio[0] > max_ratio[0] { r.ratio[0] } else { max_ratio[0] };
+        max_ratio[0] = if r.ratio[0] > max_ratio[0] {
+            r.ratio[0]
+        } else {
+            max_ratio[0]
+        };
         sink.put(i, &r.f);
         i += 1;
     }
@@ -346,11 +369,15 @@ impl Sink for Direct<'_> {
     #[inline(always)]
     fn put<const N: usize>(&mut self, i: usize, f: &[[f64; N]; 3]) {
         for c in 0..3 {
-            let fa: &mut [f64; N] = (&mut self.force[c][self.a0 + i..self.a0 + i + N]).try_into().expect("N");
+            let fa: &mut [f64; N] = (&mut self.force[c][self.a0 + i..self.a0 + i + N])
+                .try_into()
+                .expect("N");
             for j in 0..N {
                 fa[j] += f[c][j];
             }
-            let fb: &mut [f64; N] = (&mut self.force[c][self.b0 + i..self.b0 + i + N]).try_into().expect("N");
+            let fb: &mut [f64; N] = (&mut self.force[c][self.b0 + i..self.b0 + i + N])
+                .try_into()
+                .expect("N");
             for j in 0..N {
                 fb[j] -= f[c][j];
             }
@@ -388,7 +415,11 @@ fn block<const N: usize>(
     let (ubx, uby, ubz) = (arr::<N>(vb[0], i), arr::<N>(vb[1], i), arr::<N>(vb[2], i));
     let l0 = arr::<N>(rest, i);
     let il0 = arr::<N>(inv_rest, i);
-    let mut out = BlockOut { f: [[0.0; N]; 3], energy: [0.0; N], ratio: [0.0; N] };
+    let mut out = BlockOut {
+        f: [[0.0; N]; 3],
+        energy: [0.0; N],
+        ratio: [0.0; N],
+    };
     // Straight-line code with selects only (no branches), so each line
     // becomes one vector instruction over the N lanes.
     for j in 0..N {
@@ -428,7 +459,11 @@ pub(crate) fn node_normals(topology: &Topology, pos: &[f64], normals: &mut [f64]
         let u = [p(b, 0) - p(a, 0), p(b, 1) - p(a, 1), p(b, 2) - p(a, 2)];
         let w = [p(c, 0) - p(a, 0), p(c, 1) - p(a, 1), p(c, 2) - p(a, 2)];
         // Cross product = twice the triangle's area times its unit normal.
-        let cr = [u[1] * w[2] - u[2] * w[1], u[2] * w[0] - u[0] * w[2], u[0] * w[1] - u[1] * w[0]];
+        let cr = [
+            u[1] * w[2] - u[2] * w[1],
+            u[2] * w[0] - u[0] * w[2],
+            u[0] * w[1] - u[1] * w[0],
+        ];
         for k in [a, b, c] {
             for d in 0..3 {
                 normals[d * n + k as usize] += cr[d];

@@ -102,7 +102,11 @@ pub(crate) fn step(
         let co = inp.material.get(g.kind);
         for i in 0..g.len() {
             let (a, b) = (g.a[i] as usize, g.b[i] as usize);
-            let d = [pos[b] - pos[a], pos[n + b] - pos[n + a], pos[2 * n + b] - pos[2 * n + a]];
+            let d = [
+                pos[b] - pos[a],
+                pos[n + b] - pos[n + a],
+                pos[2 * n + b] - pos[2 * n + a],
+            ];
             let l = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
             let inv = if l > 1e-12 { 1.0 / l } else { 0.0 };
             let ratio = l * g.inv_rest[i];
@@ -145,7 +149,10 @@ pub(crate) fn step(
     ws.r.copy_from_slice(&ws.rhs);
     let b_norm = dot(&ws.rhs, &ws.rhs).sqrt();
     if b_norm == 0.0 {
-        return CgOutcome { iterations: 0, relative_residual: 0.0 };
+        return CgOutcome {
+            iterations: 0,
+            relative_residual: 0.0,
+        };
     }
     for i in 0..3 * n {
         ws.z[i] = ws.diag[i] * ws.r[i];
@@ -188,7 +195,10 @@ pub(crate) fn step(
             pos[i] += dt * vel[i];
         }
     }
-    CgOutcome { iterations, relative_residual: rel }
+    CgOutcome {
+        iterations,
+        relative_residual: rel,
+    }
 }
 
 fn dot(a: &[f64], b: &[f64]) -> f64 {

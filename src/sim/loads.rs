@@ -14,7 +14,12 @@ pub enum Profile {
     /// 1 for `start ≤ t < start + duration`, else 0.
     Pulse { start: f64, duration: f64 },
     /// s = offset + amplitude · sin(2π·frequency·t + phase).
-    Sine { frequency: f64, phase: f64, amplitude: f64, offset: f64 },
+    Sine {
+        frequency: f64,
+        phase: f64,
+        amplitude: f64,
+        offset: f64,
+    },
 }
 
 impl Profile {
@@ -38,9 +43,12 @@ impl Profile {
                     0.0
                 }
             }
-            Profile::Sine { frequency, phase, amplitude, offset } => {
-                offset + amplitude * (TAU * frequency * t + phase).sin()
-            }
+            Profile::Sine {
+                frequency,
+                phase,
+                amplitude,
+                offset,
+            } => offset + amplitude * (TAU * frequency * t + phase).sin(),
         }
     }
 }
@@ -146,15 +154,25 @@ mod tests {
         assert_eq!(r.at(0.5), 0.0);
         assert!((r.at(2.0) - 0.5).abs() < 1e-15);
         assert_eq!(r.at(4.0), 1.0);
-        let p = Profile::Pulse { start: 1.0, duration: 0.5 };
+        let p = Profile::Pulse {
+            start: 1.0,
+            duration: 0.5,
+        };
         assert_eq!([p.at(0.99), p.at(1.0), p.at(1.49), p.at(1.5)], [0.0, 1.0, 1.0, 0.0]);
     }
 
     #[test]
     fn pin_velocity_is_the_derivative_of_its_position() {
         let paths = [
-            PinPath::Linear { velocity: [0.1, -0.2, 0.3], start: 0.5, end: 2.0 },
-            PinPath::Sine { amplitude: [0.05, 0.0, -0.02], frequency: 1.5 },
+            PinPath::Linear {
+                velocity: [0.1, -0.2, 0.3],
+                start: 0.5,
+                end: 2.0,
+            },
+            PinPath::Sine {
+                amplitude: [0.05, 0.0, -0.02],
+                frequency: 1.5,
+            },
         ];
         let h = 1e-6;
         for path in paths {

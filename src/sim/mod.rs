@@ -35,13 +35,25 @@ use strain::StrainWorkspace;
 pub enum SimError {
     /// A scalar parameter is out of its valid range.
     #[error("{name} = {value}: {reason}")]
-    InvalidParameter { name: String, value: f64, reason: &'static str },
+    InvalidParameter {
+        name: String,
+        value: f64,
+        reason: &'static str,
+    },
     /// Array sizes do not match the topology.
     #[error("{what} has {got} entries, the cloth has {expected} nodes")]
-    SizeMismatch { what: &'static str, got: usize, expected: usize },
+    SizeMismatch {
+        what: &'static str,
+        got: usize,
+        expected: usize,
+    },
     /// A node index is outside the cloth.
     #[error("{what}: node {node} does not exist (the cloth has {n_nodes} nodes)")]
-    NodeOutOfRange { what: &'static str, node: u32, n_nodes: usize },
+    NodeOutOfRange {
+        what: &'static str,
+        node: u32,
+        n_nodes: usize,
+    },
     /// A node is pinned twice.
     #[error("node {node} is pinned more than once")]
     DuplicatePin { node: u32 },
@@ -131,7 +143,11 @@ impl Workspace {
         Workspace {
             kernel: KernelScratch::new(topology),
             force: vec![0.0; n3],
-            normals: if loads.wind.is_some() { vec![0.0; n3] } else { Vec::new() },
+            normals: if loads.wind.is_some() {
+                vec![0.0; n3]
+            } else {
+                Vec::new()
+            },
             stage_pos: vec![0.0; rk],
             stage_vel: vec![0.0; rk],
             sum_pos: vec![0.0; rk],
@@ -169,7 +185,15 @@ impl Model {
         let n = topo.n_nodes;
         let f = &mut ws.force;
         f.fill(0.0);
-        let totals = forces::spring_forces(topo, &self.params.material, self.adjust_ratio(), pos, vel, f, &mut ws.kernel);
+        let totals = forces::spring_forces(
+            topo,
+            &self.params.material,
+            self.adjust_ratio(),
+            pos,
+            vel,
+            f,
+            &mut ws.kernel,
+        );
         for load in &self.loads.forces {
             let s = load.profile.at(t);
             for (&k, &share) in load.nodes.iter().zip(&load.shares) {
@@ -200,7 +224,11 @@ impl Model {
         let g = self.params.gravity;
         let drag = self.params.drag;
         for c in 0..3 {
-            let (fc, vc, ac) = (&f[c * n..(c + 1) * n], &vel[c * n..(c + 1) * n], &mut acc[c * n..(c + 1) * n]);
+            let (fc, vc, ac) = (
+                &f[c * n..(c + 1) * n],
+                &vel[c * n..(c + 1) * n],
+                &mut acc[c * n..(c + 1) * n],
+            );
             for k in 0..n {
                 ac[k] = fc[k] * self.inv_mass[k] + self.free[k] * (g[c] - drag * vc[k]);
             }
@@ -238,7 +266,11 @@ impl Simulation {
         let n = topology.n_nodes;
         validate_params(&params)?;
         if masses.len() != n {
-            return Err(SimError::SizeMismatch { what: "masses", got: masses.len(), expected: n });
+            return Err(SimError::SizeMismatch {
+                what: "masses",
+                got: masses.len(),
+                expected: n,
+            });
         }
         if let Some((k, &m)) = masses.iter().enumerate().find(|(_, m)| !(m.is_finite() && **m > 0.0)) {
             return Err(SimError::InvalidParameter {
@@ -248,7 +280,11 @@ impl Simulation {
             });
         }
         if state.pos.len() != 3 * n || state.vel.len() != 3 * n {
-            return Err(SimError::SizeMismatch { what: "state", got: state.pos.len() / 3, expected: n });
+            return Err(SimError::SizeMismatch {
+                what: "state",
+                got: state.pos.len() / 3,
+                expected: n,
+            });
         }
         validate_loads(&loads, n)?;
         let mut pinned = vec![false; n];
@@ -272,7 +308,14 @@ impl Simulation {
         let free = (0..n).map(|k| if pinned[k] { 0.0 } else { 1.0 }).collect();
         let ws = Workspace::new(&topology, &params, &loads);
         let mut sim = Simulation {
-            model: Model { topology, masses, inv_mass, free, params, loads },
+            model: Model {
+                topology,
+                masses,
+                inv_mass,
+                free,
+                params,
+                loads,
+            },
             acc: vec![0.0; 3 * n],
             state,
             ws,
@@ -295,7 +338,11 @@ impl Simulation {
     pub fn set_state(&mut self, state: State) -> Result<(), SimError> {
         let n = self.model.topology.n_nodes;
         if state.pos.len() != 3 * n || state.vel.len() != 3 * n {
-            return Err(SimError::SizeMismatch { what: "state", got: state.pos.len() / 3, expected: n });
+            return Err(SimError::SizeMismatch {
+                what: "state",
+                got: state.pos.len() / 3,
+                expected: n,
+            });
         }
         self.state = state;
         self.cached = false;
@@ -386,7 +433,11 @@ impl Simulation {
                     dt,
                     cg: m.params.cg,
                 };
-                let ws = self.ws.implicit.as_mut().expect("implicit workspace exists for implicit Euler");
+                let ws = self
+                    .ws
+                    .implicit
+                    .as_mut()
+                    .expect("implicit workspace exists for implicit Euler");
                 let out = implicit::step(&inputs, &mut self.state.pos, &mut self.state.vel, &self.acc, ws);
                 solver = (out.iterations, out.relative_residual);
             }
@@ -436,14 +487,23 @@ impl Simulation {
     fn ensure_cache(&mut self) {
         if !self.cached {
             let s = &self.state;
-            self.totals = self.model.accelerations(s.time, &s.pos, &s.vel, &mut self.acc, &mut self.ws);
+            self.totals = self
+                .model
+                .accelerations(s.time, &s.pos, &s.vel, &mut self.acc, &mut self.ws);
             self.cached = true;
         }
     }
 
     /// Classic RK4 on y = (x, v), y' = (v, a(t, x, v)); k1 is the cached acceleration.
     fn rk4(&mut self, t0: f64, dt: f64) {
-        let Workspace { stage_pos, stage_vel, sum_pos, sum_vel, stage_acc, .. } = &mut self.ws;
+        let Workspace {
+            stage_pos,
+            stage_vel,
+            sum_pos,
+            sum_vel,
+            stage_acc,
+            ..
+        } = &mut self.ws;
         let (pos, vel) = (&self.state.pos, &self.state.vel);
         // k1
         for i in 0..pos.len() {
@@ -457,7 +517,8 @@ impl Simulation {
         let mut stage_acc = std::mem::take(stage_acc);
         // k2, k3 at the midpoint, k4 at the end.
         for (weight, t_stage, next_scale) in [(2.0, 0.5 * dt, 0.5 * dt), (2.0, 0.5 * dt, dt), (1.0, dt, 0.0)] {
-            self.model.accelerations(t0 + t_stage, &stage_pos, &stage_vel, &mut stage_acc, &mut self.ws);
+            self.model
+                .accelerations(t0 + t_stage, &stage_pos, &stage_vel, &mut stage_acc, &mut self.ws);
             let (sum_pos, sum_vel) = (&mut self.ws.sum_pos, &mut self.ws.sum_vel);
             for i in 0..pos.len() {
                 sum_pos[i] += weight * stage_vel[i];
@@ -507,7 +568,11 @@ impl Simulation {
 }
 
 fn invalid(name: impl Into<String>, value: f64, reason: &'static str) -> SimError {
-    SimError::InvalidParameter { name: name.into(), value, reason }
+    SimError::InvalidParameter {
+        name: name.into(),
+        value,
+        reason,
+    }
 }
 
 fn validate_params(p: &SimParams) -> Result<(), SimError> {
@@ -531,15 +596,27 @@ fn validate_params(p: &SimParams) -> Result<(), SimError> {
     }
     if let Some(a) = p.stiffness_adjustment {
         if !(a.allowed.is_finite() && a.allowed >= 0.0) {
-            return Err(invalid("stiffness_adjustment.allowed", a.allowed, "allowed strain must be finite and ≥ 0"));
+            return Err(invalid(
+                "stiffness_adjustment.allowed",
+                a.allowed,
+                "allowed strain must be finite and ≥ 0",
+            ));
         }
     }
     if let Some(l) = p.strain_limit {
         if !(l.max_strain.is_finite() && l.max_strain >= 0.0) {
-            return Err(invalid("strain_limit.max_strain", l.max_strain, "maximum strain must be finite and ≥ 0"));
+            return Err(invalid(
+                "strain_limit.max_strain",
+                l.max_strain,
+                "maximum strain must be finite and ≥ 0",
+            ));
         }
         if !(l.tolerance.is_finite() && l.tolerance >= 0.0) {
-            return Err(invalid("strain_limit.tolerance", l.tolerance, "tolerance must be finite and ≥ 0"));
+            return Err(invalid(
+                "strain_limit.tolerance",
+                l.tolerance,
+                "tolerance must be finite and ≥ 0",
+            ));
         }
     }
     if !(p.cg.tolerance.is_finite() && p.cg.tolerance > 0.0) {
@@ -554,13 +631,25 @@ fn validate_params(p: &SimParams) -> Result<(), SimError> {
 fn validate_loads(loads: &Loads, n: usize) -> Result<(), SimError> {
     for (i, load) in loads.forces.iter().enumerate() {
         if load.nodes.len() != load.shares.len() {
-            return Err(SimError::SizeMismatch { what: "load shares", got: load.shares.len(), expected: load.nodes.len() });
+            return Err(SimError::SizeMismatch {
+                what: "load shares",
+                got: load.shares.len(),
+                expected: load.nodes.len(),
+            });
         }
         if let Some(&k) = load.nodes.iter().find(|&&k| k as usize >= n) {
-            return Err(SimError::NodeOutOfRange { what: "force", node: k, n_nodes: n });
+            return Err(SimError::NodeOutOfRange {
+                what: "force",
+                node: k,
+                n_nodes: n,
+            });
         }
         if let Some(&f) = load.force.iter().chain(&load.shares).find(|f| !f.is_finite()) {
-            return Err(invalid(format!("forces[{i}]"), f, "force components and shares must be finite"));
+            return Err(invalid(
+                format!("forces[{i}]"),
+                f,
+                "force components and shares must be finite",
+            ));
         }
     }
     if let Some(w) = &loads.wind {
@@ -569,15 +658,27 @@ fn validate_loads(loads: &Loads, n: usize) -> Result<(), SimError> {
             return Err(invalid("wind", x, "wind values must be finite"));
         }
         if w.air_density < 0.0 || w.drag_coefficient < 0.0 {
-            return Err(invalid("wind", w.air_density.min(w.drag_coefficient), "air density and drag coefficient must be ≥ 0"));
+            return Err(invalid(
+                "wind",
+                w.air_density.min(w.drag_coefficient),
+                "air density and drag coefficient must be ≥ 0",
+            ));
         }
     }
     for pin in &loads.pins {
         if pin.node as usize >= n {
-            return Err(SimError::NodeOutOfRange { what: "pin", node: pin.node, n_nodes: n });
+            return Err(SimError::NodeOutOfRange {
+                what: "pin",
+                node: pin.node,
+                n_nodes: n,
+            });
         }
         if pin.anchor.iter().any(|x| !x.is_finite()) {
-            return Err(invalid(format!("pin on node {}", pin.node), f64::NAN, "pin anchor must be finite"));
+            return Err(invalid(
+                format!("pin on node {}", pin.node),
+                f64::NAN,
+                "pin anchor must be finite",
+            ));
         }
     }
     Ok(())

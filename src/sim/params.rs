@@ -149,8 +149,8 @@ pub struct StiffnessAdjustment {
 pub struct StrainLimit {
     /// Largest allowed strain (L − L0) / L0, e.g. 0.10.
     pub max_strain: f64,
-    /// Upper bound on Jacobi sweeps over the springs found too long by one full
-    /// check (a sweep with no violation ends early; at most 8 full checks a step).
+    /// Upper bound on Jacobi sweeps over the springs found too long by the full
+    /// checks so far (a sweep with no violation ends early; at most 8 full checks a step).
     pub max_iterations: u32,
     /// Violations at or below `max_strain · (1 + tolerance)` count as satisfied.
     pub tolerance: f64,

@@ -30,7 +30,12 @@ impl State {
                 pos[c * n + k] = p[c];
             }
         }
-        State { pos, vel: vec![0.0; 3 * n], time: 0.0, step: 0 }
+        State {
+            pos,
+            vel: vec![0.0; 3 * n],
+            time: 0.0,
+            step: 0,
+        }
     }
 
     /// Number of nodes.

@@ -210,7 +210,11 @@ impl Topology {
 
     /// Number of springs of one kind.
     pub fn spring_count_of(&self, kind: SpringKind) -> usize {
-        self.groups.iter().filter(|g| g.kind == kind).map(SpringGroup::len).sum()
+        self.groups
+            .iter()
+            .filter(|g| g.kind == kind)
+            .map(SpringGroup::len)
+            .sum()
     }
 
     /// Total rest area (m²).
@@ -239,13 +243,7 @@ impl Topology {
 }
 
 /// One stencil direction of a grid: springs (i, j) → (i + di, j + dj).
-fn grid_group(
-    shape: &GridShape,
-    rest_positions: &[[f64; 3]],
-    kind: SpringKind,
-    di: isize,
-    dj: usize,
-) -> SpringGroup {
+fn grid_group(shape: &GridShape, rest_positions: &[[f64; 3]], kind: SpringKind, di: isize, dj: usize) -> SpringGroup {
     let GridShape { nx, ny, .. } = *shape;
     let span = di.unsigned_abs();
     let offset = (dj * nx) as isize + di;
@@ -305,7 +303,12 @@ mod tests {
     use super::*;
 
     fn shape(nx: usize, ny: usize) -> GridShape {
-        GridShape { nx, ny, width: 1.0, height: 2.0 }
+        GridShape {
+            nx,
+            ny,
+            width: 1.0,
+            height: 2.0,
+        }
     }
 
     #[test]
@@ -367,7 +370,11 @@ mod tests {
             let [a, b, c] = tri.map(|k| t.rest_positions[k as usize]);
             let u = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
             let v = [c[0] - a[0], c[1] - a[1], c[2] - a[2]];
-            let cross = [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]];
+            let cross = [
+                u[1] * v[2] - u[2] * v[1],
+                u[2] * v[0] - u[0] * v[2],
+                u[0] * v[1] - u[1] * v[0],
+            ];
             // Horizontal cloth: all normals point the same way (+y).
             assert!(cross[1] > 0.0);
             total += 0.5 * cross[1];

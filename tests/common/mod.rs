@@ -8,8 +8,8 @@
 use std::sync::Arc;
 
 use lodcloth::sim::{
-    CgSettings, GridShape, Integrator, Loads, Material, Orientation, Pin, PinPath, SimParams, Simulation,
-    SpringCoeffs, SpringGroup, SpringKind, StabilityCheck, State, StepReport, Topology,
+    CgSettings, GridShape, Integrator, Loads, Material, Orientation, Pin, PinPath, SimParams, Simulation, SpringCoeffs,
+    SpringGroup, SpringKind, StabilityCheck, State, StepReport, Topology,
 };
 
 /// SplitMix64: a tiny deterministic generator, so no test depends on a seed
@@ -38,7 +38,9 @@ impl Rng {
 
 /// The same coefficients for every spring kind.
 pub fn uniform_material(k: f64, c: f64) -> Material {
-    Material { springs: [SpringCoeffs { k, c }; 3] }
+    Material {
+        springs: [SpringCoeffs { k, c }; 3],
+    }
 }
 
 /// Per-kind coefficients: (structural, shear, bend) as (k, c) pairs.
@@ -80,7 +82,11 @@ pub fn lumped_masses(topology: &Topology, areal_density: f64) -> Vec<f64> {
 pub fn fixed_pins(topology: &Topology, nodes: &[usize]) -> Vec<Pin> {
     nodes
         .iter()
-        .map(|&k| Pin { node: k as u32, anchor: topology.rest_positions[k], path: PinPath::Fixed })
+        .map(|&k| Pin {
+            node: k as u32,
+            anchor: topology.rest_positions[k],
+            path: PinPath::Fixed,
+        })
         .collect()
 }
 
@@ -168,7 +174,11 @@ pub fn dist(a: [f64; 3], b: [f64; 3]) -> f64 {
 }
 
 pub fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
 }
 
 pub fn norm(a: [f64; 3]) -> f64 {

@@ -1,0 +1,230 @@
+//! Scene files: every shipped scene loads and builds at any resolution; an
+//! invalid scene is refused with a message naming every offending field;
+//! node masses follow the chosen convention at every resolution; loads and
+//! pins resolve to the same physical quantities at every resolution.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+
+use lodcloth::scene::{MassConvention, Scene, SceneError};
+
+/// Every `*.toml` in config/scenes/, sorted.
+fn shipped_scenes() -> Vec<PathBuf> {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/scenes");
+    let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .unwrap_or_else(|e| panic!("cannot list {}: {e}", dir.display()))
+        .map(|e| e.expect("directory entry").path())
+        .filter(|p| p.extension().is_some_and(|x| x == "toml"))
+        .collect();
+    files.sort();
+    assert!(!files.is_empty(), "no scene files in {}", dir.display());
+    files
+}
+
+const RESOLUTIONS: [(usize, usize); 3] = [(16, 16), (40, 40), (100, 37)];
+
+#[test]
+fn every_shipped_scene_parses_validates_and_builds_at_its_own_and_other_resolutions() {
+    for path in shipped_scenes() {
+        let scene = Scene::load(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        let own = (scene.nx, scene.ny);
+        for (nx, ny) in std::iter::once(own).chain(RESOLUTIONS) {
+            let mut sim = scene
+                .build_at(nx, ny)
+                .unwrap_or_else(|e| panic!("{} at {nx}x{ny}: {e}", path.display()));
+            assert_eq!(sim.topology().n_nodes, nx * ny);
+            assert!(!sim.loads().pins.is_empty(), "{}: no pins at {nx}x{ny}", path.display());
+            // It really runs: a few steps stay finite.
+            for _ in 0..5 {
+                assert!(sim.step().finite, "{} at {nx}x{ny} diverged", path.display());
+            }
+        }
+        eprintln!("{}: builds at {own:?} and {RESOLUTIONS:?}", path.display());
+    }
+}
+
+/// A valid scene to break in the tests below.
+const VALID: &str = r#"
+name = "valid"
+
+[cloth]
+width = 1.0
+height = 0.5
+nx = 12
+ny = 6
+areal_density = 0.2
+
+[springs]
+structural = { k = 400.0, c = 0.04 }
+shear = { k = 60.0, c = 0.006 }
+bend = { k = 8.0, c = 0.0008 }
+
+[simulation]
+integrator = "symplectic_euler"
+dt = 1e-4
+duration = 1.0
+
+[[pins]]
+nodes = { edge = "top" }
+
+[[forces]]
+nodes = { edge = "bottom" }
+total = [0.0, -1.0, 0.0]
+"#;
+
+fn invalid_message(text: &str) -> String {
+    match Scene::from_toml(text, "<test>") {
+        Ok(_) => panic!("accepted an invalid scene:\n{text}"),
+        Err(e) => e.to_string(),
+    }
+}
+
+#[test]
+fn the_valid_template_is_valid() {
+    let scene = Scene::from_toml(VALID, "<test>").expect("valid");
+    scene.build().expect("builds");
+}
+
+#[test]
+fn unknown_field_is_refused_with_its_name_and_line() {
+    let text = VALID.replace("areal_density = 0.2", "areal_density = 0.2\ncolour = \"red\"");
+    let err = Scene::from_toml(&text, "<test>").expect_err("unknown field");
+    let msg = err.to_string();
+    eprintln!("{msg}");
+    assert!(matches!(err, SceneError::Parse { .. }));
+    assert!(msg.contains("colour"), "{msg}");
+    // The line of the offending key (line 9 of the text, counting from 1).
+    let line = text.lines().position(|l| l.starts_with("colour")).expect("inserted") + 1;
+    assert!(msg.contains(&format!("line {line}")), "{msg}");
+}
+
+#[test]
+fn negative_stiffness_is_refused_naming_springs_structural_k() {
+    let msg = invalid_message(&VALID.replace("structural = { k = 400.0", "structural = { k = -400.0"));
+    assert!(msg.contains("springs.structural.k"), "{msg}");
+}
+
+#[test]
+fn one_node_per_side_is_refused_naming_cloth_nx() {
+    let msg = invalid_message(&VALID.replace("nx = 12", "nx = 1"));
+    assert!(msg.contains("cloth.nx"), "{msg}");
+    assert!(!msg.contains("cloth.ny"), "{msg}");
+}
+
+#[test]
+fn bad_edge_name_is_refused_naming_its_pin() {
+    let msg = invalid_message(&VALID.replace("edge = \"top\"", "edge = \"middle\""));
+    assert!(msg.contains("pins[0].nodes.edge"), "{msg}");
+    assert!(msg.contains("middle"), "{msg}");
+}
+
+#[test]
+fn several_problems_at_once_are_all_reported_with_their_paths() {
+    let text = VALID
+        .replace("structural = { k = 400.0", "structural = { k = -400.0")
+        .replace("bend = { k = 8.0, c = 0.0008 }", "bend = { k = 8.0, c = -1.0 }")
+        .replace("nx = 12", "nx = 1")
+        .replace("edge = \"top\"", "edge = \"middle\"")
+        .replace("edge = \"bottom\"", "corner = \"left-top\"")
+        .replace("dt = 1e-4", "dt = -1e-4")
+        .replace("areal_density = 0.2", "areal_density = 0.0");
+    let err = Scene::from_toml(&text, "<test>").expect_err("invalid");
+    let msg = err.to_string();
+    eprintln!("{msg}");
+    let paths = [
+        "springs.structural.k",
+        "springs.bend.c",
+        "cloth.nx",
+        "pins[0].nodes.edge",
+        "forces[0].nodes.corner",
+        "simulation.dt",
+        "cloth.areal_density",
+    ];
+    for path in paths {
+        assert!(msg.contains(path), "{path} missing from:\n{msg}");
+    }
+    match err {
+        SceneError::Invalid { problems, .. } => assert_eq!(problems.len(), paths.len(), "{problems:#?}"),
+        other => panic!("expected SceneError::Invalid, got {other:?}"),
+    }
+}
+
+#[test]
+fn building_at_one_node_per_side_is_refused() {
+    let scene = Scene::from_toml(VALID, "<test>").expect("valid");
+    let msg = scene.build_at(1, 5).map(|_| ()).expect_err("1 node per side").to_string();
+    assert!(msg.contains("resolution.nx"), "{msg}");
+}
+
+fn with_mass(convention: &str) -> Scene {
+    let text = VALID.replace("areal_density = 0.2", &format!("areal_density = 0.2\nmass = \"{convention}\""));
+    Scene::from_toml(&text, "<test>").expect("valid")
+}
+
+#[test]
+fn lumped_total_mass_is_areal_density_times_area_at_every_resolution() {
+    let scene = with_mass("lumped");
+    assert_eq!(scene.mass, MassConvention::Lumped);
+    let expected = 0.2 * 1.0 * 0.5;
+    for (nx, ny) in [(12, 6), (2, 2), (16, 16), (40, 40), (100, 37)] {
+        let sim = scene.build_at(nx, ny).expect("builds");
+        let total: f64 = sim.masses().iter().sum();
+        assert!((total - expected).abs() < 1e-12 * expected, "{nx}x{ny}: {total} kg vs {expected} kg");
+    }
+}
+
+#[test]
+fn per_node_total_mass_is_proportional_to_the_node_count() {
+    let scene = with_mass("per_node");
+    assert_eq!(scene.mass, MassConvention::PerNode);
+    // Each node weighs total / (12·6) at every resolution.
+    let per_node = 0.2 * 1.0 * 0.5 / 72.0;
+    for (nx, ny) in [(12, 6), (2, 2), (16, 16), (40, 40), (100, 37)] {
+        let sim = scene.build_at(nx, ny).expect("builds");
+        let total: f64 = sim.masses().iter().sum();
+        let expected = per_node * (nx * ny) as f64;
+        assert!((total - expected).abs() < 1e-12 * expected, "{nx}x{ny}: {total} kg vs {expected} kg");
+        assert!(sim.masses().iter().all(|&m| m == sim.masses()[0]));
+    }
+}
+
+#[test]
+fn loads_and_pins_resolve_to_the_same_physical_quantities_at_every_resolution() {
+    for path in shipped_scenes() {
+        let scene = Scene::load(&path).expect("loads");
+        let reference = scene.build().expect("builds");
+        let totals = |sim: &lodcloth::sim::Simulation| -> Vec<[f64; 3]> {
+            sim.loads()
+                .forces
+                .iter()
+                .map(|l| {
+                    let s: f64 = l.shares.iter().sum();
+                    l.force.map(|f| f * s)
+                })
+                .collect()
+        };
+        let expected = totals(&reference);
+        for (nx, ny) in RESOLUTIONS {
+            let sim = scene.build_at(nx, ny).expect("builds");
+            let got = totals(&sim);
+            assert_eq!(got.len(), expected.len());
+            for (g, e) in got.iter().zip(&expected) {
+                for c in 0..3 {
+                    assert!((g[c] - e[c]).abs() < 1e-12, "{}: {g:?} vs {e:?} at {nx}x{ny}", path.display());
+                }
+            }
+            // Pins sit at their nodes' rest positions.
+            for pin in &sim.loads().pins {
+                assert_eq!(pin.anchor, sim.topology().rest_positions[pin.node as usize]);
+            }
+        }
+    }
+    // An edge pins a whole side at any resolution, a corner one node.
+    let scene = Scene::from_toml(VALID, "<test>").expect("valid");
+    for (nx, ny) in RESOLUTIONS {
+        let sim = scene.build_at(nx, ny).expect("builds");
+        assert_eq!(sim.loads().pins.len(), nx, "top edge at {nx}x{ny}");
+        assert!(sim.loads().pins.iter().all(|p| (p.node as usize) < nx));
+    }
+}
