@@ -153,12 +153,19 @@ fn several_problems_at_once_are_all_reported_with_their_paths() {
 #[test]
 fn building_at_one_node_per_side_is_refused() {
     let scene = Scene::from_toml(VALID, "<test>").expect("valid");
-    let msg = scene.build_at(1, 5).map(|_| ()).expect_err("1 node per side").to_string();
+    let msg = scene
+        .build_at(1, 5)
+        .map(|_| ())
+        .expect_err("1 node per side")
+        .to_string();
     assert!(msg.contains("resolution.nx"), "{msg}");
 }
 
 fn with_mass(convention: &str) -> Scene {
-    let text = VALID.replace("areal_density = 0.2", &format!("areal_density = 0.2\nmass = \"{convention}\""));
+    let text = VALID.replace(
+        "areal_density = 0.2",
+        &format!("areal_density = 0.2\nmass = \"{convention}\""),
+    );
     Scene::from_toml(&text, "<test>").expect("valid")
 }
 
@@ -170,7 +177,10 @@ fn lumped_total_mass_is_areal_density_times_area_at_every_resolution() {
     for (nx, ny) in [(12, 6), (2, 2), (16, 16), (40, 40), (100, 37)] {
         let sim = scene.build_at(nx, ny).expect("builds");
         let total: f64 = sim.masses().iter().sum();
-        assert!((total - expected).abs() < 1e-12 * expected, "{nx}x{ny}: {total} kg vs {expected} kg");
+        assert!(
+            (total - expected).abs() < 1e-12 * expected,
+            "{nx}x{ny}: {total} kg vs {expected} kg"
+        );
     }
 }
 
@@ -184,7 +194,10 @@ fn per_node_total_mass_is_proportional_to_the_node_count() {
         let sim = scene.build_at(nx, ny).expect("builds");
         let total: f64 = sim.masses().iter().sum();
         let expected = per_node * (nx * ny) as f64;
-        assert!((total - expected).abs() < 1e-12 * expected, "{nx}x{ny}: {total} kg vs {expected} kg");
+        assert!(
+            (total - expected).abs() < 1e-12 * expected,
+            "{nx}x{ny}: {total} kg vs {expected} kg"
+        );
         assert!(sim.masses().iter().all(|&m| m == sim.masses()[0]));
     }
 }
@@ -211,7 +224,11 @@ fn loads_and_pins_resolve_to_the_same_physical_quantities_at_every_resolution() 
             assert_eq!(got.len(), expected.len());
             for (g, e) in got.iter().zip(&expected) {
                 for c in 0..3 {
-                    assert!((g[c] - e[c]).abs() < 1e-12, "{}: {g:?} vs {e:?} at {nx}x{ny}", path.display());
+                    assert!(
+                        (g[c] - e[c]).abs() < 1e-12,
+                        "{}: {g:?} vs {e:?} at {nx}x{ny}",
+                        path.display()
+                    );
                 }
             }
             // Pins sit at their nodes' rest positions.

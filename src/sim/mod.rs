@@ -517,6 +517,18 @@ impl Simulation {
         let mut stage_acc = std::mem::take(stage_acc);
         // k2, k3 at the midpoint, k4 at the end.
         for (weight, t_stage, next_scale) in [(2.0, 0.5 * dt, 0.5 * dt), (2.0, 0.5 * dt, dt), (1.0, dt, 0.0)] {
+            // Pinned nodes are where their paths put them at the stage's time:
+            // extrapolating them with the start-of-step velocity (their
+            // acceleration is 0) made RK4 first order for moving pins
+            // (tests/convergence.rs). Fixed pins are unchanged by this.
+            let n = self.model.topology.n_nodes;
+            for pin in &self.model.loads.pins {
+                let (p, v) = pin.at(t0 + t_stage);
+                for c in 0..3 {
+                    stage_pos[c * n + pin.node as usize] = p[c];
+                    stage_vel[c * n + pin.node as usize] = v[c];
+                }
+            }
             self.model
                 .accelerations(t0 + t_stage, &stage_pos, &stage_vel, &mut stage_acc, &mut self.ws);
             let (sum_pos, sum_vel) = (&mut self.ws.sum_pos, &mut self.ws.sum_vel);
