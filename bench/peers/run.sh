@@ -20,5 +20,12 @@ fi
 
 # one thread everywhere (Taichi and Warp are set up single-threaded in the script)
 export OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1
+# Fixed glibc malloc thresholds: NumPy's per-step temporaries (~0.5-1 MB) are
+# then reused from the heap instead of being mmapped, page-faulted and zeroed
+# anew every step. Without this the NumPy spring-list times swing by ~1.7x
+# depending on glibc's adaptive threshold (history-dependent). No effect on
+# Taichi/Newton (no per-step allocation).
+export MALLOC_MMAP_THRESHOLD_="${MALLOC_MMAP_THRESHOLD_:-33554432}"
+export MALLOC_TRIM_THRESHOLD_="${MALLOC_TRIM_THRESHOLD_:-134217728}"
 cd "$here"
 exec "$venv/bin/python" cloth_peers.py "$@"
