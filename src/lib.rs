@@ -2,7 +2,8 @@
 //! time, with behaviour kept coherent across levels.
 //!
 //! # Layout
-//! Dependencies point one way: `main → {output, scene} → sim`.
+//! Dependencies point one way: `main → {experiments, output} → estimate →
+//! {lod, scene} → sim`.
 //!
 //! - [`sim`] — the pure core: topology (springs by type in a fixed order),
 //!   state (flat arrays), forces (Sung 2018 eq. 1), integrators (explicit,
@@ -11,11 +12,16 @@
 //! - [`scene`] — scene files (TOML): cloth size and resolution, material,
 //!   pins, forces over time, wind; validated into ready-to-run simulations at
 //!   any resolution.
+//! - [`lod`] — barycentric correlation between resolutions, state transfer.
+//! - [`estimate`] — pure coefficient estimation (same, BCD, GKD, lsq, fit),
+//!   reference recording and the error metric (Sung 2018 eq. 9).
 //! - [`output`] — trajectory files, CSV reports, pictures (PNG render, SVG charts).
 //! - [`experiments`] — longer studies built on the core (stability sweeps).
 //! - `main.rs` — the `lodcloth` command line.
 
+pub mod estimate;
 pub mod experiments;
+pub mod lod;
 pub mod output;
 pub mod scene;
 pub mod sim;

@@ -4,6 +4,9 @@
 
 use std::f64::consts::TAU;
 
+use super::forces::node_normals;
+use super::topology::Topology;
+
 /// A dimensionless time profile s(t) that scales a load.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Profile {
@@ -142,6 +145,48 @@ pub struct Loads {
     pub wind: Option<Wind>,
     /// Pinned nodes (at most one pin per node).
     pub pins: Vec<Pin>,
+}
+
+impl Loads {
+    /// Add the scene forces and the wind force at (t, pos, vel) to `f` (SoA).
+    /// `normals` is scratch of length 3n when there is wind (unused otherwise).
+    pub(crate) fn add_forces(
+        &self,
+        topology: &Topology,
+        t: f64,
+        pos: &[f64],
+        vel: &[f64],
+        f: &mut [f64],
+        normals: &mut [f64],
+    ) {
+        let n = topology.n_nodes;
+        for load in &self.forces {
+            let s = load.profile.at(t);
+            for (&k, &share) in load.nodes.iter().zip(&load.shares) {
+                for c in 0..3 {
+                    f[c * n + k as usize] += share * s * load.force[c];
+                }
+            }
+        }
+        if let Some(wind) = &self.wind {
+            node_normals(topology, pos, normals);
+            let s = wind.profile.at(t);
+            let half_rho_cd = 0.5 * wind.air_density * wind.drag_coefficient;
+            for k in 0..n {
+                let nk = [normals[k], normals[n + k], normals[2 * n + k]];
+                let rel = [
+                    s * wind.velocity[0] - vel[k],
+                    s * wind.velocity[1] - vel[n + k],
+                    s * wind.velocity[2] - vel[2 * n + k],
+                ];
+                let wn = rel[0] * nk[0] + rel[1] * nk[1] + rel[2] * nk[2];
+                let mag = half_rho_cd * topology.node_areas[k] * wn.abs() * wn;
+                for c in 0..3 {
+                    f[c * n + k] += mag * nk[c];
+                }
+            }
+        }
+    }
 }
 
 #[cfg(test)]

@@ -194,33 +194,7 @@ impl Model {
             f,
             &mut ws.kernel,
         );
-        for load in &self.loads.forces {
-            let s = load.profile.at(t);
-            for (&k, &share) in load.nodes.iter().zip(&load.shares) {
-                for c in 0..3 {
-                    f[c * n + k as usize] += share * s * load.force[c];
-                }
-            }
-        }
-        if let Some(wind) = &self.loads.wind {
-            forces::node_normals(topo, pos, &mut ws.normals);
-            let s = wind.profile.at(t);
-            let half_rho_cd = 0.5 * wind.air_density * wind.drag_coefficient;
-            let nr = &ws.normals;
-            for k in 0..n {
-                let nk = [nr[k], nr[n + k], nr[2 * n + k]];
-                let rel = [
-                    s * wind.velocity[0] - vel[k],
-                    s * wind.velocity[1] - vel[n + k],
-                    s * wind.velocity[2] - vel[2 * n + k],
-                ];
-                let wn = rel[0] * nk[0] + rel[1] * nk[1] + rel[2] * nk[2];
-                let mag = half_rho_cd * topo.node_areas[k] * wn.abs() * wn;
-                for c in 0..3 {
-                    f[c * n + k] += mag * nk[c];
-                }
-            }
-        }
+        self.loads.add_forces(topo, t, pos, vel, f, &mut ws.normals);
         let g = self.params.gravity;
         let drag = self.params.drag;
         for c in 0..3 {
@@ -395,6 +369,31 @@ impl Simulation {
     pub fn accelerations(&mut self) -> &[f64] {
         self.ensure_cache();
         &self.acc
+    }
+
+    /// Every force on each node except the springs' at (t, pos, vel), SoA,
+    /// into `out`: scene loads, wind, gravity and drag (`m·g − m·drag·v`).
+    /// Pinned nodes get zero. Estimation subtracts this from `m·a` to recover
+    /// the spring forces (Sung 2018 §5.1).
+    ///
+    /// # Panics
+    /// When a slice is not 3n long.
+    pub fn external_forces(&mut self, t: f64, pos: &[f64], vel: &[f64], out: &mut [f64]) {
+        let m = &self.model;
+        let n = m.topology.n_nodes;
+        assert!(
+            pos.len() == 3 * n && vel.len() == 3 * n && out.len() == 3 * n,
+            "field sizes"
+        );
+        out.fill(0.0);
+        m.loads.add_forces(&m.topology, t, pos, vel, out, &mut self.ws.normals);
+        let (g, drag) = (m.params.gravity, m.params.drag);
+        for c in 0..3 {
+            for k in 0..n {
+                let i = c * n + k;
+                out[i] = m.free[k] * (out[i] + m.masses[k] * (g[c] - drag * vel[i]));
+            }
+        }
     }
 
     /// Advance by one `dt`. Never fails and never allocates. After a

@@ -1,0 +1,553 @@
+//! Inverse Hooke's-law estimation (Sung 2018 §5.1) and our global
+//! least-squares fit, from observations of the reference mapped onto the
+//! coarse cloth.
+//!
+//! # Observations
+//! For every estimation sample, the reference positions at steps n−1, n, n+1
+//! are mapped onto the coarse nodes ([`Correlation`]). The coarse node's
+//! velocity and acceleration follow by finite differences:
+//! `a = (x₊ − 2x + x₋)/dt²`; `v = (x − x₋)/dt` when the reference ran
+//! symplectic Euler (then `m·a = F(x, v)` holds *exactly* for the reference's
+//! own springs, which makes synthetic recovery exact) and `v = (x₊ − x₋)/2dt`
+//! otherwise (second order). The spring force a coarse node must feel to
+//! follow the reference is `F_spring = m·a − F_ext` with `F_ext` = scene
+//! loads, wind, gravity and drag of the coarse cloth
+//! ([`Simulation::external_forces`]). Pinned nodes carry no information.
+//!
+//! # Per-type bases
+//! Eq. 1 is linear in the coefficients: the spring force on node i is
+//! `Σ_t K_t·G_t,i + C_t·H_t,i` with `G_t,i = Σ (L − L0)·u` (unit stiffness)
+//! and `H_t,i = Σ ((v_j − v_i)·u)·u` (unit damping) over node i's springs of
+//! type t.
+//!
+//! # BCD and GKD (the paper's methods, as we read them)
+//! The published text lost its equations; our reading, kept deliberately
+//! close to the prose:
+//! 1. Shares: at every reference node j, `S_t,j = |F_t,j| / Σ_s |F_s,j|`,
+//!    with `F_t,j` the type-t spring force from the reference coefficients.
+//!    **BCD**: a coarse node's shares are the barycentric blend of the shares
+//!    of its triangle's three nodes. **GKD**: `R_t = Σ_j w_j |F_t,j| / Σ_j w_j
+//!    Σ_s |F_s,j|` over reference nodes within 1.25× the coarse shear-spring
+//!    length, `w_j` from a 7-cell Gaussian kernel with σ = 3.0 cells spanning
+//!    that radius (cell `c = round(3·d/r)`, `w = exp(−c²/2σ²)`).
+//! 2. `F_t = R_t · F_spring` (eq. 3/6).
+//! 3. Eq. 7, stiffness ignoring damping: `K_t = F_t·G_t / |G_t|²` (the vector
+//!    form of `K = F/(L − L0)`); eq. 8, damping from the remainder with that
+//!    K: `C_t = (F_t − K_t·G_t)·H_t / |H_t|²`.
+//! 4. Per type, the averages of the accepted per-node, per-sample values.
+//!
+//! Rejected samples, counted per type and reason: springs near rest length
+//! (`|G_t|` below 1e-4 of the type's rest length: K is noise over ~0), no
+//! relative velocity (`|H_t|` below 1e-4 m/s: C undefined), and negative
+//! estimates (a spring force opposite to the elongation). A type with no
+//! accepted sample keeps the reference coefficient, and the report says so.
+//!
+//! # `lsq` (ours)
+//! One least-squares fit of the six coefficients to every free node, sample
+//! and component at once: `min |A·q − b|² + λ·s·|q − 1|²` where `q` are the
+//! coefficients relative to the reference's (so columns are comparably
+//! scaled), `s = tr(AᵀA)/6` and λ = 1e-9 (a whisper of ridge that only acts
+//! in directions the data does not determine). The report gives the
+//! condition number of the column-equilibrated normal matrix and the
+//! relative residual. Non-positive solutions are not allowed: the offending
+//! coefficient is fixed at 1e-3× the reference and the rest re-solved
+//! (reported as `clamped`).
+
+use nalgebra::{Matrix6, Vector6};
+
+use super::reference::Reference;
+use super::{Progress, ProgressFn};
+use crate::lod::Correlation;
+use crate::sim::{Integrator, Material, Simulation, SpringCoeffs, Topology};
+
+/// Spring forces per type with unit coefficients, SoA per type.
+#[derive(Debug, Clone)]
+pub struct Bases {
+    /// `G_t`: Σ (L − L0)·u over type-t springs, per node (SoA, 3n).
+    pub elastic: [Vec<f64>; 3],
+    /// `H_t`: Σ ((v_j − v_i)·u)·u over type-t springs, per node (SoA, 3n).
+    pub damping: [Vec<f64>; 3],
+}
+
+impl Bases {
+    /// Zeroed bases for `n` nodes.
+    pub fn new(n: usize) -> Bases {
+        let z = || [vec![0.0; 3 * n], vec![0.0; 3 * n], vec![0.0; 3 * n]];
+        Bases {
+            elastic: z(),
+            damping: z(),
+        }
+    }
+
+    /// Evaluate at (pos, vel) on `topology`.
+    pub fn compute(&mut self, topology: &Topology, pos: &[f64], vel: &[f64]) {
+        let n = topology.n_nodes;
+        for t in 0..3 {
+            self.elastic[t].fill(0.0);
+            self.damping[t].fill(0.0);
+        }
+        for g in &topology.groups {
+            let t = g.kind.index();
+            let (ge, gd) = (&mut self.elastic[t], &mut self.damping[t]);
+            for s in 0..g.len() {
+                let (a, b) = (g.a[s] as usize, g.b[s] as usize);
+                let d = [
+                    pos[b] - pos[a],
+                    pos[n + b] - pos[n + a],
+                    pos[2 * n + b] - pos[2 * n + a],
+                ];
+                let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+                if len < 1e-12 {
+                    continue;
+                }
+                let u = d.map(|x| x / len);
+                let dv = [
+                    vel[b] - vel[a],
+                    vel[n + b] - vel[n + a],
+                    vel[2 * n + b] - vel[2 * n + a],
+                ];
+                let stretch = len - g.rest[s];
+                let rate = dv[0] * u[0] + dv[1] * u[1] + dv[2] * u[2];
+                for c in 0..3 {
+                    ge[c * n + a] += stretch * u[c];
+                    ge[c * n + b] -= stretch * u[c];
+                    gd[c * n + a] += rate * u[c];
+                    gd[c * n + b] -= rate * u[c];
+                }
+            }
+        }
+    }
+
+    /// Type-t force on node k for coefficients (K, C): `K·G + C·H`.
+    fn force(&self, t: usize, n: usize, k: usize, co: SpringCoeffs) -> [f64; 3] {
+        [0, 1, 2].map(|c| co.k * self.elastic[t][c * n + k] + co.c * self.damping[t][c * n + k])
+    }
+}
+
+/// One coarse observation: mapped state and the spring force it implies.
+#[derive(Debug, Clone)]
+pub struct Observation {
+    /// Time (s).
+    pub time: f64,
+    /// Coarse positions and velocities (SoA).
+    pub pos: Vec<f64>,
+    pub vel: Vec<f64>,
+    /// `m·a − F_ext` per coarse node (SoA; 0 at pinned nodes).
+    pub spring_force: Vec<f64>,
+    /// Reference (fine) velocities, for the share computations of BCD/GKD.
+    pub fine_vel: Vec<f64>,
+    /// Index of the reference sample.
+    pub sample: usize,
+}
+
+/// Map the reference's estimation samples onto `coarse` (a simulation of the
+/// coarse cloth with the masses and loads to estimate for; its coefficients
+/// are not used).
+pub fn observe(
+    reference: &Reference,
+    correlation: &Correlation,
+    coarse: &mut Simulation,
+    progress: ProgressFn<'_>,
+) -> Vec<Observation> {
+    let n = coarse.topology().n_nodes;
+    let nf = reference.topology.n_nodes;
+    let dt = reference.dt;
+    let backward = reference.integrator == Integrator::SymplecticEuler;
+    let masses = coarse.masses().to_vec();
+    let mut prev = vec![0.0; 3 * n];
+    let mut next = vec![0.0; 3 * n];
+    let mut ext = vec![0.0; 3 * n];
+    let mut out = Vec::with_capacity(reference.samples.len());
+    let total = reference.samples.len() as u64;
+    for (si, s) in reference.samples.iter().enumerate() {
+        let mut pos = vec![0.0; 3 * n];
+        correlation.map(&s.prev, &mut prev);
+        correlation.map(&s.cur, &mut pos);
+        correlation.map(&s.next, &mut next);
+        let vel: Vec<f64> = (0..3 * n)
+            .map(|i| {
+                if backward {
+                    (pos[i] - prev[i]) / dt
+                } else {
+                    (next[i] - prev[i]) / (2.0 * dt)
+                }
+            })
+            .collect();
+        let fine_vel: Vec<f64> = (0..3 * nf)
+            .map(|i| {
+                if backward {
+                    (s.cur[i] - s.prev[i]) / dt
+                } else {
+                    (s.next[i] - s.prev[i]) / (2.0 * dt)
+                }
+            })
+            .collect();
+        coarse.external_forces(s.time, &pos, &vel, &mut ext);
+        let pinned = pinned_mask(coarse);
+        let mut spring_force = vec![0.0; 3 * n];
+        for c in 0..3 {
+            for k in 0..n {
+                let i = c * n + k;
+                if !pinned[k] {
+                    let acc = (next[i] - 2.0 * pos[i] + prev[i]) / (dt * dt);
+                    spring_force[i] = masses[k] * acc - ext[i];
+                }
+            }
+        }
+        out.push(Observation {
+            time: s.time,
+            pos,
+            vel,
+            spring_force,
+            fine_vel,
+            sample: si,
+        });
+        progress(Progress {
+            stage: "observe",
+            done: si as u64 + 1,
+            total,
+        });
+    }
+    out
+}
+
+fn pinned_mask(sim: &Simulation) -> Vec<bool> {
+    let mut pinned = vec![false; sim.topology().n_nodes];
+    for p in &sim.loads().pins {
+        pinned[p.node as usize] = true;
+    }
+    pinned
+}
+
+/// Why inverse samples were rejected, per spring type.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Rejections {
+    /// Node-samples considered per type.
+    pub considered: [u64; 3],
+    /// `|G_t|` too small: springs near rest length (K and C both skipped).
+    pub near_rest: [u64; 3],
+    /// `|H_t|` too small: no relative velocity (C skipped).
+    pub no_relative_velocity: [u64; 3],
+    /// K estimate ≤ 0.
+    pub negative_k: [u64; 3],
+    /// C estimate < 0.
+    pub negative_c: [u64; 3],
+    /// Accepted K and C values per type.
+    pub accepted_k: [u64; 3],
+    pub accepted_c: [u64; 3],
+}
+
+/// Share distribution of the paper's inverse methods.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Distribution {
+    /// Barycentric Coordinate-based Distribution (eq. 3).
+    Bcd,
+    /// Gaussian Kernel-based Distribution (eqs. 4–6).
+    Gkd,
+}
+
+/// Result of BCD/GKD.
+#[derive(Debug, Clone, PartialEq)]
+pub struct InverseEstimate {
+    pub material: Material,
+    pub rejections: Rejections,
+    /// Types that had no accepted K (or C) sample and kept the reference's value.
+    pub fallback_k: [bool; 3],
+    pub fallback_c: [bool; 3],
+}
+
+/// Reference nodes and Gaussian weights around each coarse node (GKD).
+fn gkd_neighbourhoods(reference: &Topology, coarse: &Topology) -> Vec<Vec<(u32, f64)>> {
+    let shape = coarse.grid.expect("coarse cloth is a grid");
+    let radius = 1.25 * shape.hx().hypot(shape.hy());
+    let sigma: f64 = 3.0;
+    coarse
+        .rest_positions
+        .iter()
+        .map(|p| {
+            let mut list = Vec::new();
+            for (j, q) in reference.rest_positions.iter().enumerate() {
+                let d = ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2)).sqrt();
+                if d <= radius {
+                    let cell = (3.0 * d / radius).round();
+                    list.push((j as u32, (-cell * cell / (2.0 * sigma * sigma)).exp()));
+                }
+            }
+            list
+        })
+        .collect()
+}
+
+/// The paper's BCD or GKD estimate from observations.
+pub fn inverse_estimate(
+    reference: &Reference,
+    correlation: &Correlation,
+    coarse: &Topology,
+    observations: &[Observation],
+    distribution: Distribution,
+    progress: ProgressFn<'_>,
+) -> InverseEstimate {
+    let n = coarse.n_nodes;
+    let nf = reference.topology.n_nodes;
+    let rest_len = mean_rest_lengths(coarse);
+    let neighbourhoods = match distribution {
+        Distribution::Gkd => gkd_neighbourhoods(&reference.topology, coarse),
+        Distribution::Bcd => Vec::new(),
+    };
+    let mut fine = Bases::new(nf);
+    let mut bases = Bases::new(n);
+    let mut mags = [vec![0.0; nf], vec![0.0; nf], vec![0.0; nf]];
+    let mut rej = Rejections::default();
+    let mut sum_k = [0.0; 3];
+    let mut sum_c = [0.0; 3];
+    let total = observations.len() as u64;
+    let free: Vec<bool> = {
+        // A pinned node has zero spring force by construction in `observe`.
+        (0..n)
+            .map(|k| (0..3).any(|c| observations.iter().any(|o| o.spring_force[c * n + k] != 0.0)))
+            .collect()
+    };
+    for (oi, obs) in observations.iter().enumerate() {
+        let s = &reference.samples[obs.sample];
+        fine.compute(&reference.topology, &s.cur, &obs.fine_vel);
+        for t in 0..3 {
+            let co = reference.material.springs[t];
+            for j in 0..nf {
+                let f = fine.force(t, nf, j, co);
+                mags[t][j] = (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt();
+            }
+        }
+        bases.compute(coarse, &obs.pos, &obs.vel);
+        for k in 0..n {
+            if !free[k] {
+                continue;
+            }
+            let shares = match distribution {
+                Distribution::Bcd => {
+                    let e = correlation.entries()[k];
+                    let mut r = [0.0; 3];
+                    for (&j, &w) in e.nodes.iter().zip(&e.weights) {
+                        let j = j as usize;
+                        let sum = mags[0][j] + mags[1][j] + mags[2][j];
+                        if sum > 0.0 {
+                            for t in 0..3 {
+                                r[t] += w * mags[t][j] / sum;
+                            }
+                        }
+                    }
+                    r
+                }
+                Distribution::Gkd => {
+                    let mut num = [0.0; 3];
+                    let mut den = 0.0;
+                    for &(j, w) in &neighbourhoods[k] {
+                        let j = j as usize;
+                        for t in 0..3 {
+                            num[t] += w * mags[t][j];
+                        }
+                        den += w * (mags[0][j] + mags[1][j] + mags[2][j]);
+                    }
+                    if den > 0.0 {
+                        num.map(|x| x / den)
+                    } else {
+                        [0.0; 3]
+                    }
+                }
+            };
+            let fs = [0, 1, 2].map(|c| obs.spring_force[c * n + k]);
+            for t in 0..3 {
+                rej.considered[t] += 1;
+                let ft = fs.map(|x| shares[t] * x);
+                let g = [0, 1, 2].map(|c| bases.elastic[t][c * n + k]);
+                let h = [0, 1, 2].map(|c| bases.damping[t][c * n + k]);
+                let gg = dot(g, g);
+                if gg.sqrt() < 1e-4 * rest_len[t] {
+                    rej.near_rest[t] += 1;
+                    continue;
+                }
+                let kt = dot(ft, g) / gg;
+                if !(kt > 0.0) {
+                    rej.negative_k[t] += 1;
+                    continue;
+                }
+                rej.accepted_k[t] += 1;
+                sum_k[t] += kt;
+                let hh = dot(h, h);
+                if hh.sqrt() < 1e-4 {
+                    rej.no_relative_velocity[t] += 1;
+                    continue;
+                }
+                let rem = [0, 1, 2].map(|c| ft[c] - kt * g[c]);
+                let ct = dot(rem, h) / hh;
+                if !(ct >= 0.0) {
+                    rej.negative_c[t] += 1;
+                    continue;
+                }
+                rej.accepted_c[t] += 1;
+                sum_c[t] += ct;
+            }
+        }
+        progress(Progress {
+            stage: "inverse",
+            done: oi as u64 + 1,
+            total,
+        });
+    }
+    let mut material = reference.material;
+    let mut fallback_k = [false; 3];
+    let mut fallback_c = [false; 3];
+    for t in 0..3 {
+        if rej.accepted_k[t] > 0 {
+            material.springs[t].k = sum_k[t] / rej.accepted_k[t] as f64;
+        } else {
+            fallback_k[t] = true;
+        }
+        if rej.accepted_c[t] > 0 {
+            material.springs[t].c = sum_c[t] / rej.accepted_c[t] as f64;
+        } else {
+            fallback_c[t] = true;
+        }
+    }
+    InverseEstimate {
+        material,
+        rejections: rej,
+        fallback_k,
+        fallback_c,
+    }
+}
+
+fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+fn mean_rest_lengths(topology: &Topology) -> [f64; 3] {
+    let mut sum = [0.0; 3];
+    let mut count = [0usize; 3];
+    for g in &topology.groups {
+        let t = g.kind.index();
+        sum[t] += g.rest.iter().sum::<f64>();
+        count[t] += g.len();
+    }
+    [0, 1, 2].map(|t| if count[t] > 0 { sum[t] / count[t] as f64 } else { 1.0 })
+}
+
+/// Result of the global least-squares fit.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LsqEstimate {
+    pub material: Material,
+    /// Condition number of the column-equilibrated normal matrix.
+    pub condition: f64,
+    /// `|A·q − b| / |b|` at the solution.
+    pub relative_residual: f64,
+    /// Equations (node × component × sample) in the fit.
+    pub equations: u64,
+    /// Coefficients that came out non-positive and were fixed at 1e-3× the
+    /// reference's, in order K_st, K_sh, K_b, C_st, C_sh, C_b.
+    pub clamped: [bool; 6],
+}
+
+/// The global least-squares fit (see the module docs).
+pub fn lsq_estimate(
+    reference_material: &Material,
+    coarse: &Topology,
+    observations: &[Observation],
+    progress: ProgressFn<'_>,
+) -> LsqEstimate {
+    let n = coarse.n_nodes;
+    let prior: [f64; 6] = [0, 1, 2, 3, 4, 5].map(|i| {
+        let co = reference_material.springs[i % 3];
+        if i < 3 {
+            co.k
+        } else {
+            co.c
+        }
+    });
+    let mut ata = Matrix6::<f64>::zeros();
+    let mut atb = Vector6::<f64>::zeros();
+    let mut btb = 0.0;
+    let mut equations = 0u64;
+    let mut bases = Bases::new(n);
+    let total = observations.len() as u64;
+    for (oi, obs) in observations.iter().enumerate() {
+        bases.compute(coarse, &obs.pos, &obs.vel);
+        for c in 0..3 {
+            for k in 0..n {
+                let i = c * n + k;
+                let b = obs.spring_force[i];
+                if b == 0.0 {
+                    continue; // pinned
+                }
+                let row = Vector6::from_fn(|j, _| {
+                    let basis = if j < 3 {
+                        &bases.elastic[j]
+                    } else {
+                        &bases.damping[j - 3]
+                    };
+                    basis[i] * prior[j]
+                });
+                ata += row * row.transpose();
+                atb += row * b;
+                btb += b * b;
+                equations += 1;
+            }
+        }
+        progress(Progress {
+            stage: "lsq",
+            done: oi as u64 + 1,
+            total,
+        });
+    }
+    let d = Vector6::from_fn(|i, _| ata[(i, i)].max(f64::MIN_POSITIVE).sqrt().recip());
+    let scaled = Matrix6::from_fn(|i, j| ata[(i, j)] * d[i] * d[j]);
+    let eig = scaled.symmetric_eigenvalues();
+    let condition = eig.max() / eig.min().max(f64::MIN_POSITIVE);
+    let ridge = 1e-9 * ata.trace() / 6.0;
+    let mut fixed = [false; 6];
+    let q_min = 1e-3;
+    let mut q = Vector6::from_element(1.0);
+    for _ in 0..6 {
+        // Solve for the free coefficients with the fixed ones at q_min.
+        let mut m = ata + Matrix6::identity() * ridge;
+        let mut rhs = atb + Vector6::from_element(ridge);
+        for j in 0..6 {
+            if fixed[j] {
+                for i in 0..6 {
+                    rhs[i] -= m[(i, j)] * q_min;
+                    m[(i, j)] = 0.0;
+                    m[(j, i)] = 0.0;
+                }
+                m[(j, j)] = 1.0;
+                rhs[j] = q_min;
+            }
+        }
+        q = match m.cholesky() {
+            Some(ch) => ch.solve(&rhs),
+            None => m.lu().solve(&rhs).unwrap_or_else(|| Vector6::from_element(1.0)),
+        };
+        let worst = (0..6)
+            .filter(|&j| !fixed[j] && q[j] <= q_min)
+            .min_by(|&a, &b| q[a].total_cmp(&q[b]));
+        match worst {
+            Some(j) => fixed[j] = true,
+            None => break,
+        }
+    }
+    let resid2 = (q.transpose() * ata * q)[0] - 2.0 * q.dot(&atb) + btb;
+    let mut material = *reference_material;
+    for t in 0..3 {
+        material.springs[t] = SpringCoeffs {
+            k: q[t] * prior[t],
+            c: q[t + 3] * prior[t + 3],
+        };
+    }
+    LsqEstimate {
+        material,
+        condition,
+        relative_residual: (resid2.max(0.0) / btb.max(f64::MIN_POSITIVE)).sqrt(),
+        equations,
+        clamped: fixed,
+    }
+}
+
+/// Coefficient names in the order of the six-vector (K then C per type).
+pub const COEFFICIENT_NAMES: [&str; 6] = ["K_st", "K_sh", "K_b", "C_st", "C_sh", "C_b"];

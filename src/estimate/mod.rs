@@ -1,0 +1,342 @@
+//! Coefficient estimation for coherent levels of detail (Sung 2018 §5) and
+//! the error metric that judges it (eq. 9). Pure library code: no I/O, no
+//! clocks, no async; long work reports progress through a callback so the
+//! daemon can run it in the background.
+//!
+//! A [`LodProblem`] ties a recorded fine [`Reference`] to one coarse level
+//! (resolution, mass convention, integrator, dt). Each [`Method`] turns it
+//! into a [`Material`]; [`LodProblem::score`] re-simulates the coarse cloth
+//! and measures it against the reference.
+//!
+//! Methods:
+//! - `same`: the reference's coefficients unchanged;
+//! - `bcd`, `gkd`: the paper's inverse-Hooke methods ([`inverse`]);
+//! - `lsq`: one global least-squares fit of the six coefficients ([`inverse`]);
+//! - `fit`: minimise the simulated displacement error directly ([`fit`]).
+
+pub mod fit;
+pub mod inverse;
+pub mod metric;
+pub mod reference;
+
+use std::fmt;
+use std::ops::Range;
+use std::sync::Arc;
+
+pub use fit::{FitOptions, FitReport};
+pub use inverse::{Distribution, InverseEstimate, LsqEstimate, Rejections};
+pub use metric::{ErrorAccumulator, ErrorReport};
+pub use reference::{RecordSpec, Reference, ReferenceError, Sample};
+
+use crate::lod::{Correlation, LodError};
+use crate::scene::{MassConvention, Scene, SceneError};
+use crate::sim::{Integrator, Loads, Material, SimError, SimParams, Simulation, StabilityCheck, State, Topology};
+
+/// Progress of a long estimation stage.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Progress {
+    /// What is running ("observe", "inverse", "lsq", "fit", "score").
+    pub stage: &'static str,
+    pub done: u64,
+    pub total: u64,
+}
+
+/// Progress callback.
+pub type ProgressFn<'a> = &'a mut dyn FnMut(Progress);
+
+/// A callback that ignores progress.
+pub fn no_progress(_: Progress) {}
+
+/// An estimation method, usable by name everywhere (CLI, config, cache).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Method {
+    Same,
+    Bcd,
+    Gkd,
+    Lsq,
+    Fit,
+}
+
+impl Method {
+    /// Every method, cheapest first.
+    pub const ALL: [Method; 5] = [Method::Same, Method::Bcd, Method::Gkd, Method::Lsq, Method::Fit];
+
+    /// Name used in config files, CLI and CSV.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Method::Same => "same",
+            Method::Bcd => "bcd",
+            Method::Gkd => "gkd",
+            Method::Lsq => "lsq",
+            Method::Fit => "fit",
+        }
+    }
+
+    /// Parse a name.
+    pub fn from_name(name: &str) -> Option<Method> {
+        Method::ALL.into_iter().find(|m| m.name() == name)
+    }
+}
+
+impl fmt::Display for Method {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// Errors of setting up or running an estimation.
+#[derive(Debug, thiserror::Error)]
+pub enum EstimateError {
+    #[error(transparent)]
+    Lod(#[from] LodError),
+    #[error(transparent)]
+    Scene(#[from] SceneError),
+    #[error("coarse cloth {nx}×{ny}: {source}")]
+    Sim { nx: usize, ny: usize, source: SimError },
+    #[error(
+        "coarse dt {dt} s does not divide the reference's metric frame interval {interval} s; \
+         pick dt = interval / k for an integer k"
+    )]
+    FrameMismatch { dt: f64, interval: f64 },
+    #[error("frame range {start}..{end} is outside the reference's {frames} metric frames")]
+    FrameRange { start: usize, end: usize, frames: usize },
+    #[error("the coarse cloth needs at least 2×2 nodes, got {nx}×{ny}")]
+    Resolution { nx: usize, ny: usize },
+}
+
+/// One coarse level to estimate for and score against a reference.
+#[derive(Debug, Clone)]
+pub struct LodProblem {
+    /// The scene (its params are the reference's).
+    pub scene: Scene,
+    pub reference: Arc<Reference>,
+    pub nx: usize,
+    pub ny: usize,
+    pub mass: MassConvention,
+    pub integrator: Integrator,
+    pub dt: f64,
+    topology: Arc<Topology>,
+    correlation: Correlation,
+    masses: Vec<f64>,
+    loads: Loads,
+    /// Coarse steps per reference metric frame.
+    steps_per_frame: u64,
+}
+
+impl LodProblem {
+    /// Set up level `nx × ny` of `scene` against `reference`.
+    ///
+    /// Masses: [`MassConvention::Lumped`] gives each coarse node its share of
+    /// the cloth's mass (total preserved); [`MassConvention::PerNode`] gives
+    /// every coarse node the reference's mean node mass, the paper's
+    /// convention (total shrinks with the node count).
+    pub fn new(
+        scene: &Scene,
+        reference: Arc<Reference>,
+        nx: usize,
+        ny: usize,
+        mass: MassConvention,
+        integrator: Integrator,
+        dt: f64,
+    ) -> Result<LodProblem, EstimateError> {
+        if nx < 2 || ny < 2 {
+            return Err(EstimateError::Resolution { nx, ny });
+        }
+        let interval = reference.dt * reference.spec.metric_stride as f64;
+        let ratio = interval / dt;
+        if !(dt > 0.0) || (ratio - ratio.round()).abs() > 1e-6 || ratio.round() < 1.0 {
+            return Err(EstimateError::FrameMismatch { dt, interval });
+        }
+        let topology = Arc::new(Topology::grid(scene.shape(nx, ny), scene.orientation));
+        let correlation = Correlation::between(&reference.topology, &topology)?;
+        let masses = match mass {
+            MassConvention::Lumped => topology.node_areas.iter().map(|a| a * scene.areal_density).collect(),
+            MassConvention::PerNode => {
+                let m = reference.masses.iter().sum::<f64>() / reference.masses.len() as f64;
+                vec![m; topology.n_nodes]
+            }
+        };
+        let loads = scene.loads(&topology)?;
+        Ok(LodProblem {
+            scene: scene.clone(),
+            reference,
+            nx,
+            ny,
+            mass,
+            integrator,
+            dt,
+            topology,
+            correlation,
+            masses,
+            loads,
+            steps_per_frame: ratio.round() as u64,
+        })
+    }
+
+    /// The coarse cloth.
+    pub fn topology(&self) -> &Arc<Topology> {
+        &self.topology
+    }
+
+    /// Reference → coarse correlation.
+    pub fn correlation(&self) -> &Correlation {
+        &self.correlation
+    }
+
+    /// Coarse node masses.
+    pub fn masses(&self) -> &[f64] {
+        &self.masses
+    }
+
+    /// Metric frames of the reference.
+    pub fn frames(&self) -> usize {
+        self.reference.frames.len()
+    }
+
+    /// Coarse parameters with `material`.
+    pub fn params(&self, material: Material) -> SimParams {
+        SimParams {
+            dt: self.dt,
+            integrator: self.integrator,
+            material,
+            ..self.scene.params
+        }
+    }
+
+    /// A coarse simulation at rest with `material`. Stability is not enforced
+    /// here (callers compare [`Simulation::dt_limit`] with their own margin).
+    pub fn simulation(&self, material: Material) -> Result<Simulation, EstimateError> {
+        Simulation::new(
+            self.topology.clone(),
+            self.masses.clone(),
+            self.params(material),
+            self.loads.clone(),
+            State::at_rest(&self.topology),
+            StabilityCheck::Force,
+        )
+        .map_err(|source| EstimateError::Sim {
+            nx: self.nx,
+            ny: self.ny,
+            source,
+        })
+    }
+
+    /// Simulate the coarse cloth with `material` from rest and score metric
+    /// frames `frames` against the reference.
+    pub fn score(
+        &self,
+        material: Material,
+        frames: Range<usize>,
+        progress: ProgressFn<'_>,
+    ) -> Result<ErrorReport, EstimateError> {
+        self.check_range(&frames)?;
+        let mut sim = self.simulation(material)?;
+        let n = self.topology.n_nodes;
+        let mut acc = ErrorAccumulator::new(self.reference.o_max, n, frames.len());
+        let mut mapped = vec![0.0; 3 * n];
+        let total = frames.end as u64;
+        for f in 0..frames.end {
+            for _ in 0..self.steps_per_frame {
+                sim.step();
+            }
+            if sim.diverged() {
+                acc.mark_diverged();
+                break;
+            }
+            if f >= frames.start {
+                self.correlation.map_f32(&self.reference.frames[f], &mut mapped);
+                acc.push(self.reference.frame_times[f], &mapped, &sim.state().pos);
+            }
+            if f % 16 == 0 || f + 1 == frames.end {
+                progress(Progress {
+                    stage: "score",
+                    done: f as u64 + 1,
+                    total,
+                });
+            }
+        }
+        Ok(acc.report())
+    }
+
+    fn check_range(&self, frames: &Range<usize>) -> Result<(), EstimateError> {
+        if frames.start >= frames.end || frames.end > self.frames() {
+            return Err(EstimateError::FrameRange {
+                start: frames.start,
+                end: frames.end,
+                frames: self.frames(),
+            });
+        }
+        Ok(())
+    }
+
+    /// Estimate coefficients with `method`. `fit` starts from the best (on
+    /// its training frames) of `same`, `gkd` and `lsq` unless
+    /// `options.start` is given.
+    pub fn estimate(
+        &self,
+        method: Method,
+        options: &FitOptions,
+        progress: ProgressFn<'_>,
+    ) -> Result<Estimate, EstimateError> {
+        let reference_material = self.reference.material;
+        let details = match method {
+            Method::Same => Details::Same,
+            Method::Bcd | Method::Gkd => {
+                let mut sim = self.simulation(reference_material)?;
+                let obs = inverse::observe(&self.reference, &self.correlation, &mut sim, progress);
+                let dist = if method == Method::Bcd {
+                    Distribution::Bcd
+                } else {
+                    Distribution::Gkd
+                };
+                Details::Inverse(inverse::inverse_estimate(
+                    &self.reference,
+                    &self.correlation,
+                    &self.topology,
+                    &obs,
+                    dist,
+                    progress,
+                ))
+            }
+            Method::Lsq => {
+                let mut sim = self.simulation(reference_material)?;
+                let obs = inverse::observe(&self.reference, &self.correlation, &mut sim, progress);
+                Details::Lsq(inverse::lsq_estimate(
+                    &reference_material,
+                    &self.topology,
+                    &obs,
+                    progress,
+                ))
+            }
+            Method::Fit => Details::Fit(fit::fit(self, options, progress)?),
+        };
+        let material = match &details {
+            Details::Same => reference_material,
+            Details::Inverse(e) => e.material,
+            Details::Lsq(e) => e.material,
+            Details::Fit(e) => e.material,
+        };
+        Ok(Estimate {
+            method,
+            material,
+            details,
+        })
+    }
+}
+
+/// Coefficients from one method, with its diagnostics.
+#[derive(Debug, Clone)]
+pub struct Estimate {
+    pub method: Method,
+    pub material: Material,
+    pub details: Details,
+}
+
+/// Method-specific diagnostics.
+#[derive(Debug, Clone)]
+pub enum Details {
+    Same,
+    Inverse(InverseEstimate),
+    Lsq(LsqEstimate),
+    Fit(FitReport),
+}

@@ -1,0 +1,188 @@
+//! Recording the fine reference run (MSS_ref) once, for every level and
+//! method that is estimated or scored against it.
+//!
+//! A "frame" is one reference step, as in the paper (20,000 frames of RK4).
+//! Storing every frame of a 64×64 cloth would take ~1 GB, so two sparse
+//! samplings are kept:
+//!
+//! - **metric frames** every `metric_stride` steps: fine positions as `f32`
+//!   (1e-7 m resolution on a 1 m cloth, far below any error we report), used to
+//!   score coarse runs;
+//! - **estimation samples** every `estimate_stride` steps: the fine positions
+//!   at steps n−1, n, n+1 in `f64`, from which velocities and accelerations
+//!   follow by finite differences (the paper's inverse procedure uses
+//!   consecutive positions). f64 matters here: the second difference at
+//!   dt = 2e-4 s cancels ~7 digits.
+//!
+//! Averages over evenly spaced samples estimate the all-frames averages of the
+//! paper without bias. `O_max` is measured at every step.
+
+use std::sync::Arc;
+
+use crate::sim::{Integrator, Material, Simulation, Topology};
+
+/// How to record a reference run.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RecordSpec {
+    /// Reference steps to run ("frames").
+    pub frames: u64,
+    /// Keep positions every this many steps for scoring.
+    pub metric_stride: u64,
+    /// Keep an estimation sample every this many steps.
+    pub estimate_stride: u64,
+}
+
+impl RecordSpec {
+    /// The paper's 20,000 frames, 2,000 metric frames, 500 estimation samples.
+    pub const PAPER: RecordSpec = RecordSpec {
+        frames: 20_000,
+        metric_stride: 10,
+        estimate_stride: 40,
+    };
+}
+
+/// Positions of three consecutive reference steps around a sample.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Sample {
+    /// Time of the middle step (s).
+    pub time: f64,
+    /// Positions at steps n−1, n, n+1 (SoA, f64).
+    pub prev: Vec<f64>,
+    pub cur: Vec<f64>,
+    pub next: Vec<f64>,
+}
+
+/// A recorded reference run. See the module docs.
+#[derive(Debug, Clone)]
+pub struct Reference {
+    /// The reference cloth.
+    pub topology: Arc<Topology>,
+    /// Node masses of the reference (kg).
+    pub masses: Vec<f64>,
+    /// Coefficients the reference ran with.
+    pub material: Material,
+    /// Reference integrator and step.
+    pub integrator: Integrator,
+    pub dt: f64,
+    pub spec: RecordSpec,
+    /// Metric frames: `frame_times[f]` and positions `frames[f]` (SoA, f32).
+    pub frame_times: Vec<f64>,
+    pub frame_steps: Vec<u64>,
+    pub frames: Vec<Vec<f32>>,
+    /// Estimation samples.
+    pub samples: Vec<Sample>,
+    /// Largest distance of any node from its rest position over the run (m).
+    pub o_max: f64,
+    /// Rest positions (SoA).
+    pub rest: Vec<f64>,
+}
+
+/// Why a reference could not be recorded.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ReferenceError {
+    #[error("the reference diverged at step {step} (t = {time:.4} s); lower its dt or check its coefficients")]
+    Diverged { step: u64, time: f64 },
+    #[error("the reference never moved from its rest shape (O_max = {o_max}); the relative error is undefined")]
+    NoMotion { o_max: f64 },
+    #[error("invalid record spec: {0}")]
+    Spec(&'static str),
+}
+
+impl Reference {
+    /// Run `sim` (at rest, t = 0) for `spec.frames` steps and record it.
+    /// `progress(done, total)` is called every 1 % of the run.
+    pub fn record(
+        mut sim: Simulation,
+        spec: RecordSpec,
+        progress: &mut dyn FnMut(u64, u64),
+    ) -> Result<Reference, ReferenceError> {
+        if spec.frames < 3 {
+            return Err(ReferenceError::Spec("frames must be at least 3"));
+        }
+        if spec.metric_stride == 0 || spec.estimate_stride < 2 {
+            return Err(ReferenceError::Spec(
+                "metric_stride must be ≥ 1 and estimate_stride ≥ 2",
+            ));
+        }
+        let topology = sim.topology().clone();
+        let n = topology.n_nodes;
+        let rest = sim.state().pos.clone();
+        let mut frames = Vec::with_capacity((spec.frames / spec.metric_stride) as usize);
+        let mut frame_times = Vec::with_capacity(frames.capacity());
+        let mut frame_steps = Vec::with_capacity(frames.capacity());
+        let mut samples = Vec::with_capacity((spec.frames / spec.estimate_stride) as usize);
+        // Positions at the step before the next sample centre.
+        let mut prev: Vec<f64> = Vec::new();
+        let mut pending: Option<Sample> = None;
+        let mut o_max2: f64 = 0.0;
+        let tick = (spec.frames / 100).max(1);
+        for step in 1..=spec.frames {
+            let report = sim.step();
+            if !report.finite {
+                return Err(ReferenceError::Diverged {
+                    step,
+                    time: sim.state().time,
+                });
+            }
+            let pos = &sim.state().pos;
+            for k in 0..n {
+                let d2 = (0..3).map(|c| (pos[c * n + k] - rest[c * n + k]).powi(2)).sum::<f64>();
+                o_max2 = o_max2.max(d2);
+            }
+            // Sample centres are the multiples of `estimate_stride` (≥ 2), so
+            // the three cases below never need the same step twice.
+            if let Some(mut s) = pending.take() {
+                s.next = pos.clone();
+                samples.push(s);
+            }
+            if step % spec.estimate_stride == 0 && step < spec.frames {
+                pending = Some(Sample {
+                    time: sim.state().time,
+                    prev: std::mem::take(&mut prev),
+                    cur: pos.clone(),
+                    next: Vec::new(),
+                });
+            }
+            if (step + 1) % spec.estimate_stride == 0 {
+                prev = pos.clone();
+            }
+            if step % spec.metric_stride == 0 {
+                frames.push(pos.iter().map(|&x| x as f32).collect());
+                frame_times.push(sim.state().time);
+                frame_steps.push(step);
+            }
+            if step % tick == 0 {
+                progress(step, spec.frames);
+            }
+        }
+        let o_max = o_max2.sqrt();
+        if !(o_max > 1e-12) {
+            return Err(ReferenceError::NoMotion { o_max });
+        }
+        let params = *sim.params();
+        Ok(Reference {
+            masses: sim.masses().to_vec(),
+            topology,
+            material: params.material,
+            integrator: params.integrator,
+            dt: params.dt,
+            spec,
+            frame_times,
+            frame_steps,
+            frames,
+            samples,
+            o_max,
+            rest,
+        })
+    }
+
+    /// Bytes held by the recorded frames and samples.
+    pub fn memory_bytes(&self) -> usize {
+        self.frames.iter().map(|f| 4 * f.len()).sum::<usize>()
+            + self
+                .samples
+                .iter()
+                .map(|s| 8 * (s.prev.len() + s.cur.len() + s.next.len()))
+                .sum::<usize>()
+    }
+}

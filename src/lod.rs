@@ -1,0 +1,297 @@
+//! Levels of detail: barycentric correlation between two resolutions of the
+//! same cloth, and transfer of a state from one resolution to another.
+//!
+//! # Correlation (Sung 2018 §3.2)
+//! Both grids cover the same W×H cloth, so a node is identified by its
+//! material coordinates (u, v) ∈ [0,1]² (`u = i/(nx−1)`, `v = j/(ny−1)`). A
+//! target node is located in the source grid's cell `(i, j) = ⌊(u·(nx−1),
+//! v·(ny−1))⌋` and, inside it, in one of the two triangles of the source's
+//! documented triangulation ([`Topology::grid`]: each quad split along its
+//! (i,j)–(i+1,j+1) diagonal). With `(s, t)` the node's offsets inside the
+//! cell:
+//!
+//! - `s ≥ t`: triangle (i,j) (i+1,j+1) (i+1,j), weights (1−s, t, s−t);
+//! - `s < t`: triangle (i,j) (i,j+1) (i+1,j+1), weights (1−t, t−s, s).
+//!
+//! Weights are non-negative and sum to one, so the mapped position of a node
+//! is a convex combination: rigid motions, uniform velocities and, within a
+//! triangle, every affine deformation are reproduced exactly. A target node
+//! that coincides with a source node gets weight 1 on it (offsets within
+//! 1e-9 of a grid line are snapped), so correlating a grid with itself is
+//! the identity.
+//!
+//! # Transfer
+//! [`transfer_state`] maps positions *and* velocities through the
+//! correlation (target ← source), so the moving cloth carries its momentum
+//! over a level switch; pinned nodes are then put back on their prescribed
+//! path by [`Simulation::set_state`](crate::sim::Simulation::set_state).
+//! Mapping a fine state to a coarse one gives coarse positions equal to the
+//! "coherent positions" of the error metric: the switch causes no jump there.
+
+use crate::sim::{GridShape, State, Topology};
+
+/// Errors of correlating two cloths.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum LodError {
+    /// Correlation needs the grid structure of both cloths.
+    #[error("{which} cloth is not a rectangular grid; barycentric correlation needs both grids")]
+    NotAGrid { which: &'static str },
+    /// The two grids do not describe the same cloth.
+    #[error("the grids cover different cloths: {source_w}×{source_h} m vs {target_w}×{target_h} m")]
+    DifferentCloth {
+        source_w: f64,
+        source_h: f64,
+        target_w: f64,
+        target_h: f64,
+    },
+    /// A state does not have the node count the correlation expects.
+    #[error("state has {got} nodes, the correlation expects {expected}")]
+    SizeMismatch { got: usize, expected: usize },
+}
+
+/// Where one target node lies in the source mesh.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Bary {
+    /// Source nodes of the containing triangle.
+    pub nodes: [u32; 3],
+    /// Barycentric weights, ≥ 0, summing to 1.
+    pub weights: [f64; 3],
+}
+
+/// Barycentric correlation: every node of a target grid expressed in a
+/// triangle of a source grid. Direction matters: `Correlation::between(fine,
+/// coarse)` maps fine states onto coarse nodes.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Correlation {
+    source: GridShape,
+    target: GridShape,
+    entries: Vec<Bary>,
+}
+
+impl Correlation {
+    /// Correlate every node of `target` with a triangle of `source`.
+    pub fn between(source: &Topology, target: &Topology) -> Result<Correlation, LodError> {
+        let s = source.grid.ok_or(LodError::NotAGrid { which: "source" })?;
+        let t = target.grid.ok_or(LodError::NotAGrid { which: "target" })?;
+        Correlation::grids(&s, &t)
+    }
+
+    /// Correlate two grid shapes of the same cloth.
+    pub fn grids(source: &GridShape, target: &GridShape) -> Result<Correlation, LodError> {
+        let same = |a: f64, b: f64| (a - b).abs() <= 1e-9 * a.abs().max(b.abs());
+        if !same(source.width, target.width) || !same(source.height, target.height) {
+            return Err(LodError::DifferentCloth {
+                source_w: source.width,
+                source_h: source.height,
+                target_w: target.width,
+                target_h: target.height,
+            });
+        }
+        let mut entries = Vec::with_capacity(target.nx * target.ny);
+        for j in 0..target.ny {
+            for i in 0..target.nx {
+                let (u, v) = target.uv(i, j);
+                entries.push(locate(source, u, v));
+            }
+        }
+        Ok(Correlation {
+            source: *source,
+            target: *target,
+            entries,
+        })
+    }
+
+    /// Source grid shape.
+    pub fn source(&self) -> &GridShape {
+        &self.source
+    }
+
+    /// Target grid shape.
+    pub fn target(&self) -> &GridShape {
+        &self.target
+    }
+
+    /// One entry per target node, in node order.
+    pub fn entries(&self) -> &[Bary] {
+        &self.entries
+    }
+
+    /// Map a source field (SoA `[x…, y…, z…]`, positions or velocities) onto
+    /// the target nodes, into `out` (SoA, target size).
+    ///
+    /// # Panics
+    /// When the slices do not have the sizes of the correlated grids.
+    pub fn map(&self, source: &[f64], out: &mut [f64]) {
+        let (ns, nt) = (self.source.nx * self.source.ny, self.entries.len());
+        assert_eq!(source.len(), 3 * ns, "source field size");
+        assert_eq!(out.len(), 3 * nt, "target field size");
+        for c in 0..3 {
+            let src = &source[c * ns..(c + 1) * ns];
+            for (o, e) in out[c * nt..(c + 1) * nt].iter_mut().zip(&self.entries) {
+                *o = e.weights[0] * src[e.nodes[0] as usize]
+                    + e.weights[1] * src[e.nodes[1] as usize]
+                    + e.weights[2] * src[e.nodes[2] as usize];
+            }
+        }
+    }
+
+    /// [`Correlation::map`] for an `f32` source (recorded trajectories).
+    pub fn map_f32(&self, source: &[f32], out: &mut [f64]) {
+        let (ns, nt) = (self.source.nx * self.source.ny, self.entries.len());
+        assert_eq!(source.len(), 3 * ns, "source field size");
+        assert_eq!(out.len(), 3 * nt, "target field size");
+        for c in 0..3 {
+            let src = &source[c * ns..(c + 1) * ns];
+            for (o, e) in out[c * nt..(c + 1) * nt].iter_mut().zip(&self.entries) {
+                *o = e.weights[0] * f64::from(src[e.nodes[0] as usize])
+                    + e.weights[1] * f64::from(src[e.nodes[1] as usize])
+                    + e.weights[2] * f64::from(src[e.nodes[2] as usize]);
+            }
+        }
+    }
+}
+
+/// Locate material point (u, v) in the triangulation of `grid`.
+fn locate(grid: &GridShape, u: f64, v: f64) -> Bary {
+    let snap = |x: f64| {
+        let r = x.round();
+        if (x - r).abs() < 1e-9 {
+            r
+        } else {
+            x
+        }
+    };
+    let x = snap(u * (grid.nx - 1) as f64);
+    let y = snap(v * (grid.ny - 1) as f64);
+    let i = (x.floor() as usize).min(grid.nx - 2);
+    let j = (y.floor() as usize).min(grid.ny - 2);
+    let (s, t) = (x - i as f64, y - j as f64);
+    let n = |i: usize, j: usize| grid.node(i, j) as u32;
+    let (p00, p10, p11, p01) = (n(i, j), n(i + 1, j), n(i + 1, j + 1), n(i, j + 1));
+    if s >= t {
+        Bary {
+            nodes: [p00, p11, p10],
+            weights: [1.0 - s, t, s - t],
+        }
+    } else {
+        Bary {
+            nodes: [p00, p01, p11],
+            weights: [1.0 - t, t - s, s],
+        }
+    }
+}
+
+/// A state of `source` resampled onto `target`: positions and velocities
+/// interpolated barycentrically, same time and step count. Pins are *not*
+/// applied here (the target simulation's `set_state` does that).
+pub fn transfer_state(source: &Topology, state: &State, target: &Topology) -> Result<State, LodError> {
+    if state.n_nodes() != source.n_nodes {
+        return Err(LodError::SizeMismatch {
+            got: state.n_nodes(),
+            expected: source.n_nodes,
+        });
+    }
+    let corr = Correlation::between(source, target)?;
+    let n = target.n_nodes;
+    let mut pos = vec![0.0; 3 * n];
+    let mut vel = vec![0.0; 3 * n];
+    corr.map(&state.pos, &mut pos);
+    corr.map(&state.vel, &mut vel);
+    Ok(State {
+        pos,
+        vel,
+        time: state.time,
+        step: state.step,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sim::Orientation;
+
+    fn shape(nx: usize, ny: usize) -> GridShape {
+        GridShape {
+            nx,
+            ny,
+            width: 2.0,
+            height: 1.0,
+        }
+    }
+
+    #[test]
+    fn a_grid_correlated_with_itself_is_the_identity() {
+        let g = shape(7, 5);
+        let c = Correlation::grids(&g, &g).unwrap();
+        for (k, e) in c.entries().iter().enumerate() {
+            let w: f64 = e
+                .nodes
+                .iter()
+                .zip(e.weights)
+                .filter(|(&n, _)| n as usize == k)
+                .map(|(_, w)| w)
+                .sum();
+            assert_eq!(w, 1.0, "node {k}: {e:?}");
+        }
+    }
+
+    #[test]
+    fn hand_built_case_3x3_onto_2x2_cell_centre_and_thirds() {
+        // Source: 2×2 nodes (one quad, two triangles). Target 3×3: its centre
+        // (u,v) = (½,½) lies on the diagonal, s = t = ½ → triangle
+        // (0,0)(1,1)(1,0) with weights (½, ½, 0).
+        let src = shape(2, 2);
+        let c = Correlation::grids(&src, &shape(3, 3)).unwrap();
+        let centre = c.entries()[4];
+        assert_eq!(centre.nodes, [0, 3, 1]);
+        assert_eq!(centre.weights, [0.5, 0.5, 0.0]);
+        // Target (1, 0): (u, v) = (½, 0) → s = ½, t = 0 → weights (½, 0, ½) on (0, 3, 1).
+        assert_eq!(c.entries()[1].weights, [0.5, 0.0, 0.5]);
+        // Target (0, 1): (0, ½) → s = 0 < t = ½ → triangle (0,0)(0,1)(1,1) = (0, 2, 3), weights (½, ½, 0).
+        assert_eq!(c.entries()[3].nodes, [0, 2, 3]);
+        assert_eq!(c.entries()[3].weights, [0.5, 0.5, 0.0]);
+        // A point at (u,v) = (2/3, 1/3) of a 4×4 target on a 2×2 source:
+        // s = 2/3 ≥ t = 1/3 → weights (1/3, 1/3, 1/3).
+        let c4 = Correlation::grids(&src, &shape(4, 4)).unwrap();
+        let e = c4.entries()[shape(4, 4).node(2, 1)];
+        for (w, want) in e.weights.iter().zip([1.0 / 3.0; 3]) {
+            assert!((w - want).abs() < 1e-15);
+        }
+    }
+
+    #[test]
+    fn weights_reproduce_rest_positions_for_uneven_resolutions() {
+        for (fine, coarse) in [
+            ((64, 64), (40, 40)),
+            ((64, 64), (44, 44)),
+            ((100, 37), (50, 20)),
+            ((9, 5), (13, 11)),
+        ] {
+            let f = Topology::grid(shape(fine.0, fine.1), Orientation::Horizontal);
+            let c = Topology::grid(shape(coarse.0, coarse.1), Orientation::Horizontal);
+            let corr = Correlation::between(&f, &c).unwrap();
+            let rest = State::at_rest(&f);
+            let mut out = vec![0.0; 3 * c.n_nodes];
+            corr.map(&rest.pos, &mut out);
+            let want = State::at_rest(&c);
+            for (a, b) in out.iter().zip(&want.pos) {
+                assert!((a - b).abs() < 1e-12, "{fine:?}→{coarse:?}: {a} vs {b}");
+            }
+            for e in corr.entries() {
+                assert!(e.weights.iter().all(|&w| (0.0..=1.0).contains(&w)));
+                assert!((e.weights.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+            }
+        }
+    }
+
+    #[test]
+    fn different_cloths_are_refused() {
+        let a = shape(4, 4);
+        let mut b = shape(3, 3);
+        b.width = 1.0;
+        assert!(matches!(
+            Correlation::grids(&a, &b),
+            Err(LodError::DifferentCloth { .. })
+        ));
+    }
+}
