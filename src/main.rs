@@ -105,12 +105,17 @@ enum Command {
         #[arg(long, default_value = "out/stability")]
         out: PathBuf,
     },
+    /// Level-of-detail experiments: table1, pareto, lod-plan, switch-test.
+    #[command(subcommand)]
+    Experiment(experiment_cli::Experiment),
     /// Print the header and a summary of a trajectory file.
     Inspect {
         /// Trajectory file (.lct).
         file: PathBuf,
     },
 }
+
+mod experiment_cli;
 
 fn main() -> Result<()> {
     tracing_subscriber::fmt()
@@ -151,6 +156,7 @@ fn main() -> Result<()> {
             bisections,
             out,
         } => stability(&scene, sizes, factors, steps, bisections, &out),
+        Command::Experiment(e) => experiment_cli::run(e),
         Command::Inspect { file } => inspect(&file),
     }
 }

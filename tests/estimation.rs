@@ -47,6 +47,7 @@ fn record(scene: &Scene, frames: u64, metric_stride: u64, estimate_stride: u64) 
         frames,
         metric_stride,
         estimate_stride,
+        difference_span: 1,
     };
     Arc::new(Reference::record(sim, spec, &mut |_, _| {}).expect("reference records"))
 }

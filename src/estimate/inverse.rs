@@ -151,8 +151,8 @@ pub fn observe(
 ) -> Vec<Observation> {
     let n = coarse.topology().n_nodes;
     let nf = reference.topology.n_nodes;
-    let dt = reference.dt;
-    let backward = reference.integrator == Integrator::SymplecticEuler;
+    let dt = reference.dt * reference.spec.difference_span as f64;
+    let backward = reference.integrator == Integrator::SymplecticEuler && reference.spec.difference_span == 1;
     let masses = coarse.masses().to_vec();
     let mut prev = vec![0.0; 3 * n];
     let mut next = vec![0.0; 3 * n];

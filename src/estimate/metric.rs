@@ -40,6 +40,8 @@ pub struct ErrorReport {
     pub node_mean: Vec<f64>,
     /// Per-node error at the worst frame.
     pub worst_frame_nodes: Vec<f64>,
+    /// Coarse positions at the worst frame (SoA), for error maps.
+    pub worst_positions: Vec<f64>,
     /// True when the coarse run diverged (non-finite state): every statistic
     /// is then +∞.
     pub diverged: bool,
@@ -60,6 +62,7 @@ impl ErrorReport {
             last_quarter: f64::INFINITY,
             node_mean: vec![f64::INFINITY; n_nodes],
             worst_frame_nodes: vec![f64::INFINITY; n_nodes],
+            worst_positions: Vec::new(),
             diverged: true,
         }
     }
@@ -76,6 +79,7 @@ pub struct ErrorAccumulator {
     node_sum: Vec<f64>,
     current: Vec<f64>,
     worst: Vec<f64>,
+    worst_positions: Vec<f64>,
     worst_mean: f64,
     histogram: Vec<u64>,
     max: f64,
@@ -100,6 +104,7 @@ impl ErrorAccumulator {
             node_sum: vec![0.0; n_nodes],
             current: vec![0.0; n_nodes],
             worst: vec![0.0; n_nodes],
+            worst_positions: vec![0.0; 3 * n_nodes],
             worst_mean: -1.0,
             histogram: vec![0; BINS + 1],
             max: 0.0,
@@ -135,6 +140,7 @@ impl ErrorAccumulator {
         if mean > self.worst_mean {
             self.worst_mean = mean;
             self.worst.copy_from_slice(&self.current);
+            self.worst_positions.copy_from_slice(sim);
         }
         self.frame_means.push(mean);
         self.frame_times.push(time);
@@ -221,6 +227,7 @@ impl ErrorAccumulator {
             last_quarter: avg(&self.frame_means[frames - quarter..]),
             node_mean: self.node_sum.iter().map(|s| s / frames as f64).collect(),
             worst_frame_nodes: self.worst.clone(),
+            worst_positions: self.worst_positions.clone(),
             diverged: false,
         }
     }

@@ -9,7 +9,7 @@
 //!   (1e-7 m resolution on a 1 m cloth, far below any error we report), used to
 //!   score coarse runs;
 //! - **estimation samples** every `estimate_stride` steps: the fine positions
-//!   at steps n−1, n, n+1 in `f64`, from which velocities and accelerations
+//!   at steps n−s, n, n+s in `f64` (s = `difference_span`, 1 by default), from which velocities and accelerations
 //!   follow by finite differences (the paper's inverse procedure uses
 //!   consecutive positions). f64 matters here: the second difference at
 //!   dt = 2e-4 s cancels ~7 digits.
@@ -30,6 +30,10 @@ pub struct RecordSpec {
     pub metric_stride: u64,
     /// Keep an estimation sample every this many steps.
     pub estimate_stride: u64,
+    /// Steps between the three positions of a sample (1: consecutive steps,
+    /// as in the paper). Larger spans difference over a longer time and so
+    /// filter out vibrations faster than the coarse cloth can represent.
+    pub difference_span: u64,
 }
 
 impl RecordSpec {
@@ -38,6 +42,7 @@ impl RecordSpec {
         frames: 20_000,
         metric_stride: 10,
         estimate_stride: 40,
+        difference_span: 1,
     };
 }
 
@@ -46,7 +51,7 @@ impl RecordSpec {
 pub struct Sample {
     /// Time of the middle step (s).
     pub time: f64,
-    /// Positions at steps n−1, n, n+1 (SoA, f64).
+    /// Positions at steps n−s, n, n+s (SoA, f64), s = the difference span.
     pub prev: Vec<f64>,
     pub cur: Vec<f64>,
     pub next: Vec<f64>,
@@ -99,9 +104,9 @@ impl Reference {
         if spec.frames < 3 {
             return Err(ReferenceError::Spec("frames must be at least 3"));
         }
-        if spec.metric_stride == 0 || spec.estimate_stride < 2 {
+        if spec.metric_stride == 0 || spec.difference_span == 0 || spec.estimate_stride < 2 * spec.difference_span {
             return Err(ReferenceError::Spec(
-                "metric_stride must be ≥ 1 and estimate_stride ≥ 2",
+                "metric_stride and difference_span must be ≥ 1 and estimate_stride ≥ 2 × difference_span",
             ));
         }
         let topology = sim.topology().clone();
@@ -129,13 +134,16 @@ impl Reference {
                 let d2 = (0..3).map(|c| (pos[c * n + k] - rest[c * n + k]).powi(2)).sum::<f64>();
                 o_max2 = o_max2.max(d2);
             }
-            // Sample centres are the multiples of `estimate_stride` (≥ 2), so
-            // the three cases below never need the same step twice.
-            if let Some(mut s) = pending.take() {
-                s.next = pos.clone();
-                samples.push(s);
+            // Sample centres are the multiples of `estimate_stride` ≥ 2·span,
+            // so a sample is completed before the next one needs its `prev`.
+            let span = spec.difference_span;
+            if step >= span && (step - span) % spec.estimate_stride == 0 {
+                if let Some(mut s) = pending.take() {
+                    s.next = pos.clone();
+                    samples.push(s);
+                }
             }
-            if step % spec.estimate_stride == 0 && step < spec.frames {
+            if step % spec.estimate_stride == 0 && step + span <= spec.frames {
                 pending = Some(Sample {
                     time: sim.state().time,
                     prev: std::mem::take(&mut prev),
@@ -143,7 +151,7 @@ impl Reference {
                     next: Vec::new(),
                 });
             }
-            if (step + 1) % spec.estimate_stride == 0 {
+            if (step + span) % spec.estimate_stride == 0 {
                 prev = pos.clone();
             }
             if step % spec.metric_stride == 0 {

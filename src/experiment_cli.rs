@@ -1,0 +1,732 @@
+//! `lodcloth experiment …`: the level-of-detail studies, with their files
+//! (CSV, markdown, SVG charts and error maps).
+
+use std::fmt::Write as _;
+use std::fs;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use clap::Subcommand;
+use tracing::info;
+
+use lodcloth::estimate::{FitOptions, LodProblem, Method, RecordSpec, Reference};
+use lodcloth::experiments::lod::{
+    level_dt, lod_plan, pareto, record_reference, switch_test, table1_scene, Table1Options, Table1Row, TABLE1_VARIANTS,
+};
+use lodcloth::output::{error_map_svg, line_chart_svg, ClothPanel, Series, PALETTE};
+use lodcloth::scene::{MassConvention, Scene};
+use lodcloth::sim::Integrator;
+
+const PAPER_SCENES: [&str; 3] = [
+    "config/scenes/paper-1-top-edge.toml",
+    "config/scenes/paper-2-corner.toml",
+    "config/scenes/paper-3-left-edge.toml",
+];
+
+/// Table 1 of Sung 2018 (mean error %, reference 64×64): level, same, BCD, GKD.
+const PAPER_TABLE1: [(usize, f64, f64, f64); 6] = [
+    (60, 6.56, 4.47, 4.36),
+    (56, 9.68, 5.35, 5.16),
+    (52, 12.93, 6.11, 5.89),
+    (48, 16.81, 6.93, 6.65),
+    (44, 20.25, 7.43, 7.12),
+    (40, 26.93, 11.22, 10.48),
+];
+
+/// Arguments shared by every experiment.
+#[derive(clap::Args, Clone)]
+pub struct Common {
+    /// Scene files (default: the paper's three scenes).
+    #[arg(long, value_delimiter = ',')]
+    scenes: Vec<PathBuf>,
+    /// Reference frames (steps of the reference run; the paper's 20,000).
+    #[arg(long, default_value_t = 20_000)]
+    frames: u64,
+    /// Score every this many reference steps.
+    #[arg(long, default_value_t = 10)]
+    metric_stride: u64,
+    /// Take an estimation sample every this many reference steps.
+    #[arg(long, default_value_t = 40)]
+    estimate_stride: u64,
+    /// Steps between the positions a sample differences (1 = consecutive, the paper's).
+    #[arg(long, default_value_t = 1)]
+    difference_span: u64,
+    /// Reference resolution (square; default: each scene's own).
+    #[arg(long)]
+    reference: Option<usize>,
+    /// Training frames of `fit` (evenly spaced) and its iteration limit.
+    #[arg(long, default_value_t = 120)]
+    fit_frames: usize,
+    #[arg(long, default_value_t = 12)]
+    fit_iterations: usize,
+    /// Fraction of the run `fit` trains on (the rest is held out).
+    #[arg(long, default_value_t = 0.5)]
+    train_fraction: f64,
+    /// Small and fast, for CI: 24×24 references, 3 s runs, short fits.
+    #[arg(long)]
+    quick: bool,
+    /// Output directory.
+    #[arg(long)]
+    out: Option<PathBuf>,
+}
+
+impl Common {
+    fn apply_quick(&mut self) {
+        if self.quick {
+            self.reference = Some(self.reference.unwrap_or(24));
+            self.frames = 15_000;
+            self.metric_stride = 25;
+            self.estimate_stride = 50;
+            self.fit_frames = 30;
+            self.fit_iterations = 4;
+        }
+    }
+
+    fn scenes(&self) -> Result<Vec<Scene>> {
+        let paths: Vec<PathBuf> = if self.scenes.is_empty() {
+            PAPER_SCENES.iter().map(PathBuf::from).collect()
+        } else {
+            self.scenes.clone()
+        };
+        paths
+            .iter()
+            .map(|p| {
+                let mut s = Scene::load(p).with_context(|| format!("loading scene {}", p.display()))?;
+                if let Some(n) = self.reference {
+                    s.nx = n;
+                    s.ny = n;
+                }
+                Ok(s)
+            })
+            .collect()
+    }
+
+    fn spec(&self) -> Result<RecordSpec> {
+        if self.metric_stride == 0
+            || self.difference_span == 0
+            || self.estimate_stride < 2 * self.difference_span
+            || self.frames < 4 * self.metric_stride
+        {
+            bail!(
+                "--metric-stride and --difference-span must be ≥ 1, --estimate-stride ≥ 2 × --difference-span, \
+                 and --frames ≥ 4 metric strides"
+            );
+        }
+        Ok(RecordSpec {
+            frames: self.frames,
+            metric_stride: self.metric_stride,
+            estimate_stride: self.estimate_stride,
+            difference_span: self.difference_span,
+        })
+    }
+
+    fn fit(&self, frames: usize) -> Result<FitOptions> {
+        if !(self.train_fraction > 0.0 && self.train_fraction < 1.0) {
+            bail!("--train-fraction must be in (0, 1), got {}", self.train_fraction);
+        }
+        let end = ((frames as f64 * self.train_fraction).round() as usize).clamp(1, frames - 1);
+        Ok(FitOptions {
+            train: Some(0..end),
+            max_frames: self.fit_frames,
+            max_iterations: self.fit_iterations,
+            ..FitOptions::default()
+        })
+    }
+
+    fn out(&self, default: &str) -> Result<PathBuf> {
+        let dir = self.out.clone().unwrap_or_else(|| PathBuf::from(default));
+        fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+        Ok(dir)
+    }
+}
+
+#[derive(Subcommand)]
+pub enum Experiment {
+    /// The paper's Table 1 for our scenes: every level and method, with CSV,
+    /// markdown, an error-vs-reduction chart and worst-frame error maps.
+    Table1 {
+        #[command(flatten)]
+        common: Common,
+        /// Coarse levels (square).
+        #[arg(long, value_delimiter = ',')]
+        levels: Vec<usize>,
+    },
+    /// Speed against accuracy for (level, method, integrator, dt), with the
+    /// Pareto front marked.
+    Pareto {
+        #[command(flatten)]
+        common: Common,
+        #[arg(long, value_delimiter = ',')]
+        levels: Vec<usize>,
+        /// Methods compared.
+        #[arg(long, value_delimiter = ',', default_values_t = vec!["same".to_string(), "lsq".to_string(), "fit".to_string()])]
+        methods: Vec<String>,
+        /// dt as fractions of each integrator's predicted limit (implicit
+        /// Euler: of 4× the symplectic limit).
+        #[arg(long, value_delimiter = ',', default_values_t = vec![0.25, 0.5, 0.8])]
+        dt_fractions: Vec<f64>,
+    },
+    /// The coarsest level whose fitted model stays within --max-error on
+    /// held-out frames.
+    LodPlan {
+        #[command(flatten)]
+        common: Common,
+        /// Largest acceptable mean error, in percent.
+        #[arg(long)]
+        max_error: f64,
+        #[arg(long, value_delimiter = ',')]
+        levels: Vec<usize>,
+    },
+    /// Switch reference ↔ a coarse level mid-run and measure the jump.
+    SwitchTest {
+        #[command(flatten)]
+        common: Common,
+        /// Coarse level.
+        #[arg(long, default_value_t = 40)]
+        level: usize,
+        /// Method giving the coarse coefficients.
+        #[arg(long, default_value = "fit")]
+        method: String,
+        /// Switch time (s) and the window scored after it (s).
+        #[arg(long, default_value_t = 1.75)]
+        at: f64,
+        #[arg(long, default_value_t = 0.5)]
+        window: f64,
+    },
+}
+
+pub fn run(experiment: Experiment) -> Result<()> {
+    match experiment {
+        Experiment::Table1 { mut common, levels } => {
+            common.apply_quick();
+            let levels = if !levels.is_empty() {
+                levels
+            } else if common.quick {
+                vec![16, 12]
+            } else {
+                vec![60, 56, 52, 48, 44, 40, 32, 24, 16]
+            };
+            table1(&common, &levels)
+        }
+        Experiment::Pareto {
+            mut common,
+            levels,
+            methods,
+            dt_fractions,
+        } => {
+            common.apply_quick();
+            let levels = if !levels.is_empty() {
+                levels
+            } else if common.quick {
+                vec![24, 16, 12]
+            } else {
+                vec![64, 48, 40, 32, 24]
+            };
+            let methods = methods
+                .iter()
+                .map(|m| Method::from_name(m).with_context(|| format!("--methods: unknown method {m:?}")))
+                .collect::<Result<Vec<_>>>()?;
+            pareto_cmd(&common, &levels, &methods, &dt_fractions)
+        }
+        Experiment::LodPlan {
+            mut common,
+            max_error,
+            levels,
+        } => {
+            common.apply_quick();
+            if !(max_error > 0.0) {
+                bail!("--max-error must be a positive percentage, got {max_error}");
+            }
+            let levels = if levels.is_empty() {
+                vec![8, 12, 16, 24, 32, 40, 44, 48, 52, 56, 60]
+            } else {
+                levels
+            };
+            plan_cmd(&common, max_error / 100.0, &levels)
+        }
+        Experiment::SwitchTest {
+            mut common,
+            level,
+            method,
+            at,
+            window,
+        } => {
+            common.apply_quick();
+            let method = Method::from_name(&method).with_context(|| format!("--method: unknown method {method:?}"))?;
+            switch_cmd(&common, level, method, at, window)
+        }
+    }
+}
+
+fn log_line(line: String) {
+    info!("{line}");
+}
+
+fn reference_for(scene: &Scene, spec: RecordSpec) -> Result<(Arc<Reference>, f64)> {
+    let t = Instant::now();
+    let (reference, cost) = record_reference(scene, spec, &mut log_line)?;
+    info!(
+        "{}: reference {}×{} recorded in {:.1} s ({:.2} wall s per simulated s, {} MB held, O_max {:.3} m)",
+        scene.name,
+        scene.nx,
+        scene.ny,
+        t.elapsed().as_secs_f64(),
+        cost,
+        reference.memory_bytes() / 1_000_000,
+        reference.o_max
+    );
+    Ok((reference, cost))
+}
+
+fn table1(common: &Common, levels: &[usize]) -> Result<()> {
+    let out = common.out("out/table1")?;
+    let spec = common.spec()?;
+    let scenes = common.scenes()?;
+    let frames = (spec.frames / spec.metric_stride) as usize;
+    let map_level = if levels.contains(&48) {
+        48
+    } else {
+        levels[levels.len() / 2]
+    };
+    let options = Table1Options {
+        levels: levels.to_vec(),
+        spec,
+        variants: TABLE1_VARIANTS.to_vec(),
+        fit: common.fit(frames)?,
+        dt_margin: 0.5,
+        map_level,
+    };
+    let started = Instant::now();
+    let mut rows: Vec<Table1Row> = Vec::new();
+    let mut ref_costs = Vec::new();
+    for scene in &scenes {
+        let (reference, cost) = reference_for(scene, spec)?;
+        ref_costs.push((scene.name.clone(), cost));
+        let scene_rows = table1_scene(scene, &reference, &options, &mut log_line)?;
+        write_error_maps(&out, scene, &reference, &scene_rows, map_level)?;
+        rows.extend(scene_rows);
+        write_table1(&out, &rows, &ref_costs, levels, &scenes, common)?;
+    }
+    info!(
+        "table1 done in {:.0} s: {}",
+        started.elapsed().as_secs_f64(),
+        out.join("table1.md").display()
+    );
+    Ok(())
+}
+
+fn write_table1(
+    out: &Path,
+    rows: &[Table1Row],
+    ref_costs: &[(String, f64)],
+    levels: &[usize],
+    scenes: &[Scene],
+    common: &Common,
+) -> Result<()> {
+    let mut csv = String::from(
+        "scene,level,nodes,reduction,variant,method,mass,k_structural,k_shear,k_bend,c_structural,c_shear,c_bend,dt,dt_over_limit,mean,held_out_mean,p95,max,first_quarter,last_quarter,worst_time,worst_frame_mean,estimate_s,cost_s_per_s,diverged,notes\n",
+    );
+    for r in rows {
+        let m = r.material.springs;
+        let _ = writeln!(
+            csv,
+            "{},{},{},{:.4},{},{},{},{},{},{},{},{},{},{:e},{:.3},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.4},{:.6},{:.2},{:.4},{},\"{}\"",
+            r.scene,
+            r.level,
+            r.nodes,
+            r.reduction,
+            r.variant.label(),
+            r.variant.method,
+            r.variant.mass.name(),
+            m[0].k,
+            m[1].k,
+            m[2].k,
+            m[0].c,
+            m[1].c,
+            m[2].c,
+            r.dt,
+            r.dt_ratio,
+            r.all.mean,
+            r.held_out_mean,
+            r.all.p95,
+            r.all.max,
+            r.all.first_quarter,
+            r.all.last_quarter,
+            r.all.worst_time,
+            r.all.worst_frame_mean,
+            r.estimate_seconds,
+            r.cost,
+            r.all.diverged,
+            r.notes.replace('"', "'")
+        );
+    }
+    fs::write(out.join("table1.csv"), csv).context("writing table1.csv")?;
+
+    let labels: Vec<String> = TABLE1_VARIANTS.iter().map(|v| v.label()).collect();
+    let scenes_done: Vec<&str> = scenes
+        .iter()
+        .map(|s| s.name.as_str())
+        .filter(|n| rows.iter().any(|r| r.scene == *n))
+        .collect();
+    let mean_of = |level: usize, label: &str, f: &dyn Fn(&Table1Row) -> f64| -> f64 {
+        let v: Vec<f64> = rows
+            .iter()
+            .filter(|r| r.level == level && r.variant.label() == label)
+            .map(f)
+            .collect();
+        v.iter().sum::<f64>() / v.len().max(1) as f64
+    };
+    let mut md = String::new();
+    let _ = writeln!(
+        md,
+        "Mean displacement error (% of O_max, Sung eq. 9) averaged over {} — reference {}, {} frames, metric every {} frames.\n\nCommand: `lodcloth experiment table1{}`\n",
+        scenes_done.join(", "),
+        scenes.first().map_or(String::new(), |s| format!("{}×{}", s.nx, s.ny)),
+        common.frames,
+        common.metric_stride,
+        if common.quick { " --quick" } else { "" }
+    );
+    for (title, held) in [
+        ("All frames (fit's training half included)", false),
+        ("Held-out frames (second half of the run: fit never saw them)", true),
+    ] {
+        let _ = writeln!(md, "### {title}\n");
+        let _ = writeln!(
+            md,
+            "| coarse | reduction | {} | paper same / BCD / GKD |",
+            labels.join(" | ")
+        );
+        let _ = writeln!(md, "|---|---|{}---|", "---|".repeat(labels.len()));
+        for &level in levels {
+            if !rows.iter().any(|r| r.level == level) {
+                continue;
+            }
+            let reduction = rows.iter().find(|r| r.level == level).map_or(0.0, |r| r.reduction);
+            let cells: Vec<String> = labels
+                .iter()
+                .map(|l| {
+                    let v = mean_of(level, l, &|r| if held { r.held_out_mean } else { r.all.mean });
+                    format!("{:.2}", 100.0 * v)
+                })
+                .collect();
+            let paper = PAPER_TABLE1
+                .iter()
+                .find(|p| p.0 == level)
+                .map_or("—".to_string(), |p| format!("{} / {} / {}", p.1, p.2, p.3));
+            let _ = writeln!(
+                md,
+                "| {level}×{level} | {:.0}% | {} | {paper} |",
+                100.0 * reduction,
+                cells.join(" | ")
+            );
+        }
+        let _ = writeln!(md);
+    }
+    let _ = writeln!(md, "### Per scene (all frames / held-out), fit and the paper's GKD\n");
+    let _ = writeln!(md, "| scene | coarse | gkd/per-node | fit/lumped | fit p95 | fit last/first quarter | estimation s (fit) | cost s/s (fit) |");
+    let _ = writeln!(md, "|---|---|---|---|---|---|---|---|");
+    for r in rows.iter().filter(|r| r.variant.method == Method::Fit) {
+        let gkd = rows.iter().find(|g| {
+            g.scene == r.scene
+                && g.level == r.level
+                && g.variant.method == Method::Gkd
+                && g.variant.mass == MassConvention::PerNode
+        });
+        let _ = writeln!(
+            md,
+            "| {} | {}×{} | {} | {:.2} / {:.2} | {:.2} | {:.2} | {:.0} | {:.3} |",
+            r.scene,
+            r.level,
+            r.level,
+            gkd.map_or("—".into(), |g| format!(
+                "{:.2} / {:.2}",
+                100.0 * g.all.mean,
+                100.0 * g.held_out_mean
+            )),
+            100.0 * r.all.mean,
+            100.0 * r.held_out_mean,
+            100.0 * r.all.p95,
+            r.all.last_quarter / r.all.first_quarter.max(f64::MIN_POSITIVE),
+            r.estimate_seconds,
+            r.cost
+        );
+    }
+    let _ = writeln!(md, "\nReference cost (wall s per simulated s):");
+    for (name, c) in ref_costs {
+        let _ = writeln!(md, "- {name}: {c:.3}");
+    }
+    fs::write(out.join("table1.md"), md).context("writing table1.md")?;
+
+    let series: Vec<Series<'_>> = labels
+        .iter()
+        .enumerate()
+        .map(|(i, l)| Series {
+            name: l,
+            points: levels
+                .iter()
+                .filter(|&&lv| rows.iter().any(|r| r.level == lv))
+                .map(|&lv| {
+                    let red = rows.iter().find(|r| r.level == lv).map_or(0.0, |r| r.reduction);
+                    (100.0 * red, 100.0 * mean_of(lv, l, &|r| r.held_out_mean))
+                })
+                .collect(),
+            markers: false,
+            color: PALETTE[i % PALETTE.len()],
+        })
+        .collect();
+    if series.iter().any(|s| !s.points.is_empty()) {
+        line_chart_svg(
+            &out.join("error_vs_reduction.svg"),
+            "Held-out mean error vs node reduction (mean over scenes)",
+            "node reduction (%)",
+            "mean error (% of O_max)",
+            &series,
+            false,
+            true,
+        )?;
+    }
+    Ok(())
+}
+
+fn write_error_maps(out: &Path, scene: &Scene, reference: &Reference, rows: &[Table1Row], level: usize) -> Result<()> {
+    let chosen = [
+        (Method::Same, MassConvention::PerNode),
+        (Method::Bcd, MassConvention::PerNode),
+        (Method::Gkd, MassConvention::PerNode),
+        (Method::Fit, MassConvention::Lumped),
+    ];
+    let maps: Vec<&Table1Row> = rows
+        .iter()
+        .filter(|r| r.level == level && chosen.contains(&(r.variant.method, r.variant.mass)) && !r.all.diverged)
+        .collect();
+    let scale = maps
+        .iter()
+        .flat_map(|r| r.all.worst_frame_nodes.iter().copied())
+        .fold(0.0, f64::max)
+        .max(1e-6);
+    for r in maps {
+        let frame = reference
+            .frame_times
+            .iter()
+            .position(|&t| (t - r.all.worst_time).abs() < 1e-9)
+            .unwrap_or(0);
+        let ref_pos: Vec<f64> = reference.frames[frame].iter().map(|&x| f64::from(x)).collect();
+        let coarse = lodcloth::sim::Topology::grid(scene.shape(level, level), scene.orientation);
+        let panels = [
+            ClothPanel {
+                title: format!("reference {}×{}", scene.nx, scene.ny),
+                topology: &reference.topology,
+                pos: &ref_pos,
+                values: None,
+            },
+            ClothPanel {
+                title: format!(
+                    "{} {level}×{level}: mean {:.2}%",
+                    r.variant.label(),
+                    100.0 * r.all.worst_frame_mean
+                ),
+                topology: &coarse,
+                pos: &r.all.worst_positions,
+                values: Some(&r.all.worst_frame_nodes),
+            },
+        ];
+        let path = out.join(format!(
+            "errormap_{}_{level}_{}.svg",
+            scene.name,
+            r.variant.label().replace('/', "_")
+        ));
+        error_map_svg(
+            &path,
+            &format!("{} — worst frame t = {:.3} s", scene.name, r.all.worst_time),
+            &panels,
+            scale,
+            420,
+        )?;
+    }
+    Ok(())
+}
+
+fn pareto_cmd(common: &Common, levels: &[usize], methods: &[Method], fractions: &[f64]) -> Result<()> {
+    let out = common.out("out/pareto")?;
+    let spec = common.spec()?;
+    let scene = common.scenes()?.into_iter().next().context("no scene")?;
+    let (reference, _) = reference_for(&scene, spec)?;
+    let frames = reference.frames.len();
+    let integrators = [Integrator::SymplecticEuler, Integrator::Rk4, Integrator::ImplicitEuler];
+    let points = pareto(
+        &scene,
+        &reference,
+        levels,
+        methods,
+        &integrators,
+        fractions,
+        &common.fit(frames)?,
+        &mut log_line,
+    )?;
+    let mut csv = String::from("level,method,integrator,dt,dt_over_limit,cost_s_per_s,mean_error,on_front\n");
+    for p in &points {
+        let _ = writeln!(
+            csv,
+            "{},{},{},{:e},{:.3},{:.5},{:.6},{}",
+            p.level,
+            p.method,
+            p.integrator.name(),
+            p.dt,
+            p.dt_ratio,
+            p.cost,
+            p.mean_error,
+            p.on_front
+        );
+    }
+    fs::write(out.join("pareto.csv"), csv)?;
+    let names: Vec<String> = methods.iter().map(|m| m.name().to_string()).collect();
+    let mut series: Vec<Series<'_>> = methods
+        .iter()
+        .enumerate()
+        .map(|(i, m)| Series {
+            name: &names[i],
+            points: points
+                .iter()
+                .filter(|p| p.method == *m)
+                .map(|p| (p.cost, 100.0 * p.mean_error))
+                .collect(),
+            markers: true,
+            color: PALETTE[i % PALETTE.len()],
+        })
+        .collect();
+    let mut front: Vec<(f64, f64)> = points
+        .iter()
+        .filter(|p| p.on_front)
+        .map(|p| (p.cost, 100.0 * p.mean_error))
+        .collect();
+    front.sort_by(|a, b| a.0.total_cmp(&b.0));
+    series.push(Series {
+        name: "Pareto front",
+        points: front,
+        markers: false,
+        color: PALETTE[5],
+    });
+    line_chart_svg(
+        &out.join("pareto.svg"),
+        &format!("{}: wall time per simulated second vs mean error", scene.name),
+        "wall s per simulated s",
+        "mean error (% of O_max)",
+        &series,
+        true,
+        true,
+    )?;
+    info!("wrote {}", out.join("pareto.svg").display());
+    Ok(())
+}
+
+fn plan_cmd(common: &Common, max_error: f64, levels: &[usize]) -> Result<()> {
+    let out = common.out("out/lod-plan")?;
+    let spec = common.spec()?;
+    let mut csv =
+        String::from("scene,level,dt,held_out_mean,accepted,k_structural,k_shear,k_bend,c_structural,c_shear,c_bend\n");
+    for scene in common.scenes()? {
+        let (reference, _) = reference_for(&scene, spec)?;
+        let fit = common.fit(reference.frames.len())?;
+        let levels: Vec<usize> = levels.iter().copied().filter(|&l| l < scene.nx.max(scene.ny)).collect();
+        let steps = lod_plan(&scene, &reference, &levels, max_error, &fit, &mut log_line)?;
+        match steps.iter().find(|s| s.accepted) {
+            Some(s) => println!(
+                "{}: {}×{} (held-out error {:.2}% ≤ {:.2}%), coefficients {:?}",
+                scene.name,
+                s.level,
+                s.level,
+                100.0 * s.held_out_mean,
+                100.0 * max_error,
+                s.material
+            ),
+            None => println!(
+                "{}: no coarser level stays within {:.2}%; keep the reference {}×{}",
+                scene.name,
+                100.0 * max_error,
+                scene.nx,
+                scene.ny
+            ),
+        }
+        for s in &steps {
+            let m = s.material.springs;
+            let _ = writeln!(
+                csv,
+                "{},{},{:e},{:.6},{},{},{},{},{},{},{}",
+                scene.name, s.level, s.dt, s.held_out_mean, s.accepted, m[0].k, m[1].k, m[2].k, m[0].c, m[1].c, m[2].c
+            );
+        }
+    }
+    fs::write(out.join("lod-plan.csv"), csv)?;
+    Ok(())
+}
+
+fn switch_cmd(common: &Common, level: usize, method: Method, at: f64, window: f64) -> Result<()> {
+    let out = common.out("out/switch-test")?;
+    let spec = common.spec()?;
+    let mut csv = String::from(
+        "scene,level,method,switch_time,position_jump_m,kinetic_jump,error_transfer,error_never_switched,error_zero_velocity,back_kinetic_jump,back_error\n",
+    );
+    for scene in common.scenes()? {
+        let (reference, _) = reference_for(&scene, spec)?;
+        let interval = reference.dt * reference.spec.metric_stride as f64;
+        let at_frame = (at / interval).round() as usize;
+        let window_frames = ((window / interval).round() as usize).max(1);
+        let (dt, _) = level_dt(
+            &scene,
+            &reference,
+            level,
+            level,
+            MassConvention::Lumped,
+            scene.params.integrator,
+            reference.material,
+            0.5,
+        )?;
+        let problem = LodProblem::new(
+            &scene,
+            reference.clone(),
+            level,
+            level,
+            MassConvention::Lumped,
+            scene.params.integrator,
+            dt,
+        )?;
+        let fit = common.fit(reference.frames.len())?;
+        let material = problem
+            .estimate(method, &fit, &mut lodcloth::estimate::no_progress)?
+            .material;
+        let r = switch_test(&problem, material, at_frame, window_frames)?;
+        println!(
+            "{}: {}×{}↔{level}×{level} ({method}) at t = {:.3} s: position jump {:.2e} m, KE jump {:.2}%, \
+             error over the next {window} s: transfer {:.2}%, never switched {:.2}%, zeroed velocities {:.2}%; \
+             back to fine: KE jump {:.2}%, error {:.2}%",
+            scene.name,
+            scene.nx,
+            scene.ny,
+            r.switch_time,
+            r.position_jump,
+            100.0 * r.kinetic_jump,
+            100.0 * r.error_transfer,
+            100.0 * r.error_never_switched,
+            100.0 * r.error_zero_velocity,
+            100.0 * r.back_kinetic_jump,
+            100.0 * r.back_error
+        );
+        let _ = writeln!(
+            csv,
+            "{},{level},{method},{:.4},{:e},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6}",
+            scene.name,
+            r.switch_time,
+            r.position_jump,
+            r.kinetic_jump,
+            r.error_transfer,
+            r.error_never_switched,
+            r.error_zero_velocity,
+            r.back_kinetic_jump,
+            r.back_error
+        );
+    }
+    fs::write(out.join("switch-test.csv"), csv)?;
+    Ok(())
+}

@@ -1,0 +1,651 @@
+//! Level-of-detail experiments: the paper's Table 1 and beyond, the
+//! speed/accuracy Pareto front, LOD planning and level-switch continuity.
+//! No files and no printing here: results come back as values, progress as
+//! log lines through a callback; `main.rs` writes CSV, markdown and charts.
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use crate::estimate::{
+    no_progress, Details, ErrorReport, EstimateError, FitOptions, LodProblem, Method, RecordSpec, Reference,
+    ReferenceError,
+};
+use crate::lod::transfer_state;
+use crate::scene::{MassConvention, Scene, SceneError};
+use crate::sim::{Integrator, Material, StabilityCheck};
+
+/// Errors of the experiments.
+#[derive(Debug, thiserror::Error)]
+pub enum ExperimentError {
+    #[error(transparent)]
+    Scene(#[from] SceneError),
+    #[error("{scene}: {source}")]
+    Reference { scene: String, source: ReferenceError },
+    #[error(transparent)]
+    Estimate(#[from] EstimateError),
+    #[error("{0}")]
+    Invalid(String),
+}
+
+/// A method under a mass convention: one column of Table 1.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Variant {
+    pub method: Method,
+    pub mass: MassConvention,
+}
+
+impl Variant {
+    /// `method/mass`, e.g. `gkd/per-node`.
+    pub fn label(&self) -> String {
+        format!("{}/{}", self.method, self.mass.name())
+    }
+}
+
+/// The paper's three methods under its mass convention, the same three with
+/// lumped masses, and ours.
+pub const TABLE1_VARIANTS: [Variant; 8] = [
+    Variant {
+        method: Method::Same,
+        mass: MassConvention::PerNode,
+    },
+    Variant {
+        method: Method::Bcd,
+        mass: MassConvention::PerNode,
+    },
+    Variant {
+        method: Method::Gkd,
+        mass: MassConvention::PerNode,
+    },
+    Variant {
+        method: Method::Same,
+        mass: MassConvention::Lumped,
+    },
+    Variant {
+        method: Method::Bcd,
+        mass: MassConvention::Lumped,
+    },
+    Variant {
+        method: Method::Gkd,
+        mass: MassConvention::Lumped,
+    },
+    Variant {
+        method: Method::Lsq,
+        mass: MassConvention::Lumped,
+    },
+    Variant {
+        method: Method::Fit,
+        mass: MassConvention::Lumped,
+    },
+];
+
+/// Record the reference run of `scene` at its own resolution.
+pub fn record_reference(
+    scene: &Scene,
+    spec: RecordSpec,
+    log: &mut dyn FnMut(String),
+) -> Result<(Arc<Reference>, f64), ExperimentError> {
+    let mut s = scene.clone();
+    s.stability = StabilityCheck::Enforce;
+    let sim = s.build()?;
+    let start = Instant::now();
+    let mut last = Instant::now();
+    let name = scene.name.clone();
+    let reference = Reference::record(sim, spec, &mut |done, total| {
+        if last.elapsed().as_secs_f64() > 5.0 {
+            last = Instant::now();
+            log(format!("{name}: reference {done}/{total} steps"));
+        }
+    })
+    .map_err(|source| ExperimentError::Reference {
+        scene: scene.name.clone(),
+        source,
+    })?;
+    let wall = start.elapsed().as_secs_f64();
+    let simulated = spec.frames as f64 * reference.dt;
+    Ok((Arc::new(reference), wall / simulated))
+}
+
+/// The largest dt ≤ `margin` × the predicted stability limit of `material` at
+/// level n×n that divides the reference's metric frame interval.
+pub fn level_dt(
+    scene: &Scene,
+    reference: &Arc<Reference>,
+    nx: usize,
+    ny: usize,
+    mass: MassConvention,
+    integrator: Integrator,
+    material: Material,
+    margin: f64,
+) -> Result<(f64, f64), ExperimentError> {
+    let interval = reference.dt * reference.spec.metric_stride as f64;
+    let probe = LodProblem::new(scene, reference.clone(), nx, ny, mass, integrator, interval)?;
+    let limit = probe.simulation(material)?.dt_limit();
+    let k = (interval / (margin * limit)).ceil().max(1.0);
+    Ok((interval / k, limit))
+}
+
+/// Options of [`table1_scene`].
+#[derive(Debug, Clone)]
+pub struct Table1Options {
+    pub levels: Vec<usize>,
+    pub spec: RecordSpec,
+    pub variants: Vec<Variant>,
+    pub fit: FitOptions,
+    /// dt of a level as a fraction of the `same` model's stability limit.
+    pub dt_margin: f64,
+    /// Level whose worst-frame error maps are kept.
+    pub map_level: usize,
+}
+
+/// One cell of Table 1 (scene × level × variant).
+#[derive(Debug, Clone)]
+pub struct Table1Row {
+    pub scene: String,
+    pub level: usize,
+    pub nodes: usize,
+    /// 1 − coarse nodes / reference nodes.
+    pub reduction: f64,
+    pub variant: Variant,
+    pub material: Material,
+    pub dt: f64,
+    /// dt over the model's predicted stability limit.
+    pub dt_ratio: f64,
+    /// Over every frame.
+    pub all: ErrorReport,
+    /// Over the held-out frames (after the fit's training window).
+    pub held_out_mean: f64,
+    pub estimate_seconds: f64,
+    /// Wall seconds per simulated second of the coarse run.
+    pub cost: f64,
+    pub notes: String,
+}
+
+/// Table 1 for one scene: every level and variant.
+pub fn table1_scene(
+    scene: &Scene,
+    reference: &Arc<Reference>,
+    options: &Table1Options,
+    log: &mut dyn FnMut(String),
+) -> Result<Vec<Table1Row>, ExperimentError> {
+    let frames = reference.frames.len();
+    let train = options.fit.train_range(frames);
+    let held_out = train.end..frames;
+    if held_out.is_empty() {
+        return Err(ExperimentError::Invalid(
+            "the fit's training window covers every frame: nothing is held out".into(),
+        ));
+    }
+    let n_ref = reference.topology.n_nodes;
+    let integrator = scene.params.integrator;
+    let mut rows = Vec::new();
+    for &level in &options.levels {
+        for variant in &options.variants {
+            let t0 = Instant::now();
+            // dt from the `same` model, then checked against the estimate.
+            let (dt, _) = level_dt(
+                scene,
+                reference,
+                level,
+                level,
+                variant.mass,
+                integrator,
+                reference.material,
+                options.dt_margin,
+            )?;
+            let problem = LodProblem::new(scene, reference.clone(), level, level, variant.mass, integrator, dt)?;
+            let mut fit = options.fit.clone();
+            fit.train = Some(train.clone());
+            let est = problem.estimate(variant.method, &fit, &mut no_progress)?;
+            let estimate_seconds = t0.elapsed().as_secs_f64();
+            // A model estimated stiffer than the level's dt allows gets its own dt.
+            let (dt, limit) = {
+                let limit = problem.simulation(est.material)?.dt_limit();
+                if dt <= 0.8 * limit {
+                    (dt, limit)
+                } else {
+                    level_dt(
+                        scene,
+                        reference,
+                        level,
+                        level,
+                        variant.mass,
+                        integrator,
+                        est.material,
+                        0.8,
+                    )?
+                }
+            };
+            let problem = LodProblem::new(scene, reference.clone(), level, level, variant.mass, integrator, dt)?;
+            let t1 = Instant::now();
+            let all = problem.score(est.material, 0..frames, &mut no_progress)?;
+            let cost =
+                t1.elapsed().as_secs_f64() / (frames as f64 * reference.dt * reference.spec.metric_stride as f64);
+            let held_out_mean = held_out_mean(&problem, &est.material, &all, held_out.clone())?;
+            let notes = notes(&est.details);
+            log(format!(
+                "{} {level}×{level} {:<14} mean {:6.2}%  held-out {:6.2}%  p95 {:6.2}%  dt {:.2e} ({:.2} of limit)  est {:.1}s  {notes}",
+                scene.name,
+                variant.label(),
+                100.0 * all.mean,
+                100.0 * held_out_mean,
+                100.0 * all.p95,
+                dt,
+                dt / limit,
+                estimate_seconds
+            ));
+            let keep_map = level == options.map_level;
+            rows.push(Table1Row {
+                scene: scene.name.clone(),
+                level,
+                nodes: level * level,
+                reduction: 1.0 - (level * level) as f64 / n_ref as f64,
+                variant: *variant,
+                material: est.material,
+                dt,
+                dt_ratio: dt / limit,
+                all: if keep_map { all } else { strip(all) },
+                held_out_mean,
+                estimate_seconds,
+                cost,
+                notes,
+            });
+        }
+    }
+    Ok(rows)
+}
+
+/// The held-out mean from a full-run report would need per-frame means; the
+/// frames after the training window are re-scored instead (cheap next to
+/// estimation).
+fn held_out_mean(
+    problem: &LodProblem,
+    material: &Material,
+    all: &ErrorReport,
+    held_out: std::ops::Range<usize>,
+) -> Result<f64, ExperimentError> {
+    if all.diverged {
+        return Ok(f64::INFINITY);
+    }
+    Ok(problem.score(*material, held_out, &mut no_progress)?.mean)
+}
+
+/// Drop the per-node vectors of reports that no map needs.
+fn strip(mut r: ErrorReport) -> ErrorReport {
+    r.node_mean = Vec::new();
+    r.worst_frame_nodes = Vec::new();
+    r.worst_positions = Vec::new();
+    r
+}
+
+/// One-line diagnostics of an estimate.
+pub fn notes(details: &Details) -> String {
+    match details {
+        Details::Same => String::new(),
+        Details::Inverse(e) => {
+            let r = &e.rejections;
+            let considered: u64 = r.considered.iter().sum();
+            let rejected: u64 = r.near_rest.iter().sum::<u64>() + r.negative_k.iter().sum::<u64>();
+            let fallbacks = e.fallback_k.iter().chain(&e.fallback_c).filter(|&&f| f).count();
+            format!(
+                "rejected K samples {rejected}/{considered} (near rest {}, negative {}); C: no rel. velocity {}, negative {}; fallbacks {fallbacks}",
+                r.near_rest.iter().sum::<u64>(),
+                r.negative_k.iter().sum::<u64>(),
+                r.no_relative_velocity.iter().sum::<u64>(),
+                r.negative_c.iter().sum::<u64>()
+            )
+        }
+        Details::Lsq(e) => format!(
+            "condition {:.2e}, relative residual {:.3}, clamped {}",
+            e.condition,
+            e.relative_residual,
+            e.clamped.iter().filter(|&&c| c).count()
+        ),
+        Details::Fit(f) => format!(
+            "start {} (train rms {:.3}%), train rms {:.3}% after {} iterations, {} runs, {}",
+            f.start,
+            100.0 * f.start_rms,
+            100.0 * f.rms,
+            f.iterations,
+            f.evaluations,
+            f.stop
+        ),
+    }
+}
+
+/// A level-switch experiment's outcome (fine → coarse and back).
+#[derive(Debug, Clone)]
+pub struct SwitchReport {
+    pub switch_time: f64,
+    /// Largest distance between a coarse node right after the switch and its
+    /// coherent (mapped) reference position (m).
+    pub position_jump: f64,
+    /// |KE_coarse − KE_fine| / KE_fine at the switch.
+    pub kinetic_jump: f64,
+    /// Mean eq.-9 error over the window after the switch: switched with
+    /// transfer, never switched (coarse from t = 0), switched with zeroed
+    /// velocities.
+    pub error_transfer: f64,
+    pub error_never_switched: f64,
+    pub error_zero_velocity: f64,
+    /// Coarse → fine: kinetic-energy jump and the fine run's error against the
+    /// reference over the window.
+    pub back_kinetic_jump: f64,
+    pub back_error: f64,
+}
+
+fn kinetic(masses: &[f64], vel: &[f64]) -> f64 {
+    let n = masses.len();
+    (0..n)
+        .map(|k| 0.5 * masses[k] * (0..3).map(|c| vel[c * n + k].powi(2)).sum::<f64>())
+        .sum()
+}
+
+/// Switch between the reference and `problem`'s level at metric frame
+/// `at` and score the `window` frames that follow.
+pub fn switch_test(
+    problem: &LodProblem,
+    material: Material,
+    at: usize,
+    window: usize,
+) -> Result<SwitchReport, ExperimentError> {
+    let reference = &problem.reference;
+    let frames = reference.frames.len();
+    if at == 0 || at + window > frames {
+        return Err(ExperimentError::Invalid(format!(
+            "switch at frame {at} with a {window}-frame window does not fit in {frames} frames"
+        )));
+    }
+    // Re-run the fine reference to the switch frame (the recording keeps f32
+    // positions only; a switch needs the f64 state with velocities).
+    let mut fine = problem.scene.build()?;
+    let steps = reference.frame_steps[at - 1];
+    for _ in 0..steps {
+        fine.step();
+    }
+    let fine_state = fine.state().clone();
+    let n = problem.topology().n_nodes;
+    let score_from = |sim: &mut crate::sim::Simulation| -> f64 {
+        let mut acc = crate::estimate::ErrorAccumulator::new(reference.o_max, n, window);
+        let mut mapped = vec![0.0; 3 * n];
+        let per = (reference.dt * reference.spec.metric_stride as f64 / problem.dt).round() as usize;
+        for f in at..at + window {
+            for _ in 0..per {
+                sim.step();
+            }
+            if sim.diverged() {
+                return f64::INFINITY;
+            }
+            problem.correlation().map_f32(&reference.frames[f], &mut mapped);
+            acc.push(reference.frame_times[f], &mapped, &sim.state().pos);
+        }
+        acc.mean()
+    };
+    // Fine → coarse with transfer.
+    let coarse_state =
+        transfer_state(&reference.topology, &fine_state, problem.topology()).map_err(EstimateError::from)?;
+    let mut coarse = problem.simulation(material)?;
+    coarse
+        .set_state(coarse_state.clone())
+        .map_err(|source| EstimateError::Sim {
+            nx: problem.nx,
+            ny: problem.ny,
+            source,
+        })?;
+    let mut mapped = vec![0.0; 3 * n];
+    problem.correlation().map(&fine_state.pos, &mut mapped);
+    let position_jump = (0..n)
+        .map(|k| {
+            (0..3)
+                .map(|c| (coarse.state().pos[c * n + k] - mapped[c * n + k]).powi(2))
+                .sum::<f64>()
+                .sqrt()
+        })
+        .fold(0.0, f64::max);
+    let ke_fine = kinetic(fine.masses(), &fine_state.vel);
+    let ke_coarse = kinetic(coarse.masses(), &coarse.state().vel);
+    let kinetic_jump = (ke_coarse - ke_fine).abs() / ke_fine.max(f64::MIN_POSITIVE);
+    let error_transfer = score_from(&mut coarse);
+    // Never switched: the coarse model from t = 0.
+    let mut never = problem.simulation(material)?;
+    let per = (reference.dt * reference.spec.metric_stride as f64 / problem.dt).round() as usize;
+    for _ in 0..at * per {
+        never.step();
+    }
+    let error_never_switched = score_from(&mut never);
+    // Zeroed velocities.
+    let mut zero = problem.simulation(material)?;
+    let mut z = coarse_state.clone();
+    z.vel.iter_mut().for_each(|v| *v = 0.0);
+    zero.set_state(z).map_err(|source| EstimateError::Sim {
+        nx: problem.nx,
+        ny: problem.ny,
+        source,
+    })?;
+    let error_zero_velocity = score_from(&mut zero);
+    // Coarse → fine: the coarse model's state at the switch back onto the
+    // reference cloth, continued with the reference's coefficients.
+    let mut coarse_run = problem.simulation(material)?;
+    for _ in 0..at * per {
+        coarse_run.step();
+    }
+    let back =
+        transfer_state(problem.topology(), coarse_run.state(), &reference.topology).map_err(EstimateError::from)?;
+    let ke_c = kinetic(coarse_run.masses(), &coarse_run.state().vel);
+    let mut fine2 = problem.scene.build()?;
+    fine2.set_state(back).map_err(|source| EstimateError::Sim {
+        nx: problem.scene.nx,
+        ny: problem.scene.ny,
+        source,
+    })?;
+    let back_kinetic_jump = (kinetic(fine2.masses(), &fine2.state().vel) - ke_c).abs() / ke_c.max(f64::MIN_POSITIVE);
+    let nf = reference.topology.n_nodes;
+    let mut acc = crate::estimate::ErrorAccumulator::new(reference.o_max, nf, window);
+    let mut refpos = vec![0.0; 3 * nf];
+    for f in at..at + window {
+        for _ in 0..reference.spec.metric_stride {
+            fine2.step();
+        }
+        for (d, &s) in refpos.iter_mut().zip(&reference.frames[f]) {
+            *d = f64::from(s);
+        }
+        acc.push(reference.frame_times[f], &refpos, &fine2.state().pos);
+    }
+    Ok(SwitchReport {
+        switch_time: reference.frame_times[at - 1],
+        position_jump,
+        kinetic_jump,
+        error_transfer,
+        error_never_switched,
+        error_zero_velocity,
+        back_kinetic_jump,
+        back_error: acc.mean(),
+    })
+}
+
+/// One point of the speed/accuracy chart.
+#[derive(Debug, Clone)]
+pub struct ParetoPoint {
+    pub level: usize,
+    pub method: Method,
+    pub integrator: Integrator,
+    pub dt: f64,
+    pub dt_ratio: f64,
+    /// Wall seconds per simulated second.
+    pub cost: f64,
+    pub mean_error: f64,
+    pub on_front: bool,
+}
+
+/// Speed against accuracy over levels, methods, integrators and dt.
+pub fn pareto(
+    scene: &Scene,
+    reference: &Arc<Reference>,
+    levels: &[usize],
+    methods: &[Method],
+    integrators: &[Integrator],
+    dt_fractions: &[f64],
+    fit: &FitOptions,
+    log: &mut dyn FnMut(String),
+) -> Result<Vec<ParetoPoint>, ExperimentError> {
+    let frames = reference.frames.len();
+    let mut points = Vec::new();
+    for &level in levels {
+        // Estimate once per method with the scene's integrator at half its limit.
+        let (dt0, _) = level_dt(
+            scene,
+            reference,
+            level,
+            level,
+            MassConvention::Lumped,
+            scene.params.integrator,
+            reference.material,
+            0.5,
+        )?;
+        let base = LodProblem::new(
+            scene,
+            reference.clone(),
+            level,
+            level,
+            MassConvention::Lumped,
+            scene.params.integrator,
+            dt0,
+        )?;
+        for &method in methods {
+            let material = base.estimate(method, fit, &mut no_progress)?.material;
+            for &integrator in integrators {
+                // Implicit Euler is stable at any dt: its fractions are of the
+                // symplectic limit, and may exceed 1.
+                let (probe_integrator, scale) = if integrator == Integrator::ImplicitEuler {
+                    (Integrator::SymplecticEuler, 4.0)
+                } else {
+                    (integrator, 1.0)
+                };
+                for &frac in dt_fractions {
+                    let (dt, limit) = level_dt(
+                        scene,
+                        reference,
+                        level,
+                        level,
+                        MassConvention::Lumped,
+                        probe_integrator,
+                        material,
+                        frac * scale,
+                    )?;
+                    let p = LodProblem::new(
+                        scene,
+                        reference.clone(),
+                        level,
+                        level,
+                        MassConvention::Lumped,
+                        integrator,
+                        dt,
+                    )?;
+                    let t = Instant::now();
+                    let r = p.score(material, 0..frames, &mut no_progress)?;
+                    let cost = t.elapsed().as_secs_f64()
+                        / (frames as f64 * reference.dt * reference.spec.metric_stride as f64);
+                    log(format!(
+                        "{level}×{level} {method:<4} {:<16} dt {dt:.2e} ({:.2} of limit): {:.3} s/s, error {:.2}%",
+                        integrator.name(),
+                        dt / limit,
+                        cost,
+                        100.0 * r.mean
+                    ));
+                    points.push(ParetoPoint {
+                        level,
+                        method,
+                        integrator,
+                        dt,
+                        dt_ratio: dt / limit,
+                        cost,
+                        mean_error: r.mean,
+                        on_front: false,
+                    });
+                }
+            }
+        }
+    }
+    mark_front(&mut points);
+    Ok(points)
+}
+
+/// Mark the points no other point beats in both cost and error.
+pub fn mark_front(points: &mut [ParetoPoint]) {
+    let snapshot: Vec<(f64, f64)> = points.iter().map(|p| (p.cost, p.mean_error)).collect();
+    for (i, p) in points.iter_mut().enumerate() {
+        let (c, e) = snapshot[i];
+        p.on_front = e.is_finite()
+            && !snapshot
+                .iter()
+                .enumerate()
+                .any(|(j, &(cj, ej))| j != i && cj <= c && ej <= e && (cj < c || ej < e));
+    }
+}
+
+/// Outcome of [`lod_plan`] for one level tried.
+#[derive(Debug, Clone)]
+pub struct PlanStep {
+    pub level: usize,
+    pub material: Material,
+    pub dt: f64,
+    pub held_out_mean: f64,
+    pub accepted: bool,
+}
+
+/// The coarsest level (trying `levels` from coarsest) whose fitted model
+/// stays within `max_error` on held-out frames.
+pub fn lod_plan(
+    scene: &Scene,
+    reference: &Arc<Reference>,
+    levels: &[usize],
+    max_error: f64,
+    fit: &FitOptions,
+    log: &mut dyn FnMut(String),
+) -> Result<Vec<PlanStep>, ExperimentError> {
+    let mut levels = levels.to_vec();
+    levels.sort_unstable();
+    let frames = reference.frames.len();
+    let train = fit.train_range(frames);
+    let mut steps = Vec::new();
+    for level in levels {
+        let (dt, _) = level_dt(
+            scene,
+            reference,
+            level,
+            level,
+            MassConvention::Lumped,
+            scene.params.integrator,
+            reference.material,
+            0.5,
+        )?;
+        let p = LodProblem::new(
+            scene,
+            reference.clone(),
+            level,
+            level,
+            MassConvention::Lumped,
+            scene.params.integrator,
+            dt,
+        )?;
+        let est = p.estimate(Method::Fit, fit, &mut no_progress)?;
+        let held = p.score(est.material, train.end..frames, &mut no_progress)?.mean;
+        let accepted = held <= max_error;
+        log(format!(
+            "{level}×{level}: held-out error {:.2}% {} {:.2}%",
+            100.0 * held,
+            if accepted { "≤" } else { ">" },
+            100.0 * max_error
+        ));
+        steps.push(PlanStep {
+            level,
+            material: est.material,
+            dt,
+            held_out_mean: held,
+            accepted,
+        });
+        if accepted {
+            break;
+        }
+    }
+    Ok(steps)
+}
