@@ -2,7 +2,8 @@
 //! time, with behaviour kept coherent across levels.
 //!
 //! # Layout
-//! Dependencies point one way: `main → {output, scene} → sim`.
+//! Dependencies point one way: `main → {output, cache, scene} → sim`
+//! (`cache` also names `scene`'s mass convention).
 //!
 //! - [`sim`] — the pure core: topology (springs by type in a fixed order),
 //!   state (flat arrays), forces (Sung 2018 eq. 1), integrators (explicit,
@@ -12,9 +13,13 @@
 //!   pins, forces over time, wind; validated into ready-to-run simulations at
 //!   any resolution.
 //! - [`output`] — trajectory files, CSV reports, pictures (PNG render, SVG charts).
+//! - [`cache`] — on-disk cache of estimated coefficients: one checksummed TOML
+//!   file per (scene, resolutions, method, mass, integrator, dt), written
+//!   atomically so a crash never leaves a torn file.
 //! - [`experiments`] — longer studies built on the core (stability sweeps).
 //! - `main.rs` — the `lodcloth` command line.
 
+pub mod cache;
 pub mod experiments;
 pub mod output;
 pub mod scene;
