@@ -2,8 +2,9 @@
 //! time, with behaviour kept coherent across levels.
 //!
 //! # Layout
-//! Dependencies point one way: `main → {experiments, output} → estimate →
-//! {lod, scene} → sim`.
+//! Dependencies point one way: `main → {experiments, output, cache} →
+//! estimate → {lod, scene} → sim` (`cache` also names `scene`'s mass
+//! convention).
 //!
 //! - [`sim`] — the pure core: topology (springs by type in a fixed order),
 //!   state (flat arrays), forces (Sung 2018 eq. 1), integrators (explicit,
@@ -16,9 +17,13 @@
 //! - [`estimate`] — pure coefficient estimation (same, BCD, GKD, lsq, fit),
 //!   reference recording and the error metric (Sung 2018 eq. 9).
 //! - [`output`] — trajectory files, CSV reports, pictures (PNG render, SVG charts).
+//! - [`cache`] — on-disk cache of estimated coefficients: one checksummed TOML
+//!   file per (scene, resolutions, method, mass, integrator, dt), written
+//!   atomically so a crash never leaves a torn file.
 //! - [`experiments`] — longer studies built on the core (stability sweeps).
 //! - `main.rs` — the `lodcloth` command line.
 
+pub mod cache;
 pub mod estimate;
 pub mod experiments;
 pub mod lod;
