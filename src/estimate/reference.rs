@@ -137,7 +137,7 @@ impl Reference {
             // Sample centres are the multiples of `estimate_stride` ≥ 2·span,
             // so a sample is completed before the next one needs its `prev`.
             let span = spec.difference_span;
-            if step >= span && (step - span) % spec.estimate_stride == 0 {
+            if step >= span && (step - span).is_multiple_of(spec.estimate_stride) {
                 if let Some(mut s) = pending.take() {
                     s.next = pos.clone();
                     samples.push(s);
@@ -151,7 +151,7 @@ impl Reference {
                     next: Vec::new(),
                 });
             }
-            if (step + span) % spec.estimate_stride == 0 {
+            if (step + span).is_multiple_of(spec.estimate_stride) {
                 prev = pos.clone();
             }
             if step % spec.metric_stride == 0 {
