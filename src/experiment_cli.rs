@@ -13,7 +13,8 @@ use tracing::info;
 
 use lodcloth::estimate::{FitOptions, LodProblem, Method, RecordSpec, Reference};
 use lodcloth::experiments::lod::{
-    level_dt, lod_plan, pareto, record_reference, switch_test, table1_scene, Table1Options, Table1Row, TABLE1_VARIANTS,
+    generalisation, level_dt, lod_plan, pareto, record_reference, switch_test, table1_scene, Table1Options, Table1Row,
+    TABLE1_VARIANTS,
 };
 use lodcloth::output::{error_map_svg, line_chart_svg, ClothPanel, Series, PALETTE};
 use lodcloth::scene::{MassConvention, Scene};
@@ -179,6 +180,14 @@ pub enum Experiment {
         #[arg(long, value_delimiter = ',')]
         levels: Vec<usize>,
     },
+    /// Fit on one scene, score on the others; fit on the first 10 % of the
+    /// frames vs on all of them.
+    Generalise {
+        #[command(flatten)]
+        common: Common,
+        #[arg(long, default_value_t = 40)]
+        level: usize,
+    },
     /// Switch reference ↔ a coarse level mid-run and measure the jump.
     SwitchTest {
         #[command(flatten)]
@@ -245,6 +254,10 @@ pub fn run(experiment: Experiment) -> Result<()> {
                 levels
             };
             plan_cmd(&common, max_error / 100.0, &levels)
+        }
+        Experiment::Generalise { mut common, level } => {
+            common.apply_quick();
+            generalise_cmd(&common, level)
         }
         Experiment::SwitchTest {
             mut common,
@@ -728,5 +741,59 @@ fn switch_cmd(common: &Common, level: usize, method: Method, at: f64, window: f6
         );
     }
     fs::write(out.join("switch-test.csv"), csv)?;
+    Ok(())
+}
+
+fn generalise_cmd(common: &Common, level: usize) -> Result<()> {
+    let out = common.out("out/generalise")?;
+    let spec = common.spec()?;
+    let mut pairs = Vec::new();
+    for scene in common.scenes()? {
+        let (reference, _) = reference_for(&scene, spec)?;
+        pairs.push((scene, reference));
+    }
+    let frames = pairs.first().context("no scene")?.1.frames.len();
+    let g = generalisation(&pairs, level, &common.fit(frames)?, &mut log_line)?;
+    let mut csv = String::from("fitted_on,scored_on,mean_error,own_fit_error,ratio\n");
+    let mut md = format!(
+        "Generalisation of `fit` at {level}×{level} (mean error over every frame, %). Rows: scene fitted on; columns: scene scored on.\n\n| fitted on | {} |\n|---|{}\n",
+        g.scenes.join(" | "),
+        "---|".repeat(g.scenes.len())
+    );
+    for (a, row) in g.cross.iter().enumerate() {
+        let cells: Vec<String> = row
+            .iter()
+            .enumerate()
+            .map(|(b, e)| format!("{:.2} ({:.2}×)", 100.0 * e, e / g.cross[b][b]))
+            .collect();
+        let _ = writeln!(md, "| {} | {} |", g.scenes[a], cells.join(" | "));
+        for (b, e) in row.iter().enumerate() {
+            let _ = writeln!(
+                csv,
+                "{},{},{:.6},{:.6},{:.4}",
+                g.scenes[a],
+                g.scenes[b],
+                e,
+                g.cross[b][b],
+                e / g.cross[b][b]
+            );
+        }
+    }
+    let _ = writeln!(
+        md,
+        "\n| scene | fit on first 10% | fit on all frames | ratio |\n|---|---|---|---|"
+    );
+    for (i, s) in g.scenes.iter().enumerate() {
+        let _ = writeln!(
+            md,
+            "| {s} | {:.3} | {:.3} | {:.2} |",
+            100.0 * g.short_window[i],
+            100.0 * g.full_window[i],
+            g.short_window[i] / g.full_window[i]
+        );
+    }
+    fs::write(out.join("generalise.csv"), csv)?;
+    fs::write(out.join("generalise.md"), &md)?;
+    println!("{md}");
     Ok(())
 }

@@ -649,3 +649,110 @@ pub fn lod_plan(
     }
     Ok(steps)
 }
+
+/// Cross-scene and short-window generalisation of `fit` at one level.
+#[derive(Debug, Clone)]
+pub struct Generalisation {
+    pub level: usize,
+    pub scenes: Vec<String>,
+    /// `cross[a][b]`: coefficients fitted on scene a's training window,
+    /// mean error over every frame of scene b.
+    pub cross: Vec<Vec<f64>>,
+    /// Per scene: error over every frame of a fit trained on the first 10 %
+    /// of the frames, and of a fit trained on all of them.
+    pub short_window: Vec<f64>,
+    pub full_window: Vec<f64>,
+}
+
+/// Fit every scene at `level` on its training window, score each fit on
+/// every scene; and compare a first-10 % fit with a full-run fit.
+pub fn generalisation(
+    scenes: &[(Scene, Arc<Reference>)],
+    level: usize,
+    fit: &FitOptions,
+    log: &mut dyn FnMut(String),
+) -> Result<Generalisation, ExperimentError> {
+    let mut problems = Vec::new();
+    for (scene, reference) in scenes {
+        let (dt, _) = level_dt(
+            scene,
+            reference,
+            level,
+            level,
+            MassConvention::Lumped,
+            scene.params.integrator,
+            reference.material,
+            0.5,
+        )?;
+        problems.push(LodProblem::new(
+            scene,
+            reference.clone(),
+            level,
+            level,
+            MassConvention::Lumped,
+            scene.params.integrator,
+            dt,
+        )?);
+    }
+    let mut fitted = Vec::new();
+    let mut short_window = Vec::new();
+    let mut full_window = Vec::new();
+    for p in &problems {
+        let frames = p.frames();
+        let m = p.estimate(Method::Fit, fit, &mut no_progress)?.material;
+        fitted.push(m);
+        let short = FitOptions {
+            train: Some(0..(frames / 10).max(1)),
+            ..fit.clone()
+        };
+        let full = FitOptions {
+            train: Some(0..frames),
+            ..fit.clone()
+        };
+        let ms = p.estimate(Method::Fit, &short, &mut no_progress)?.material;
+        let mf = p.estimate(Method::Fit, &full, &mut no_progress)?.material;
+        let es = p.score(ms, 0..frames, &mut no_progress)?.mean;
+        let ef = p.score(mf, 0..frames, &mut no_progress)?.mean;
+        log(format!(
+            "{} {level}×{level}: fit on first 10% → {:.3}%, on all frames → {:.3}% (ratio {:.2})",
+            p.scene.name,
+            100.0 * es,
+            100.0 * ef,
+            es / ef
+        ));
+        short_window.push(es);
+        full_window.push(ef);
+    }
+    let mut cross = Vec::new();
+    for (a, m) in fitted.iter().enumerate() {
+        let mut row = Vec::new();
+        for p in &problems {
+            // A model fitted elsewhere may need a smaller dt here.
+            let limit = p.simulation(*m)?.dt_limit();
+            let e = if p.dt <= 0.8 * limit {
+                p.score(*m, 0..p.frames(), &mut no_progress)?.mean
+            } else {
+                let (dt, _) = level_dt(&p.scene, &p.reference, level, level, p.mass, p.integrator, *m, 0.8)?;
+                let q = LodProblem::new(&p.scene, p.reference.clone(), level, level, p.mass, p.integrator, dt)?;
+                q.score(*m, 0..q.frames(), &mut no_progress)?.mean
+            };
+            row.push(e);
+        }
+        log(format!(
+            "fitted on {}: {}",
+            problems[a].scene.name,
+            row.iter()
+                .map(|e| format!("{:.3}%", 100.0 * e))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ));
+        cross.push(row);
+    }
+    Ok(Generalisation {
+        level,
+        scenes: problems.iter().map(|p| p.scene.name.clone()).collect(),
+        cross,
+        short_window,
+        full_window,
+    })
+}
