@@ -11,10 +11,11 @@ use anyhow::{bail, Context, Result};
 use clap::Subcommand;
 use tracing::info;
 
+use lodcloth::cache::CoefficientCache;
 use lodcloth::estimate::{FitOptions, LodProblem, Method, RecordSpec, Reference};
 use lodcloth::experiments::lod::{
-    generalisation, level_dt, lod_plan, pareto, record_reference, switch_test, table1_scene, Table1Options, Table1Row,
-    TABLE1_VARIANTS,
+    generalisation, level_dt, lod_plan, pareto, record_reference, switch_test, table1_scene, Estimator, Table1Options,
+    Table1Row, TABLE1_VARIANTS,
 };
 use lodcloth::output::{error_map_svg, line_chart_svg, ClothPanel, Series, PALETTE};
 use lodcloth::scene::{MassConvention, Scene};
@@ -71,6 +72,12 @@ pub struct Common {
     /// Output directory.
     #[arg(long)]
     out: Option<PathBuf>,
+    /// Coefficient cache directory (estimates are reused across runs).
+    #[arg(long, default_value = "out/cache")]
+    cache: PathBuf,
+    /// Do not read or write the coefficient cache.
+    #[arg(long)]
+    no_cache: bool,
 }
 
 impl Common {
@@ -133,6 +140,24 @@ impl Common {
             max_frames: self.fit_frames,
             max_iterations: self.fit_iterations,
             ..FitOptions::default()
+        })
+    }
+
+    fn estimator(&self) -> Result<Estimator> {
+        let cache = if self.no_cache {
+            None
+        } else {
+            Some(
+                CoefficientCache::open(&self.cache)
+                    .with_context(|| format!("opening the coefficient cache {}", self.cache.display()))?,
+            )
+        };
+        Ok(Estimator {
+            cache,
+            tag: format!(
+                "f{}m{}e{}s{}",
+                self.frames, self.metric_stride, self.estimate_stride, self.difference_span
+            ),
         })
     }
 
@@ -312,12 +337,13 @@ fn table1(common: &Common, levels: &[usize]) -> Result<()> {
         map_level,
     };
     let started = Instant::now();
+    let estimator = common.estimator()?;
     let mut rows: Vec<Table1Row> = Vec::new();
     let mut ref_costs = Vec::new();
     for scene in &scenes {
         let (reference, cost) = reference_for(scene, spec)?;
         ref_costs.push((scene.name.clone(), cost));
-        let scene_rows = table1_scene(scene, &reference, &options, &mut log_line)?;
+        let scene_rows = table1_scene(scene, &reference, &options, &estimator, &mut log_line)?;
         write_error_maps(&out, scene, &reference, &scene_rows, map_level)?;
         rows.extend(scene_rows);
         write_table1(&out, &rows, &ref_costs, levels, &scenes, common)?;
@@ -576,6 +602,7 @@ fn pareto_cmd(common: &Common, levels: &[usize], methods: &[Method], fractions: 
         &integrators,
         fractions,
         &common.fit(frames)?,
+        &common.estimator()?,
         &mut log_line,
     )?;
     let mut csv = String::from("level,method,integrator,dt,dt_over_limit,cost_s_per_s,mean_error,on_front\n");
@@ -636,6 +663,7 @@ fn pareto_cmd(common: &Common, levels: &[usize], methods: &[Method], fractions: 
 
 fn plan_cmd(common: &Common, max_error: f64, levels: &[usize]) -> Result<()> {
     let out = common.out("out/lod-plan")?;
+    let estimator = common.estimator()?;
     let spec = common.spec()?;
     let mut csv =
         String::from("scene,level,dt,held_out_mean,accepted,k_structural,k_shear,k_bend,c_structural,c_shear,c_bend\n");
@@ -643,7 +671,7 @@ fn plan_cmd(common: &Common, max_error: f64, levels: &[usize]) -> Result<()> {
         let (reference, _) = reference_for(&scene, spec)?;
         let fit = common.fit(reference.frames.len())?;
         let levels: Vec<usize> = levels.iter().copied().filter(|&l| l < scene.nx.max(scene.ny)).collect();
-        let steps = lod_plan(&scene, &reference, &levels, max_error, &fit, &mut log_line)?;
+        let steps = lod_plan(&scene, &reference, &levels, max_error, &fit, &estimator, &mut log_line)?;
         match steps.iter().find(|s| s.accepted) {
             Some(s) => println!(
                 "{}: {}×{} (held-out error {:.2}% ≤ {:.2}%), coefficients {:?}",
@@ -706,9 +734,7 @@ fn switch_cmd(common: &Common, level: usize, method: Method, at: f64, window: f6
             dt,
         )?;
         let fit = common.fit(reference.frames.len())?;
-        let material = problem
-            .estimate(method, &fit, &mut lodcloth::estimate::no_progress)?
-            .material;
+        let material = common.estimator()?.estimate(&problem, method, &fit)?.material;
         let r = switch_test(&problem, material, at_frame, window_frames)?;
         println!(
             "{}: {}×{}↔{level}×{level} ({method}) at t = {:.3} s: position jump {:.2e} m, KE jump {:.2}%, \
@@ -753,7 +779,7 @@ fn generalise_cmd(common: &Common, level: usize) -> Result<()> {
         pairs.push((scene, reference));
     }
     let frames = pairs.first().context("no scene")?.1.frames.len();
-    let g = generalisation(&pairs, level, &common.fit(frames)?, &mut log_line)?;
+    let g = generalisation(&pairs, level, &common.fit(frames)?, &common.estimator()?, &mut log_line)?;
     let mut csv = String::from("fitted_on,scored_on,mean_error,own_fit_error,ratio\n");
     let mut md = format!(
         "Generalisation of `fit` at {level}×{level} (mean error over every frame, %). Rows: scene fitted on; columns: scene scored on.\n\n| fitted on | {} |\n|---|{}\n",

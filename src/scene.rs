@@ -358,6 +358,10 @@ pub struct Scene {
     /// Run length (s).
     pub duration: f64,
     pub stability: StabilityCheck,
+    /// FNV-1a 64 of the scene's TOML text (0 when built from parsed values):
+    /// caches of derived results (estimated coefficients) key on it, so an
+    /// edited scene never reuses them.
+    pub source_hash: u64,
     pins: Vec<(Selector, PinPath, String)>,
     forces: Vec<(Selector, [f64; 3], Profile, String)>,
     wind: Option<Wind>,
@@ -379,7 +383,9 @@ impl Scene {
             origin: origin.to_string(),
             message: e.to_string(),
         })?;
-        Scene::validate(raw, origin)
+        let mut scene = Scene::validate(raw, origin)?;
+        scene.source_hash = crate::cache::fnv1a64(text.as_bytes());
+        Ok(scene)
     }
 
     /// Validate a parsed scene, listing every problem with its path.
@@ -541,6 +547,7 @@ impl Scene {
             } else {
                 StabilityCheck::Enforce
             },
+            source_hash: 0,
             pins,
             forces,
             wind,

@@ -6,6 +6,7 @@
 use std::sync::Arc;
 use std::time::Instant;
 
+use crate::cache::{CacheEntry, CacheError, CacheKey, CoefficientCache, Provenance};
 use crate::estimate::{
     no_progress, Details, ErrorReport, EstimateError, FitOptions, LodProblem, Method, RecordSpec, Reference,
     ReferenceError,
@@ -23,8 +24,87 @@ pub enum ExperimentError {
     Reference { scene: String, source: ReferenceError },
     #[error(transparent)]
     Estimate(#[from] EstimateError),
+    #[error(transparent)]
+    Cache(#[from] CacheError),
     #[error("{0}")]
     Invalid(String),
+}
+
+/// Runs estimators, through the on-disk coefficient cache when there is one.
+#[derive(Debug, Clone, Default)]
+pub struct Estimator {
+    pub cache: Option<CoefficientCache>,
+    /// Everything besides the cache key's fields that changes an estimate
+    /// (record spec, fit settings), folded into the key's method string.
+    pub tag: String,
+}
+
+/// What [`Estimator::estimate`] returns.
+#[derive(Debug, Clone)]
+pub struct Estimated {
+    pub material: Material,
+    pub notes: String,
+    /// Wall seconds spent estimating (0 on a cache hit).
+    pub seconds: f64,
+    pub cached: bool,
+}
+
+impl Estimator {
+    /// Estimate with `method`, or read it from the cache.
+    pub fn estimate(
+        &self,
+        problem: &LodProblem,
+        method: Method,
+        fit: &FitOptions,
+    ) -> Result<Estimated, ExperimentError> {
+        let compute = || -> Result<Estimated, ExperimentError> {
+            let t = Instant::now();
+            let est = problem.estimate(method, fit, &mut no_progress)?;
+            Ok(Estimated {
+                material: est.material,
+                notes: notes(&est.details),
+                seconds: t.elapsed().as_secs_f64(),
+                cached: false,
+            })
+        };
+        let Some(cache) = self.cache.as_ref().filter(|_| method != Method::Same) else {
+            return compute();
+        };
+        let train = fit.train_range(problem.frames());
+        let key = CacheKey {
+            scene: problem.scene.name.clone(),
+            scene_hash: problem.scene.source_hash,
+            reference: (problem.scene.nx, problem.scene.ny),
+            target: (problem.nx, problem.ny),
+            method: format!(
+                "{method}[{};train={}..{};frames={};iter={}]",
+                self.tag, train.start, train.end, fit.max_frames, fit.max_iterations
+            ),
+            mass: problem.mass.name().to_string(),
+            integrator: problem.integrator.name().to_string(),
+            dt: problem.dt,
+        };
+        let mut fresh = None;
+        let (entry, provenance) = cache.get_or_compute(&key, || -> Result<CacheEntry, ExperimentError> {
+            let e = compute()?;
+            let mut entry = CacheEntry::new(key.clone(), e.material);
+            entry.notes.insert("estimate_seconds".into(), e.seconds);
+            fresh = Some(e);
+            Ok(entry)
+        })?;
+        Ok(match (provenance, fresh) {
+            (Provenance::Hit, _) | (_, None) => Estimated {
+                material: entry.material,
+                notes: format!(
+                    "cached ({:.1} s when computed)",
+                    entry.notes.get("estimate_seconds").copied().unwrap_or(f64::NAN)
+                ),
+                seconds: 0.0,
+                cached: true,
+            },
+            (_, Some(e)) => e,
+        })
+    }
 }
 
 /// A method under a mass convention: one column of Table 1.
@@ -165,6 +245,7 @@ pub fn table1_scene(
     scene: &Scene,
     reference: &Arc<Reference>,
     options: &Table1Options,
+    estimator: &Estimator,
     log: &mut dyn FnMut(String),
 ) -> Result<Vec<Table1Row>, ExperimentError> {
     let frames = reference.frames.len();
@@ -180,7 +261,6 @@ pub fn table1_scene(
     let mut rows = Vec::new();
     for &level in &options.levels {
         for variant in &options.variants {
-            let t0 = Instant::now();
             // dt from the `same` model, then checked against the estimate.
             let (dt, _) = level_dt(
                 scene,
@@ -195,8 +275,8 @@ pub fn table1_scene(
             let problem = LodProblem::new(scene, reference.clone(), level, level, variant.mass, integrator, dt)?;
             let mut fit = options.fit.clone();
             fit.train = Some(train.clone());
-            let est = problem.estimate(variant.method, &fit, &mut no_progress)?;
-            let estimate_seconds = t0.elapsed().as_secs_f64();
+            let est = estimator.estimate(&problem, variant.method, &fit)?;
+            let estimate_seconds = est.seconds;
             // A model estimated stiffer than the level's dt allows gets its own dt.
             let (dt, limit) = {
                 let limit = problem.simulation(est.material)?.dt_limit();
@@ -221,7 +301,7 @@ pub fn table1_scene(
             let cost =
                 t1.elapsed().as_secs_f64() / (frames as f64 * reference.dt * reference.spec.metric_stride as f64);
             let held_out_mean = held_out_mean(&problem, &est.material, &all, held_out.clone())?;
-            let notes = notes(&est.details);
+            let notes = est.notes.clone();
             log(format!(
                 "{} {level}×{level} {:<14} mean {:6.2}%  held-out {:6.2}%  p95 {:6.2}%  dt {:.2e} ({:.2} of limit)  est {:.1}s  {notes}",
                 scene.name,
@@ -485,6 +565,7 @@ pub fn pareto(
     integrators: &[Integrator],
     dt_fractions: &[f64],
     fit: &FitOptions,
+    estimator: &Estimator,
     log: &mut dyn FnMut(String),
 ) -> Result<Vec<ParetoPoint>, ExperimentError> {
     let frames = reference.frames.len();
@@ -511,7 +592,7 @@ pub fn pareto(
             dt0,
         )?;
         for &method in methods {
-            let material = base.estimate(method, fit, &mut no_progress)?.material;
+            let material = estimator.estimate(&base, method, fit)?.material;
             for &integrator in integrators {
                 // Implicit Euler is stable at any dt: its fractions are of the
                 // symplectic limit, and may exceed 1.
@@ -600,6 +681,7 @@ pub fn lod_plan(
     levels: &[usize],
     max_error: f64,
     fit: &FitOptions,
+    estimator: &Estimator,
     log: &mut dyn FnMut(String),
 ) -> Result<Vec<PlanStep>, ExperimentError> {
     let mut levels = levels.to_vec();
@@ -627,7 +709,7 @@ pub fn lod_plan(
             scene.params.integrator,
             dt,
         )?;
-        let est = p.estimate(Method::Fit, fit, &mut no_progress)?;
+        let est = estimator.estimate(&p, Method::Fit, fit)?;
         let held = p.score(est.material, train.end..frames, &mut no_progress)?.mean;
         let accepted = held <= max_error;
         log(format!(
@@ -670,6 +752,7 @@ pub fn generalisation(
     scenes: &[(Scene, Arc<Reference>)],
     level: usize,
     fit: &FitOptions,
+    estimator: &Estimator,
     log: &mut dyn FnMut(String),
 ) -> Result<Generalisation, ExperimentError> {
     let mut problems = Vec::new();
@@ -699,7 +782,7 @@ pub fn generalisation(
     let mut full_window = Vec::new();
     for p in &problems {
         let frames = p.frames();
-        let m = p.estimate(Method::Fit, fit, &mut no_progress)?.material;
+        let m = estimator.estimate(p, Method::Fit, fit)?.material;
         fitted.push(m);
         let short = FitOptions {
             train: Some(0..(frames / 10).max(1)),
@@ -709,8 +792,8 @@ pub fn generalisation(
             train: Some(0..frames),
             ..fit.clone()
         };
-        let ms = p.estimate(Method::Fit, &short, &mut no_progress)?.material;
-        let mf = p.estimate(Method::Fit, &full, &mut no_progress)?.material;
+        let ms = estimator.estimate(p, Method::Fit, &short)?.material;
+        let mf = estimator.estimate(p, Method::Fit, &full)?.material;
         let es = p.score(ms, 0..frames, &mut no_progress)?.mean;
         let ef = p.score(mf, 0..frames, &mut no_progress)?.mean;
         log(format!(
