@@ -40,6 +40,8 @@ pub struct ErrorReport {
     pub node_mean: Vec<f64>,
     /// Per-node error at the worst frame.
     pub worst_frame_nodes: Vec<f64>,
+    /// Mean error of every scored frame, in order.
+    pub frame_means: Vec<f64>,
     /// Coarse positions at the worst frame (SoA), for error maps.
     pub worst_positions: Vec<f64>,
     /// True when the coarse run diverged (non-finite state): every statistic
@@ -48,6 +50,20 @@ pub struct ErrorReport {
 }
 
 impl ErrorReport {
+    /// Mean error over scored frames `range` (indices into [`ErrorReport::frame_means`];
+    /// every frame has the same node count, so this is the node-and-frame mean).
+    pub fn mean_over(&self, range: std::ops::Range<usize>) -> f64 {
+        if self.diverged {
+            return f64::INFINITY;
+        }
+        let s = &self.frame_means[range.start.min(self.frame_means.len())..range.end.min(self.frame_means.len())];
+        if s.is_empty() {
+            f64::NAN
+        } else {
+            s.iter().sum::<f64>() / s.len() as f64
+        }
+    }
+
     /// The report of a run that diverged.
     pub fn diverged(n_nodes: usize) -> ErrorReport {
         ErrorReport {
@@ -63,6 +79,7 @@ impl ErrorReport {
             node_mean: vec![f64::INFINITY; n_nodes],
             worst_frame_nodes: vec![f64::INFINITY; n_nodes],
             worst_positions: Vec::new(),
+            frame_means: Vec::new(),
             diverged: true,
         }
     }
@@ -228,6 +245,7 @@ impl ErrorAccumulator {
             node_mean: self.node_sum.iter().map(|s| s / frames as f64).collect(),
             worst_frame_nodes: self.worst.clone(),
             worst_positions: self.worst_positions.clone(),
+            frame_means: self.frame_means.clone(),
             diverged: false,
         }
     }
@@ -264,6 +282,7 @@ mod tests {
         assert_eq!(r.worst_frame_nodes, vec![2.5, 0.0]);
         assert_eq!(r.node_mean, vec![1.25, 0.25]);
         assert!((r.first_quarter - 1.25).abs() < 1e-15 && (r.last_quarter - 0.25).abs() < 1e-15);
+        assert!((r.mean_over(1..2) - 0.25).abs() < 1e-15 && (r.mean_over(0..2) - r.mean).abs() < 1e-15);
         // 4 values {2.5, 0, 0, 0.5}: the 95th percentile (rank 4) is the largest.
         assert_eq!(r.p95, 2.5);
     }

@@ -300,7 +300,7 @@ pub fn table1_scene(
             let all = problem.score(est.material, 0..frames, &mut no_progress)?;
             let cost =
                 t1.elapsed().as_secs_f64() / (frames as f64 * reference.dt * reference.spec.metric_stride as f64);
-            let held_out_mean = held_out_mean(&problem, &est.material, &all, held_out.clone())?;
+            let held_out_mean = all.mean_over(held_out.clone());
             let notes = est.notes.clone();
             log(format!(
                 "{} {level}×{level} {:<14} mean {:6.2}%  held-out {:6.2}%  p95 {:6.2}%  dt {:.2e} ({:.2} of limit)  est {:.1}s  {notes}",
@@ -334,26 +334,12 @@ pub fn table1_scene(
     Ok(rows)
 }
 
-/// The held-out mean from a full-run report would need per-frame means; the
-/// frames after the training window are re-scored instead (cheap next to
-/// estimation).
-fn held_out_mean(
-    problem: &LodProblem,
-    material: &Material,
-    all: &ErrorReport,
-    held_out: std::ops::Range<usize>,
-) -> Result<f64, ExperimentError> {
-    if all.diverged {
-        return Ok(f64::INFINITY);
-    }
-    Ok(problem.score(*material, held_out, &mut no_progress)?.mean)
-}
-
 /// Drop the per-node vectors of reports that no map needs.
 fn strip(mut r: ErrorReport) -> ErrorReport {
     r.node_mean = Vec::new();
     r.worst_frame_nodes = Vec::new();
     r.worst_positions = Vec::new();
+    r.frame_means = Vec::new();
     r
 }
 
