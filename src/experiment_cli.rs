@@ -12,10 +12,10 @@ use clap::Subcommand;
 use tracing::info;
 
 use lodcloth::cache::CoefficientCache;
-use lodcloth::estimate::{FitOptions, LodProblem, Method, RecordSpec, Reference};
+use lodcloth::estimate::{FitOptions, Method, RecordSpec, Reference};
 use lodcloth::experiments::lod::{
-    generalisation, level_dt, lod_plan, pareto, record_reference, switch_test, table1_scene, Estimator, Table1Options,
-    Table1Row, TABLE1_VARIANTS,
+    default_problem, generalisation, lod_plan, pareto, record_reference, switch_test, table1_scene, Estimator,
+    Table1Options, Table1Row, TABLE1_VARIANTS,
 };
 use lodcloth::output::{error_map_svg, line_chart_svg, ClothPanel, Series, PALETTE};
 use lodcloth::scene::{MassConvention, Scene};
@@ -714,25 +714,7 @@ fn switch_cmd(common: &Common, level: usize, method: Method, at: f64, window: f6
         let interval = reference.dt * reference.spec.metric_stride as f64;
         let at_frame = (at / interval).round() as usize;
         let window_frames = ((window / interval).round() as usize).max(1);
-        let (dt, _) = level_dt(
-            &scene,
-            &reference,
-            level,
-            level,
-            MassConvention::Lumped,
-            scene.params.integrator,
-            reference.material,
-            0.5,
-        )?;
-        let problem = LodProblem::new(
-            &scene,
-            reference.clone(),
-            level,
-            level,
-            MassConvention::Lumped,
-            scene.params.integrator,
-            dt,
-        )?;
+        let problem = default_problem(&scene, &reference, level)?;
         let fit = common.fit(reference.frames.len())?;
         let material = common.estimator()?.estimate(&problem, method, &fit)?.material;
         let r = switch_test(&problem, material, at_frame, window_frames)?;

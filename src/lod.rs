@@ -116,36 +116,22 @@ impl Correlation {
         &self.entries
     }
 
-    /// Map a source field (SoA `[x…, y…, z…]`, positions or velocities) onto
-    /// the target nodes, into `out` (SoA, target size).
+    /// Map a source field (SoA `[x…, y…, z…]`, positions or velocities;
+    /// f64, or f32 as recorded trajectories store it) onto the target nodes,
+    /// into `out` (SoA, target size).
     ///
     /// # Panics
     /// When the slices do not have the sizes of the correlated grids.
-    pub fn map(&self, source: &[f64], out: &mut [f64]) {
+    pub fn map<T: Copy + Into<f64>>(&self, source: &[T], out: &mut [f64]) {
         let (ns, nt) = (self.source.nx * self.source.ny, self.entries.len());
         assert_eq!(source.len(), 3 * ns, "source field size");
         assert_eq!(out.len(), 3 * nt, "target field size");
         for c in 0..3 {
             let src = &source[c * ns..(c + 1) * ns];
             for (o, e) in out[c * nt..(c + 1) * nt].iter_mut().zip(&self.entries) {
-                *o = e.weights[0] * src[e.nodes[0] as usize]
-                    + e.weights[1] * src[e.nodes[1] as usize]
-                    + e.weights[2] * src[e.nodes[2] as usize];
-            }
-        }
-    }
-
-    /// [`Correlation::map`] for an `f32` source (recorded trajectories).
-    pub fn map_f32(&self, source: &[f32], out: &mut [f64]) {
-        let (ns, nt) = (self.source.nx * self.source.ny, self.entries.len());
-        assert_eq!(source.len(), 3 * ns, "source field size");
-        assert_eq!(out.len(), 3 * nt, "target field size");
-        for c in 0..3 {
-            let src = &source[c * ns..(c + 1) * ns];
-            for (o, e) in out[c * nt..(c + 1) * nt].iter_mut().zip(&self.entries) {
-                *o = e.weights[0] * f64::from(src[e.nodes[0] as usize])
-                    + e.weights[1] * f64::from(src[e.nodes[1] as usize])
-                    + e.weights[2] * f64::from(src[e.nodes[2] as usize]);
+                *o = e.weights[0] * src[e.nodes[0] as usize].into()
+                    + e.weights[1] * src[e.nodes[1] as usize].into()
+                    + e.weights[2] * src[e.nodes[2] as usize].into();
             }
         }
     }

@@ -346,31 +346,11 @@ pub fn render_png(
         path: path.display().to_string(),
         reason: e,
     };
-    // Camera: azimuth 35° about y, elevation 20°, orthographic.
-    let (az, el) = (35f64.to_radians(), 20f64.to_radians());
-    let forward = [-el.cos() * az.sin(), -el.sin(), -el.cos() * az.cos()];
-    let right = [az.cos(), 0.0, -az.sin()];
-    let up = cross(right, forward);
     let n = topology.n_nodes;
     let pts: Vec<[f64; 3]> = (0..n).map(|k| state.position(k)).collect();
-    let proj: Vec<(f64, f64, f64)> = pts
-        .iter()
-        .map(|p| (dot(*p, right), dot(*p, up), dot(*p, forward)))
-        .collect();
-    let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
-    for &(x, y, _) in &proj {
-        if x.is_finite() && y.is_finite() {
-            x0 = x0.min(x);
-            x1 = x1.max(x);
-            y0 = y0.min(y);
-            y1 = y1.max(y);
-        }
-    }
-    if x0 > x1 {
-        return Err(draw_err("no finite node position to draw".into()));
-    }
-    let span = (x1 - x0).max(y1 - y0).max(1e-9) * 1.1;
-    let (cx, cy) = (0.5 * (x0 + x1), 0.5 * (y0 + y1));
+    let proj = project(&pts);
+    let (cx, cy, span) =
+        frame(std::slice::from_ref(&proj)).ok_or_else(|| draw_err("no finite node position to draw".into()))?;
     let px = |x: f64, y: f64| -> (i32, i32) {
         let s = f64::from(size);
         (
@@ -524,6 +504,34 @@ pub const PALETTE: [RGBColor; 6] = [
     RGBColor(140, 86, 75),
 ];
 
+/// Orthographic camera of every cloth picture: azimuth 35° about y,
+/// elevation 20°. Returns (right, up, depth) per point.
+fn project(points: &[[f64; 3]]) -> Vec<(f64, f64, f64)> {
+    let (az, el) = (35f64.to_radians(), 20f64.to_radians());
+    let forward = [-el.cos() * az.sin(), -el.sin(), -el.cos() * az.cos()];
+    let right = [az.cos(), 0.0, -az.sin()];
+    let up = cross(right, forward);
+    points
+        .iter()
+        .map(|p| (dot(*p, right), dot(*p, up), dot(*p, forward)))
+        .collect()
+}
+
+/// Centre and side of a square that holds every finite projected point
+/// (10 % margin); `None` when there is none.
+fn frame(projected: &[Vec<(f64, f64, f64)>]) -> Option<(f64, f64, f64)> {
+    let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
+    for &(x, y, _) in projected.iter().flatten() {
+        if x.is_finite() && y.is_finite() {
+            x0 = x0.min(x);
+            x1 = x1.max(x);
+            y0 = y0.min(y);
+            y1 = y1.max(y);
+        }
+    }
+    (x0 <= x1).then(|| (0.5 * (x0 + x1), 0.5 * (y0 + y1), (x1 - x0).max(y1 - y0).max(1e-9) * 1.1))
+}
+
 fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
@@ -586,34 +594,18 @@ pub fn error_map_svg(
         path: path.display().to_string(),
         reason: e,
     };
-    let (az, el) = (35f64.to_radians(), 20f64.to_radians());
-    let forward = [-el.cos() * az.sin(), -el.sin(), -el.cos() * az.cos()];
-    let right = [az.cos(), 0.0, -az.sin()];
-    let up = cross(right, forward);
-    let project = |p: &ClothPanel<'_>| -> Vec<(f64, f64, f64)> {
-        let n = p.topology.n_nodes;
-        (0..n)
-            .map(|k| {
-                let q = [p.pos[k], p.pos[n + k], p.pos[2 * n + k]];
-                (dot(q, right), dot(q, up), dot(q, forward))
-            })
-            .collect()
-    };
-    let projected: Vec<Vec<(f64, f64, f64)>> = panels.iter().map(project).collect();
-    let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
-    for &(x, y, _) in projected.iter().flatten() {
-        if x.is_finite() && y.is_finite() {
-            x0 = x0.min(x);
-            x1 = x1.max(x);
-            y0 = y0.min(y);
-            y1 = y1.max(y);
-        }
-    }
-    if x0 > x1 {
-        return Err(draw_err("no finite node position to draw".into()));
-    }
-    let span = (x1 - x0).max(y1 - y0).max(1e-9) * 1.1;
-    let (cx, cy) = (0.5 * (x0 + x1), 0.5 * (y0 + y1));
+    let projected: Vec<Vec<(f64, f64, f64)>> = panels
+        .iter()
+        .map(|p| {
+            let n = p.topology.n_nodes;
+            project(
+                &(0..n)
+                    .map(|k| [p.pos[k], p.pos[n + k], p.pos[2 * n + k]])
+                    .collect::<Vec<_>>(),
+            )
+        })
+        .collect();
+    let (cx, cy, span) = frame(&projected).ok_or_else(|| draw_err("no finite node position to draw".into()))?;
     let s = f64::from(panel_size);
     let header = 40;
     let bar = 70;

@@ -160,7 +160,7 @@ pub fn fit(problem: &LodProblem, options: &FitOptions, progress: ProgressFn<'_>)
         .iter()
         .map(|&f| {
             let mut m = vec![0.0; 3 * n];
-            problem.correlation().map_f32(&problem.reference.frames[f], &mut m);
+            problem.correlation().map(&problem.reference.frames[f], &mut m);
             m
         })
         .collect();

@@ -244,7 +244,7 @@ impl LodProblem {
                 break;
             }
             if f >= frames.start {
-                self.correlation.map_f32(&self.reference.frames[f], &mut mapped);
+                self.correlation.map(&self.reference.frames[f], &mut mapped);
                 acc.push(self.reference.frame_times[f], &mapped, &sim.state().pos);
             }
             if f % 16 == 0 || f + 1 == frames.end {

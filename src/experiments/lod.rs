@@ -204,6 +204,32 @@ pub fn level_dt(
     Ok((interval / k, limit))
 }
 
+/// Level n×n of `scene` as the daemon and `lod-plan` run it: lumped masses,
+/// the scene's integrator, dt at half the `same` model's stability limit.
+pub fn default_problem(scene: &Scene, reference: &Arc<Reference>, level: usize) -> Result<LodProblem, ExperimentError> {
+    let integrator = scene.params.integrator;
+    let mass = MassConvention::Lumped;
+    let (dt, _) = level_dt(
+        scene,
+        reference,
+        level,
+        level,
+        mass,
+        integrator,
+        reference.material,
+        0.5,
+    )?;
+    Ok(LodProblem::new(
+        scene,
+        reference.clone(),
+        level,
+        level,
+        mass,
+        integrator,
+        dt,
+    )?)
+}
+
 /// Options of [`table1_scene`].
 #[derive(Debug, Clone)]
 pub struct Table1Options {
@@ -441,7 +467,7 @@ pub fn switch_test(
             if sim.diverged() {
                 return f64::INFINITY;
             }
-            problem.correlation().map_f32(&reference.frames[f], &mut mapped);
+            problem.correlation().map(&reference.frames[f], &mut mapped);
             acc.push(reference.frame_times[f], &mapped, &sim.state().pos);
         }
         acc.mean()
@@ -558,25 +584,7 @@ pub fn pareto(
     let mut points = Vec::new();
     for &level in levels {
         // Estimate once per method with the scene's integrator at half its limit.
-        let (dt0, _) = level_dt(
-            scene,
-            reference,
-            level,
-            level,
-            MassConvention::Lumped,
-            scene.params.integrator,
-            reference.material,
-            0.5,
-        )?;
-        let base = LodProblem::new(
-            scene,
-            reference.clone(),
-            level,
-            level,
-            MassConvention::Lumped,
-            scene.params.integrator,
-            dt0,
-        )?;
+        let base = default_problem(scene, reference, level)?;
         for &method in methods {
             let material = estimator.estimate(&base, method, fit)?.material;
             for &integrator in integrators {
@@ -676,25 +684,7 @@ pub fn lod_plan(
     let train = fit.train_range(frames);
     let mut steps = Vec::new();
     for level in levels {
-        let (dt, _) = level_dt(
-            scene,
-            reference,
-            level,
-            level,
-            MassConvention::Lumped,
-            scene.params.integrator,
-            reference.material,
-            0.5,
-        )?;
-        let p = LodProblem::new(
-            scene,
-            reference.clone(),
-            level,
-            level,
-            MassConvention::Lumped,
-            scene.params.integrator,
-            dt,
-        )?;
+        let p = default_problem(scene, reference, level)?;
         let est = estimator.estimate(&p, Method::Fit, fit)?;
         let held = p.score(est.material, train.end..frames, &mut no_progress)?.mean;
         let accepted = held <= max_error;
@@ -707,7 +697,7 @@ pub fn lod_plan(
         steps.push(PlanStep {
             level,
             material: est.material,
-            dt,
+            dt: p.dt,
             held_out_mean: held,
             accepted,
         });
@@ -743,25 +733,7 @@ pub fn generalisation(
 ) -> Result<Generalisation, ExperimentError> {
     let mut problems = Vec::new();
     for (scene, reference) in scenes {
-        let (dt, _) = level_dt(
-            scene,
-            reference,
-            level,
-            level,
-            MassConvention::Lumped,
-            scene.params.integrator,
-            reference.material,
-            0.5,
-        )?;
-        problems.push(LodProblem::new(
-            scene,
-            reference.clone(),
-            level,
-            level,
-            MassConvention::Lumped,
-            scene.params.integrator,
-            dt,
-        )?);
+        problems.push(default_problem(scene, reference, level)?);
     }
     let mut fitted = Vec::new();
     let mut short_window = Vec::new();

@@ -151,35 +151,16 @@ pub fn stability_sweep(cfg: &StabilitySweep, progress: &mut dyn FnMut(usize, usi
                 if integrator == Integrator::ImplicitEuler {
                     hi = 100.0 * reference;
                 }
-                let row = if unstable(lo) {
+                // (largest dt seen stable, smallest seen unstable)
+                let (measured_stable, measured_unstable) = if unstable(lo) {
                     // Unstable even far below the reference: search downwards.
                     let mut h = lo;
                     while h > reference * 1e-4 && unstable(h) {
                         h /= 4.0;
                     }
-                    StabilityRow {
-                        integrator,
-                        n,
-                        stiffness_factor: factor,
-                        omega_gershgorin: modal.omega_gershgorin,
-                        omega_max: modal.omega_max,
-                        damping_rate: modal.damping_rate,
-                        predicted_dt: predicted,
-                        measured_stable: if unstable(h) { 0.0 } else { h },
-                        measured_unstable: lo,
-                    }
+                    (if unstable(h) { 0.0 } else { h }, lo)
                 } else if !unstable(hi) {
-                    StabilityRow {
-                        integrator,
-                        n,
-                        stiffness_factor: factor,
-                        omega_gershgorin: modal.omega_gershgorin,
-                        omega_max: modal.omega_max,
-                        damping_rate: modal.damping_rate,
-                        predicted_dt: predicted,
-                        measured_stable: hi,
-                        measured_unstable: f64::INFINITY,
-                    }
+                    (hi, f64::INFINITY)
                 } else {
                     for _ in 0..cfg.bisections {
                         let mid = (lo * hi).sqrt();
@@ -189,17 +170,18 @@ pub fn stability_sweep(cfg: &StabilitySweep, progress: &mut dyn FnMut(usize, usi
                             lo = mid;
                         }
                     }
-                    StabilityRow {
-                        integrator,
-                        n,
-                        stiffness_factor: factor,
-                        omega_gershgorin: modal.omega_gershgorin,
-                        omega_max: modal.omega_max,
-                        damping_rate: modal.damping_rate,
-                        predicted_dt: predicted,
-                        measured_stable: lo,
-                        measured_unstable: hi,
-                    }
+                    (lo, hi)
+                };
+                let row = StabilityRow {
+                    integrator,
+                    n,
+                    stiffness_factor: factor,
+                    omega_gershgorin: modal.omega_gershgorin,
+                    omega_max: modal.omega_max,
+                    damping_rate: modal.damping_rate,
+                    predicted_dt: predicted,
+                    measured_stable,
+                    measured_unstable,
                 };
                 rows.push(row);
                 progress(rows.len(), total);
