@@ -7,7 +7,19 @@
 //! read run by run as contiguous slices; the kernel processes `LANES` springs
 //! at a time with fixed-size arrays, so the compiler emits vector code and the
 //! per-lane reductions (elastic energy, largest strain) have a fixed summation
-//! order: results are bit-identical whichever instruction set runs them.
+//! order: results are bit-identical whichever instruction set runs them
+//! (`inv_sqrt` and `f64::mul_add` are exactly rounded everywhere; see the
+//! `dispatch_paths_are_bit_identical` test).
+//!
+//! Performance notes (64×64 grid, ~24k springs, one AVX-512 core):
+//! - No `sqrt` or division: 1/L comes from [`inv_sqrt`] (multiplies and FMAs
+//!   only); 8-wide `vsqrtpd` + `vdivpd` were the kernel's bottleneck.
+//! - The ends of a run that do not fill a block of `LANES` are one more
+//!   block overlapping the previous one, with the already-counted lanes
+//!   masked out, not a scalar loop (a 64-node row has 63 or 62 springs).
+//! - Horizontal neighbours (offsets 1 and 2) add +F and −F to overlapping
+//!   node ranges; the kernel nets them in registers (`run_carry`) and writes
+//!   each force once, instead of going through a scratch buffer.
 //!
 //! Precision: f64 throughout. Estimation differentiates recorded positions
 //! twice ((x₊ − 2x + x₋)/dt² at dt ≈ 1e-4 s); in f32 that second difference
@@ -34,21 +46,18 @@ pub struct SpringTotals {
 /// Preallocated buffers of the kernel; sized once from the topology.
 #[derive(Debug, Clone, Default)]
 pub(crate) struct KernelScratch {
-    /// Per-spring force of the current run, [x…, y…, z…] with `run` entries each.
+    /// Per-spring force of a gathered group, [x…, y…, z…] with `gather_len` entries each.
     out: Vec<f64>,
-    run: usize,
-    /// Gathered endpoint data for non-stencil groups: 12 components + rest.
+    /// Gathered endpoint data for non-stencil groups: 12 components.
     gather: Vec<f64>,
     gather_len: usize,
 }
 
 impl KernelScratch {
     pub(crate) fn new(topology: &Topology) -> KernelScratch {
-        let run = topology.max_run_len().max(topology.max_gather_len());
         let gather_len = topology.max_gather_len();
         KernelScratch {
-            out: vec![0.0; 3 * run],
-            run,
+            out: vec![0.0; 3 * gather_len],
             gather: vec![0.0; 12 * gather_len],
             gather_len,
         }
@@ -64,10 +73,31 @@ struct Coef {
     adjust_ratio: f64,
 }
 
-/// Per-lane accumulators.
+/// Per-lane accumulators of one spring kind.
+#[derive(Clone, Copy)]
 struct Acc {
-    energy: [f64; LANES],
+    /// Σ (L − L0)² (times ½K at the end: K is the same for the whole kind).
+    ext2: [f64; LANES],
     max_ratio: [f64; LANES],
+}
+
+impl Acc {
+    const EMPTY: Acc = Acc {
+        ext2: [0.0; LANES],
+        max_ratio: [f64::NEG_INFINITY; LANES],
+    };
+
+    #[inline(always)]
+    fn add<const N: usize>(&mut self, out: &BlockOut<N>) {
+        for j in 0..N {
+            self.ext2[j] = out.ext[j].mul_add(out.ext[j], self.ext2[j]);
+            self.max_ratio[j] = if out.ratio[j] > self.max_ratio[j] {
+                out.ratio[j]
+            } else {
+                self.max_ratio[j]
+            };
+        }
+    }
 }
 
 /// Add every spring's force to `force` (same layout as `pos`).
@@ -82,50 +112,37 @@ pub(crate) fn spring_forces(
     force: &mut [f64],
     scratch: &mut KernelScratch,
 ) -> SpringTotals {
-    #[cfg(target_arch = "x86_64")]
-    {
-        if std::is_x86_feature_detected!("avx512f") {
-            // SAFETY: the CPU supports AVX-512F, checked just above.
-            return unsafe { spring_forces_avx512(topology, material, adjust_ratio, pos, vel, force, scratch) };
-        }
-        if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma") {
-            // SAFETY: the CPU supports AVX2 and FMA, checked just above.
-            return unsafe { spring_forces_avx2(topology, material, adjust_ratio, pos, vel, force, scratch) };
-        }
+    super::simd::dispatch(
+        #[inline(always)]
+        || spring_forces_impl(topology, material, adjust_ratio, pos, vel, force, scratch),
+    )
+}
+
+/// The kernel, compiled once per instruction set ([`super::simd`]). Without
+/// hardware FMA (the generic path on x86-64 CPUs older than AVX2) `mul_add`
+/// is a library call: slow, but still exactly rounded, so results stay
+/// identical.
+#[inline(always)]
+fn spring_forces_impl(
+    topology: &Topology,
+    material: &Material,
+    adjust_ratio: f64,
+    pos: &[f64],
+    vel: &[f64],
+    force: &mut [f64],
+    scratch: &mut KernelScratch,
+) -> SpringTotals {
+    // Two instantiations: without the stiffness adjustment (the usual case)
+    // its compare and select drop out of the inner loop.
+    if adjust_ratio < f64::INFINITY {
+        all_springs::<true>(topology, material, adjust_ratio, pos, vel, force, scratch)
+    } else {
+        all_springs::<false>(topology, material, adjust_ratio, pos, vel, force, scratch)
     }
-    spring_forces_impl(topology, material, adjust_ratio, pos, vel, force, scratch)
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-unsafe fn spring_forces_avx2(
-    topology: &Topology,
-    material: &Material,
-    adjust_ratio: f64,
-    pos: &[f64],
-    vel: &[f64],
-    force: &mut [f64],
-    scratch: &mut KernelScratch,
-) -> SpringTotals {
-    spring_forces_impl(topology, material, adjust_ratio, pos, vel, force, scratch)
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f")]
-unsafe fn spring_forces_avx512(
-    topology: &Topology,
-    material: &Material,
-    adjust_ratio: f64,
-    pos: &[f64],
-    vel: &[f64],
-    force: &mut [f64],
-    scratch: &mut KernelScratch,
-) -> SpringTotals {
-    spring_forces_impl(topology, material, adjust_ratio, pos, vel, force, scratch)
 }
 
 #[inline(always)]
-fn spring_forces_impl(
+fn all_springs<const ADJ: bool>(
     topology: &Topology,
     material: &Material,
     adjust_ratio: f64,
@@ -142,118 +159,238 @@ fn spring_forces_impl(
     let (vy, vz) = rest.split_at(n);
     let p = [px, py, pz];
     let v = [vx, vy, vz];
-
-    let mut totals = SpringTotals {
-        elastic_energy: 0.0,
-        max_strain: [f64::NEG_INFINITY; 3],
-    };
-    for group in &topology.groups {
+    let (fx, rest) = force.split_at_mut(n);
+    let (fy, fz) = rest.split_at_mut(n);
+    let mut f = [fx, fy, fz];
+    let coef = |group: &SpringGroup| {
         let sc = material.get(group.kind);
-        let coef = Coef {
+        Coef {
             k: sc.k,
             c: sc.c,
             adjust_ratio,
-        };
-        let mut acc = Acc {
-            energy: [0.0; LANES],
-            max_ratio: [f64::NEG_INFINITY; LANES],
-        };
-        match group.stencil_offset {
-            Some(offset) => stencil_group(group, offset as usize, p, v, coef, force, scratch, &mut acc),
-            None => gather_group(group, p, v, coef, force, scratch, &mut acc),
         }
-        totals.elastic_energy += acc.energy.iter().sum::<f64>();
-        let m = acc
-            .max_ratio
-            .iter()
-            .fold(f64::NEG_INFINITY, |a, &b| if b > a { b } else { a });
-        let slot = &mut totals.max_strain[group.kind.index()];
-        if m - 1.0 > *slot {
-            *slot = m - 1.0;
-        }
-    }
-    for kind in SpringKind::ALL {
-        if totals.max_strain[kind.index()] == f64::NEG_INFINITY {
-            totals.max_strain[kind.index()] = 0.0;
-        }
-    }
-    totals
-}
+    };
 
-#[allow(clippy::too_many_arguments)]
-#[inline(always)]
-fn stencil_group(
-    group: &SpringGroup,
-    offset: usize,
-    p: [&[f64]; 3],
-    v: [&[f64]; 3],
-    coef: Coef,
-    force: &mut [f64],
-    scratch: &mut KernelScratch,
-    acc: &mut Acc,
-) {
-    let n = p[0].len();
-    let run_cap = scratch.run;
-    for run in &group.runs {
+    let mut acc = [Acc::EMPTY; 3];
+    let KernelScratch {
+        out,
+        gather,
+        gather_len,
+    } = scratch;
+    let stencil_runs = topology
+        .groups
+        .iter()
+        .filter_map(|g| g.stencil_offset.map(|offset| (g, offset as usize)))
+        .flat_map(|(g, offset)| g.runs.iter().map(move |run| (g, offset, run)));
+    for (group, offset, run) in stencil_runs {
         let (a0, len, first) = (run.start as usize, run.len as usize, run.first as usize);
         let b0 = a0 + offset;
         #[inline(always)]
         fn sl(s: &[f64], at: usize, len: usize) -> &[f64] {
             &s[at..at + len]
         }
-        let xa = [sl(p[0], a0, len), sl(p[1], a0, len), sl(p[2], a0, len)];
-        let xb = [sl(p[0], b0, len), sl(p[1], b0, len), sl(p[2], b0, len)];
-        let va = [sl(v[0], a0, len), sl(v[1], a0, len), sl(v[2], a0, len)];
-        let vb = [sl(v[0], b0, len), sl(v[1], b0, len), sl(v[2], b0, len)];
-        let rest = &group.rest[first..first + len];
-        let inv_rest = &group.inv_rest[first..first + len];
-        if offset >= LANES {
-            let (fx, rest_f) = force.split_at_mut(n);
-            let (fy, fz) = rest_f.split_at_mut(n);
-            let mut sink = Direct {
-                force: [fx, fy, fz],
-                a0,
-                b0,
-            };
-            eval_springs(xa, xb, va, vb, rest, inv_rest, coef, &mut sink, acc);
-            continue;
+        let run = Run {
+            xa: [sl(p[0], a0, len), sl(p[1], a0, len), sl(p[2], a0, len)],
+            xb: [sl(p[0], b0, len), sl(p[1], b0, len), sl(p[2], b0, len)],
+            va: [sl(v[0], a0, len), sl(v[1], a0, len), sl(v[2], a0, len)],
+            vb: [sl(v[0], b0, len), sl(v[1], b0, len), sl(v[2], b0, len)],
+            rest: sl(&group.rest, first, len),
+            inv_rest: sl(&group.inv_rest, first, len),
+        };
+        let acc = &mut acc[group.kind.index()];
+        match offset {
+            1 => run_carry::<1, ADJ>(&run, a0, coef(group), &mut f, acc),
+            2 => run_carry::<2, ADJ>(&run, a0, coef(group), &mut f, acc),
+            _ => run_direct::<ADJ>(&run, a0, b0, coef(group), &mut f, acc),
         }
-        let (ox, rest_out) = scratch.out.split_at_mut(run_cap);
-        let (oy, oz) = rest_out.split_at_mut(run_cap);
-        let mut sink = ToScratch([&mut ox[..len], &mut oy[..len], &mut oz[..len]]);
-        eval_springs(xa, xb, va, vb, rest, inv_rest, coef, &mut sink, acc);
-        // Newton's third law: +F on a, −F on b. Separate passes over
-        // contiguous slices, so they vectorise too.
-        for c in 0..3 {
-            let o = &scratch.out[c * run_cap..c * run_cap + len];
-            let f = &mut force[c * n..(c + 1) * n];
-            for (fa, &s) in f[a0..a0 + len].iter_mut().zip(o) {
-                *fa += s;
-            }
-            for (fb, &s) in f[b0..b0 + len].iter_mut().zip(o) {
-                *fb -= s;
-            }
+    }
+    for group in &topology.groups {
+        if group.stencil_offset.is_none() {
+            let ws = GatherScratch {
+                out,
+                gather,
+                cap: *gather_len,
+            };
+            gather_group::<ADJ>(group, p, v, coef(group), &mut f, ws, &mut acc[group.kind.index()]);
+        }
+    }
+
+    let mut totals = SpringTotals {
+        elastic_energy: 0.0,
+        max_strain: [0.0; 3],
+    };
+    for kind in SpringKind::ALL {
+        let a = &acc[kind.index()];
+        totals.elastic_energy += 0.5 * material.get(kind).k * a.ext2.iter().sum::<f64>();
+        let m = a
+            .max_ratio
+            .iter()
+            .fold(f64::NEG_INFINITY, |a, &b| if b > a { b } else { a });
+        // No spring of this kind: report 0.
+        if m > f64::NEG_INFINITY {
+            totals.max_strain[kind.index()] = m - 1.0;
+        }
+    }
+    totals
+}
+
+/// Endpoint data of a batch of springs as parallel slices of equal length.
+struct Run<'a> {
+    xa: [&'a [f64]; 3],
+    xb: [&'a [f64]; 3],
+    va: [&'a [f64]; 3],
+    vb: [&'a [f64]; 3],
+    rest: &'a [f64],
+    inv_rest: &'a [f64],
+}
+
+impl Run<'_> {
+    fn len(&self) -> usize {
+        self.rest.len()
+    }
+}
+
+/// A run of springs `a → a + offset` with `offset ≥ 1`, adding +F at `a0 + i`
+/// and −F at `b0 + i` block by block. Blocks of `LANES`, then one block
+/// ending at the run's end with the lanes already counted masked out (or
+/// single springs, for runs shorter than a block).
+#[inline(always)]
+fn run_direct<const ADJ: bool>(run: &Run, a0: usize, b0: usize, coef: Coef, f: &mut [&mut [f64]; 3], acc: &mut Acc) {
+    let len = run.len();
+    // Local accumulators (not behind a reference) so they stay in registers.
+    let mut local = *acc;
+    let mut i = 0;
+    while i + LANES <= len {
+        let o = block::<LANES, ADJ>(run, i, coef, 0);
+        local.add(&o);
+        add_pair(f, a0 + i, b0 + i, &o.f);
+        i += LANES;
+    }
+    tail::<ADJ>(run, i, a0, b0, coef, f, &mut local);
+    *acc = local;
+}
+
+/// Springs `i..len` of a run (fewer than `LANES`), added with [`add_pair`].
+#[inline(always)]
+fn tail<const ADJ: bool>(
+    run: &Run,
+    i: usize,
+    a0: usize,
+    b0: usize,
+    coef: Coef,
+    f: &mut [&mut [f64]; 3],
+    acc: &mut Acc,
+) {
+    let len = run.len();
+    if i == len {
+        return;
+    }
+    if len >= LANES {
+        let s = len - LANES;
+        let o = block::<LANES, ADJ>(run, s, coef, i - s);
+        acc.add(&o);
+        add_pair(f, a0 + s, b0 + s, &o.f);
+    } else {
+        for i in i..len {
+            let o = block::<1, ADJ>(run, i, coef, 0);
+            acc.add(&o);
+            add_pair(f, a0 + i, b0 + i, &o.f);
         }
     }
 }
 
+/// +F on nodes `a..a+N`, then −F on nodes `b..b+N`. Correct for any
+/// `b > a` (the second range is read after the first is written); when the
+/// ranges overlap the CPU stalls on the store-to-load dependency, so hot
+/// loops with short offsets use [`run_carry`].
 #[inline(always)]
-fn gather_group(
+fn add_pair<const N: usize>(f: &mut [&mut [f64]; 3], a: usize, b: usize, fo: &[[f64; N]; 3]) {
+    for c in 0..3 {
+        let fa: &mut [f64; N] = (&mut f[c][a..a + N]).try_into().expect("N");
+        for j in 0..N {
+            fa[j] += fo[c][j];
+        }
+        let fb: &mut [f64; N] = (&mut f[c][b..b + N]).try_into().expect("N");
+        for j in 0..N {
+            fb[j] -= fo[c][j];
+        }
+    }
+}
+
+/// A run of springs `a → a + OFF` with `OFF < LANES` (horizontal structural
+/// and bend springs of a grid). Node `a0 + i + j` receives +F of spring
+/// `i + j` and −F of spring `i + j − OFF`; the block nets both in registers
+/// (the second from this block shifted by OFF lanes, or from the previous
+/// block) and updates the node forces once, with no overlapping
+/// stores and loads between blocks.
+#[inline(always)]
+fn run_carry<const OFF: usize, const ADJ: bool>(
+    run: &Run,
+    a0: usize,
+    coef: Coef,
+    f: &mut [&mut [f64]; 3],
+    acc: &mut Acc,
+) {
+    let len = run.len();
+    let mut local = *acc;
+    // Forces of the previous block; its last OFF lanes are still owed to
+    // the b ends of its last OFF springs.
+    let mut carry = [[0.0; LANES]; 3];
+    let mut i = 0;
+    while i + LANES <= len {
+        let o = block::<LANES, ADJ>(run, i, coef, 0);
+        local.add(&o);
+        for c in 0..3 {
+            let fa: &mut [f64; LANES] = (&mut f[c][a0 + i..a0 + i + LANES]).try_into().expect("LANES");
+            for j in 0..LANES {
+                let back = if j >= OFF {
+                    o.f[c][j - OFF]
+                } else {
+                    carry[c][LANES - OFF + j]
+                };
+                fa[j] += o.f[c][j] - back;
+            }
+            carry[c] = o.f[c];
+        }
+        i += LANES;
+    }
+    if i > 0 {
+        // −F of springs i − OFF .. i at their b ends, nodes a0 + i .. a0 + i + OFF.
+        for c in 0..3 {
+            for k in 0..OFF {
+                f[c][a0 + i + k] -= carry[c][LANES - OFF + k];
+            }
+        }
+    }
+    tail::<ADJ>(run, i, a0, a0 + OFF, coef, f, &mut local);
+    *acc = local;
+}
+
+/// Buffers of the gather path.
+struct GatherScratch<'a> {
+    out: &'a mut [f64],
+    gather: &'a mut [f64],
+    cap: usize,
+}
+
+/// A group of arbitrary node pairs: gather the endpoint data into contiguous
+/// blocks, evaluate as one run, scatter the forces.
+#[inline(always)]
+fn gather_group<const ADJ: bool>(
     group: &SpringGroup,
     p: [&[f64]; 3],
     v: [&[f64]; 3],
     coef: Coef,
-    force: &mut [f64],
-    scratch: &mut KernelScratch,
+    f: &mut [&mut [f64]; 3],
+    ws: GatherScratch,
     acc: &mut Acc,
 ) {
-    let n = p[0].len();
     let len = group.len();
-    let cap = scratch.gather_len;
-    debug_assert!(len <= cap && len <= scratch.run);
+    let cap = ws.cap;
+    debug_assert!(len <= cap);
     // Gather endpoint data: blocks of `cap` entries, 12 blocks.
     {
-        let g = &mut scratch.gather;
+        let g = &mut *ws.gather;
         for s in 0..len {
             let (a, b) = (group.a[s] as usize, group.b[s] as usize);
             for c in 0..3 {
@@ -264,188 +401,158 @@ fn gather_group(
             }
         }
     }
-    let g = &scratch.gather;
+    let g = &*ws.gather;
     let blk = |i: usize| &g[i * cap..i * cap + len];
-    let run_cap = scratch.run;
-    let (ox, rest_out) = scratch.out.split_at_mut(run_cap);
-    let (oy, oz) = rest_out.split_at_mut(run_cap);
-    eval_springs(
-        [blk(0), blk(1), blk(2)],
-        [blk(3), blk(4), blk(5)],
-        [blk(6), blk(7), blk(8)],
-        [blk(9), blk(10), blk(11)],
-        &group.rest,
-        &group.inv_rest,
-        coef,
-        &mut ToScratch([&mut ox[..len], &mut oy[..len], &mut oz[..len]]),
-        acc,
-    );
+    let run = Run {
+        xa: [blk(0), blk(1), blk(2)],
+        xb: [blk(3), blk(4), blk(5)],
+        va: [blk(6), blk(7), blk(8)],
+        vb: [blk(9), blk(10), blk(11)],
+        rest: &group.rest,
+        inv_rest: &group.inv_rest,
+    };
+    let out = &mut *ws.out;
+    let mut local = *acc;
+    let mut put = |i: usize, skip: usize, fo: &[[f64; LANES]; 3]| {
+        for c in 0..3 {
+            for j in skip..LANES {
+                out[c * cap + i + j] = fo[c][j];
+            }
+        }
+    };
+    let mut i = 0;
+    while i + LANES <= len {
+        let o = block::<LANES, ADJ>(&run, i, coef, 0);
+        local.add(&o);
+        put(i, 0, &o.f);
+        i += LANES;
+    }
+    if i < len && len >= LANES {
+        let s = len - LANES;
+        let o = block::<LANES, ADJ>(&run, s, coef, i - s);
+        local.add(&o);
+        put(s, i - s, &o.f);
+    } else {
+        for i in i..len {
+            let o = block::<1, ADJ>(&run, i, coef, 0);
+            local.add(&o);
+            for c in 0..3 {
+                out[c * cap + i] = o.f[c][0];
+            }
+        }
+    }
+    *acc = local;
     for s in 0..len {
         let (a, b) = (group.a[s] as usize, group.b[s] as usize);
         for c in 0..3 {
-            let fs = scratch.out[c * run_cap + s];
-            force[c * n + a] += fs;
-            force[c * n + b] -= fs;
-        }
-    }
-}
-
-/// Spring forces on the `a` ends of a batch of springs whose endpoint data
-/// are given as parallel slices of equal length.
-#[allow(clippy::too_many_arguments)]
-#[inline(always)]
-fn eval_springs(
-    xa: [&[f64]; 3],
-    xb: [&[f64]; 3],
-    va: [&[f64]; 3],
-    vb: [&[f64]; 3],
-    rest: &[f64],
-    inv_rest: &[f64],
-    coef: Coef,
-    sink: &mut impl Sink,
-    acc: &mut Acc,
-) {
-    let len = rest.len();
-    // Local accumulators (not behind a reference) so they stay in registers.
-    let mut energy = acc.energy;
-    let mut max_ratio = acc.max_ratio;
-    let mut i = 0;
-    while i + LANES <= len {
-        let r = block::<LANES>(i, xa, xb, va, vb, rest, inv_rest, coef);
-        for j in 0..LANES {
-            energy[j] += r.energy[j];
-            max_ratio[j] = if r.ratio[j] > max_ratio[j] {
-                r.ratio[j]
-            } else {
-                max_ratio[j]
-            };
-        }
-        sink.put(i, &r.f);
-        i += LANES;
-    }
-    while i < len {
-        let r = block::<1>(i, xa, xb, va, vb, rest, inv_rest, coef);
-        energy[0] += r.energy[0];
-        max_ratio[0] = if r.ratio[0] > max_ratio[0] {
-            r.ratio[0]
-        } else {
-            max_ratio[0]
-        };
-        sink.put(i, &r.f);
-        i += 1;
-    }
-    acc.energy = energy;
-    acc.max_ratio = max_ratio;
-}
-
-/// Where the kernel puts the force on each spring's `a` end.
-trait Sink {
-    /// Springs `i..i+N` of the batch exert `f` on their `a` ends.
-    fn put<const N: usize>(&mut self, i: usize, f: &[[f64; N]; 3]);
-}
-
-/// Store per-spring forces in scratch arrays (scattered afterwards).
-struct ToScratch<'a>([&'a mut [f64]; 3]);
-
-impl Sink for ToScratch<'_> {
-    #[inline(always)]
-    fn put<const N: usize>(&mut self, i: usize, f: &[[f64; N]; 3]) {
-        for c in 0..3 {
-            self.0[c][i..i + N].copy_from_slice(&f[c]);
-        }
-    }
-}
-
-/// Add +F to node `a0 + i` and −F to node `b0 + i` directly. Only valid when
-/// `b0 − a0 ≥ LANES`, so the a and b ranges of one block never overlap (blocks
-/// are applied in order, so overlaps between blocks are fine).
-struct Direct<'a> {
-    force: [&'a mut [f64]; 3],
-    a0: usize,
-    b0: usize,
-}
-
-impl Sink for Direct<'_> {
-    #[inline(always)]
-    fn put<const N: usize>(&mut self, i: usize, f: &[[f64; N]; 3]) {
-        for c in 0..3 {
-            let fa: &mut [f64; N] = (&mut self.force[c][self.a0 + i..self.a0 + i + N])
-                .try_into()
-                .expect("N");
-            for j in 0..N {
-                fa[j] += f[c][j];
-            }
-            let fb: &mut [f64; N] = (&mut self.force[c][self.b0 + i..self.b0 + i + N])
-                .try_into()
-                .expect("N");
-            for j in 0..N {
-                fb[j] -= f[c][j];
-            }
+            let fs = out[c * cap + s];
+            f[c][a] += fs;
+            f[c][b] -= fs;
         }
     }
 }
 
 /// Results of one block of `N` springs.
 struct BlockOut<const N: usize> {
+    /// Force on each spring's `a` end.
     f: [[f64; N]; 3],
-    energy: [f64; N],
+    /// L − L0.
+    ext: [f64; N],
+    /// L / L0.
     ratio: [f64; N],
 }
 
-#[allow(clippy::too_many_arguments)]
+/// Springs `i..i+N` of `run`. Lanes below `skip` are masked: zero force and
+/// extension, ratio −∞ (they were counted by the previous block).
 #[inline(always)]
-fn block<const N: usize>(
-    i: usize,
-    xa: [&[f64]; 3],
-    xb: [&[f64]; 3],
-    va: [&[f64]; 3],
-    vb: [&[f64]; 3],
-    rest: &[f64],
-    inv_rest: &[f64],
-    coef: Coef,
-) -> BlockOut<N> {
+fn block<const N: usize, const ADJ: bool>(run: &Run, i: usize, coef: Coef, skip: usize) -> BlockOut<N> {
     #[inline(always)]
     fn arr<const N: usize>(s: &[f64], i: usize) -> [f64; N] {
         let a: &[f64; N] = s[i..i + N].try_into().expect("slice of N");
         *a
     }
-    let (ax, ay, az) = (arr::<N>(xa[0], i), arr::<N>(xa[1], i), arr::<N>(xa[2], i));
-    let (bx, by, bz) = (arr::<N>(xb[0], i), arr::<N>(xb[1], i), arr::<N>(xb[2], i));
-    let (uax, uay, uaz) = (arr::<N>(va[0], i), arr::<N>(va[1], i), arr::<N>(va[2], i));
-    let (ubx, uby, ubz) = (arr::<N>(vb[0], i), arr::<N>(vb[1], i), arr::<N>(vb[2], i));
-    let l0 = arr::<N>(rest, i);
-    let il0 = arr::<N>(inv_rest, i);
+    let (ax, ay, az) = (arr::<N>(run.xa[0], i), arr::<N>(run.xa[1], i), arr::<N>(run.xa[2], i));
+    let (bx, by, bz) = (arr::<N>(run.xb[0], i), arr::<N>(run.xb[1], i), arr::<N>(run.xb[2], i));
+    let (uax, uay, uaz) = (arr::<N>(run.va[0], i), arr::<N>(run.va[1], i), arr::<N>(run.va[2], i));
+    let (ubx, uby, ubz) = (arr::<N>(run.vb[0], i), arr::<N>(run.vb[1], i), arr::<N>(run.vb[2], i));
+    let l0 = arr::<N>(run.rest, i);
+    let il0 = arr::<N>(run.inv_rest, i);
     let mut out = BlockOut {
         f: [[0.0; N]; 3],
-        energy: [0.0; N],
+        ext: [0.0; N],
         ratio: [0.0; N],
     };
     // Straight-line code with selects only (no branches), so each line
     // becomes one vector instruction over the N lanes.
     for j in 0..N {
         // Sung 2018 eq. 1: F_a = K (L − L0) u + C ((v_b − v_a)·u) u, u = (x_b − x_a)/L.
+        // Written as F_a = s·d with d = x_b − x_a, s = (K (L − L0) + C (Δv·d)/L)/L.
         let dx = bx[j] - ax[j];
         let dy = by[j] - ay[j];
         let dz = bz[j] - az[j];
-        let len = (dx * dx + dy * dy + dz * dz).sqrt();
+        let len2 = dz.mul_add(dz, dy.mul_add(dy, dx * dx));
         // A coincident pair (L < MIN_LENGTH) has |d| < MIN_LENGTH too, so
-        // dividing by MIN_LENGTH keeps |u| < 1: bounded, direction-free.
-        let safe = if len > MIN_LENGTH { len } else { MIN_LENGTH };
-        let inv = 1.0 / safe;
-        let (ux, uy, uz) = (dx * inv, dy * inv, dz * inv);
-        let vrel = (ubx[j] - uax[j]) * ux + (uby[j] - uay[j]) * uy + (ubz[j] - uaz[j]) * uz;
+        // scaling by 1/MIN_LENGTH keeps |d|/L < 1: bounded, direction-free.
+        let safe2 = if len2 > MIN_LENGTH * MIN_LENGTH {
+            len2
+        } else {
+            MIN_LENGTH * MIN_LENGTH
+        };
+        let inv = inv_sqrt(safe2);
+        // L = L²·(1/L). Below MIN_LENGTH this is L²/MIN_LENGTH < L, a
+        // difference under 1e-12 m that no force notices.
+        let len = len2 * inv;
+        let dvd = (ubz[j] - uaz[j]).mul_add(dz, (uby[j] - uay[j]).mul_add(dy, (ubx[j] - uax[j]) * dx));
         let ext = len - l0[j];
         let ratio = len * il0[j];
         // Bayraktar 2007 (Yu eq. 6): K·L/L0 beyond the allowed length.
-        let scale = if ratio > coef.adjust_ratio { ratio } else { 1.0 };
-        let mag = coef.k * scale * ext + coef.c * vrel;
-        out.f[0][j] = mag * ux;
-        out.f[1][j] = mag * uy;
-        out.f[2][j] = mag * uz;
-        out.energy[j] = 0.5 * coef.k * ext * ext;
-        out.ratio[j] = ratio;
+        let elastic = if ADJ {
+            let scale = if ratio > coef.adjust_ratio { ratio } else { 1.0 };
+            coef.k * scale * ext
+        } else {
+            coef.k * ext
+        };
+        let s = coef.c.mul_add(dvd * inv, elastic) * inv;
+        let live = j >= skip;
+        let s = if live { s } else { 0.0 };
+        out.f[0][j] = s * dx;
+        out.f[1][j] = s * dy;
+        out.f[2][j] = s * dz;
+        out.ext[j] = if live { ext } else { 0.0 };
+        out.ratio[j] = if live { ratio } else { f64::NEG_INFINITY };
     }
     out
+}
+
+/// First guess of 1/√x for f64 (Lomont's constant for the classic bit trick):
+/// halving the exponent bits of x and subtracting from this constant gives
+/// 1/√x within 3.5% for every positive normal x.
+const INV_SQRT_MAGIC: u64 = 0x5FE6_EB50_C7B5_37A9;
+
+/// 1/√x for positive normal x (and +∞ → NaN, NaN → NaN), to ~1 ulp.
+///
+/// The kernel used `sqrt` and a division; 8-wide f64 `vsqrtpd`/`vdivpd`
+/// take ~16 cycles each and bounded the whole kernel. This uses only integer
+/// ops on the bits, multiplies and FMAs, which pipeline: four Newton steps
+/// from the bit-trick guess take the relative error 3.5e-2 → 1.8e-3 → 4.6e-6
+/// → 3e-11 → below f64 rounding.
+///
+/// Deterministic: every operation is exactly rounded IEEE arithmetic
+/// (`mul_add` is a fused multiply-add, one rounding, in software as in
+/// hardware), so the AVX-512, AVX2 and generic builds give identical bits.
+/// No approximate-reciprocal instructions (`vrsqrt14pd`): their results are
+/// not specified to the bit and differ between instruction sets.
+#[inline(always)]
+fn inv_sqrt(x: f64) -> f64 {
+    let mut y = f64::from_bits(INV_SQRT_MAGIC - (x.to_bits() >> 1));
+    let half = 0.5 * x;
+    for _ in 0..4 {
+        // y ← y + y·(½ − ½x·y²): the correction form rounds better than
+        // y·(3/2 − ½x·y²) once y is close.
+        let e = (-half * y).mul_add(y, 0.5);
+        y = y.mul_add(e, y);
+    }
+    y
 }
 
 /// Area-weighted node normals (unit length; zero for nodes with no area).
@@ -476,5 +583,127 @@ pub(crate) fn node_normals(topology: &Topology, pos: &[f64], normals: &mut [f64]
         for d in 0..3 {
             normals[d * n + k] *= inv;
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::params::SpringCoeffs;
+    use super::super::simd::{self, Isa};
+    use super::super::topology::{GridShape, Orientation};
+    use super::*;
+
+    /// Rest shape moved by up to ±`amp` per coordinate, velocities up to ±1,
+    /// from a fixed-seed generator.
+    fn random_state(topology: &Topology, seed: u64, amp: f64) -> (Vec<f64>, Vec<f64>) {
+        let mut x = seed;
+        let mut next = move || {
+            x = x.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (x >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+        };
+        let n = topology.n_nodes;
+        let mut pos = vec![0.0; 3 * n];
+        let mut vel = vec![0.0; 3 * n];
+        for k in 0..n {
+            for c in 0..3 {
+                pos[c * n + k] = topology.rest_positions[k][c] + amp * next();
+                vel[c * n + k] = next();
+            }
+        }
+        // Two coincident nodes: the MIN_LENGTH guard.
+        for c in 0..3 {
+            pos[c * n + 1] = pos[c * n];
+        }
+        (pos, vel)
+    }
+
+    fn gathered(topology: &Topology) -> Topology {
+        let mut t = topology.clone();
+        t.grid = None;
+        for g in &mut t.groups {
+            g.stencil_offset = None;
+            g.runs.clear();
+        }
+        t
+    }
+
+    #[test]
+    fn dispatch_paths_are_bit_identical() {
+        let material = Material {
+            springs: [
+                SpringCoeffs { k: 40.0, c: 0.3 },
+                SpringCoeffs { k: 9.0, c: 0.07 },
+                SpringCoeffs { k: 2.5, c: 0.02 },
+            ],
+        };
+        let isas: Vec<Isa> = Isa::supported().collect();
+        eprintln!("instruction sets compared: {isas:?}");
+        for (nx, ny) in [(2, 2), (3, 7), (9, 4), (17, 6), (64, 64), (63, 5)] {
+            let shape = GridShape {
+                nx,
+                ny,
+                width: 0.4,
+                height: 0.3,
+            };
+            let grid = Topology::grid(shape, Orientation::Horizontal);
+            for topology in [grid.clone(), gathered(&grid)] {
+                let (pos, vel) = random_state(&topology, (nx * 100 + ny) as u64, 0.02);
+                for adjust_ratio in [f64::INFINITY, 1.05] {
+                    let results: Vec<(Vec<u64>, SpringTotals)> = isas
+                        .iter()
+                        .map(|&isa| {
+                            let mut scratch = KernelScratch::new(&topology);
+                            let mut force = vec![0.0; pos.len()];
+                            let totals = simd::run(
+                                isa,
+                                // Inlined, so it is compiled for `isa`.
+                                #[inline(always)]
+                                || {
+                                    spring_forces_impl(
+                                        &topology,
+                                        &material,
+                                        adjust_ratio,
+                                        &pos,
+                                        &vel,
+                                        &mut force,
+                                        &mut scratch,
+                                    )
+                                },
+                            );
+                            assert!(force.iter().all(|f| f.is_finite()));
+                            (force.iter().map(|f| f.to_bits()).collect(), totals)
+                        })
+                        .collect();
+                    for (isa, r) in isas.iter().zip(&results) {
+                        assert!(
+                            r.0 == results[0].0,
+                            "{nx}x{ny}: {isa:?} forces differ from {:?}",
+                            isas[0]
+                        );
+                        assert_eq!(r.1.elastic_energy.to_bits(), results[0].1.elastic_energy.to_bits());
+                        assert_eq!(
+                            r.1.max_strain.map(f64::to_bits),
+                            results[0].1.max_strain.map(f64::to_bits)
+                        );
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn inv_sqrt_is_within_an_ulp_or_two_over_the_exponent_range() {
+        let mut worst: f64 = 0.0;
+        let mut x: f64 = 1e-24;
+        while x < 1e24 {
+            for m in [1.0, 1.234_567, 1.5, 1.999_999, 2.5, 3.999_999_9] {
+                let v = x * m;
+                let exact = 1.0 / v.sqrt();
+                worst = worst.max(((inv_sqrt(v) - exact) / exact).abs());
+            }
+            x *= 4.0;
+        }
+        eprintln!("inv_sqrt: largest relative error {worst:.2e}");
+        assert!(worst < 4.0 * f64::EPSILON, "{worst:e}");
     }
 }

@@ -8,6 +8,7 @@ mod forces;
 mod implicit;
 mod loads;
 mod params;
+mod simd;
 mod stability;
 mod state;
 mod strain;
@@ -180,11 +181,16 @@ impl Model {
     }
 
     /// Accelerations at (t, pos, vel) into `acc`; returns the spring by-products.
+    ///
+    /// `ws.force` is all zeros on entry and on return: the last pass, which
+    /// turns forces into accelerations, clears it while it is in cache,
+    /// instead of a separate pass to clear it before the next evaluation.
+    #[inline(always)]
     fn accelerations(&self, t: f64, pos: &[f64], vel: &[f64], acc: &mut [f64], ws: &mut Workspace) -> SpringTotals {
         let topo = &*self.topology;
         let n = topo.n_nodes;
         let f = &mut ws.force;
-        f.fill(0.0);
+        debug_assert!(f.iter().all(|&x| x == 0.0), "force buffer not cleared");
         let totals = forces::spring_forces(
             topo,
             &self.params.material,
@@ -197,14 +203,16 @@ impl Model {
         self.loads.add_forces(topo, t, pos, vel, f, &mut ws.normals);
         let g = self.params.gravity;
         let drag = self.params.drag;
+        let (inv_mass, free) = (&self.inv_mass[..n], &self.free[..n]);
         for c in 0..3 {
             let (fc, vc, ac) = (
-                &f[c * n..(c + 1) * n],
+                &mut f[c * n..(c + 1) * n],
                 &vel[c * n..(c + 1) * n],
                 &mut acc[c * n..(c + 1) * n],
             );
             for k in 0..n {
-                ac[k] = fc[k] * self.inv_mass[k] + self.free[k] * (g[c] - drag * vc[k]);
+                ac[k] = fc[k] * inv_mass[k] + free[k] * (g[c] - drag * vc[k]);
+                fc[k] = 0.0;
             }
         }
         totals
@@ -399,6 +407,17 @@ impl Simulation {
     /// Advance by one `dt`. Never fails and never allocates. After a
     /// divergence it does nothing and returns the divergence report again.
     pub fn step(&mut self) -> StepReport {
+        // Compiled for the CPU's best vector instruction set (see `simd`):
+        // the node loops of the integrators, the strain check and the
+        // report all run inlined into this closure.
+        simd::dispatch(
+            #[inline(always)]
+            || self.step_impl(),
+        )
+    }
+
+    #[inline(always)]
+    fn step_impl(&mut self) -> StepReport {
         if let Some(last) = self.last.filter(|r| !r.finite) {
             return last;
         }
@@ -445,28 +464,28 @@ impl Simulation {
         // Time from the step count, not by accumulation: no drift over long runs.
         self.state.time = self.state.step as f64 * dt;
         self.apply_pins();
-        self.cached = false;
-        self.ensure_cache();
 
+        // Strain limiting runs before the force evaluation, not after it: its
+        // first full pass finds the over-long springs itself (and returns at
+        // once when there are none), so one evaluation per step serves both the
+        // report and the next step. Checking the kernel's max strain first and
+        // evaluating again after a correction cost a second full force
+        // evaluation on every limited step (most steps of the hanging scene).
         let mut strain_iterations = 0;
         if let (Some(limit), Some(ws)) = (&self.model.params.strain_limit, self.ws.strain.as_mut()) {
-            let accept = limit.max_strain * (1.0 + limit.tolerance);
-            let over = (0..3).any(|k| limit.kinds[k] && self.totals.max_strain[k] > accept);
-            if over {
-                let out = strain::limit(
-                    &self.model.topology,
-                    &self.model.inv_mass,
-                    limit,
-                    dt,
-                    &mut self.state.pos,
-                    &mut self.state.vel,
-                    ws,
-                );
-                strain_iterations = out.iterations;
-                self.cached = false;
-                self.ensure_cache();
-            }
+            let out = strain::limit(
+                &self.model.topology,
+                &self.model.inv_mass,
+                limit,
+                dt,
+                &mut self.state.pos,
+                &mut self.state.vel,
+                ws,
+            );
+            strain_iterations = out.iterations;
         }
+        self.cached = false;
+        self.ensure_cache();
 
         let report = self.measure(solver, strain_iterations);
         self.last = Some(report);
@@ -483,6 +502,7 @@ impl Simulation {
         }
     }
 
+    #[inline(always)]
     fn ensure_cache(&mut self) {
         if !self.cached {
             let s = &self.state;
@@ -494,6 +514,7 @@ impl Simulation {
     }
 
     /// Classic RK4 on y = (x, v), y' = (v, a(t, x, v)); k1 is the cached acceleration.
+    #[inline(always)]
     fn rk4(&mut self, t0: f64, dt: f64) {
         let Workspace {
             stage_pos,
@@ -551,18 +572,60 @@ impl Simulation {
         self.ws.stage_acc = stage_acc;
     }
 
+    /// The report of the current state. One pass over the nodes gives the
+    /// energies and finiteness, with `LANES` partial sums (a sequential sum
+    /// is one long chain of dependent additions, several µs at 64×64).
+    #[inline(always)]
     fn measure(&self, solver: (u32, f64), strain_iterations: u32) -> StepReport {
+        const LANES: usize = 8;
         let n = self.model.topology.n_nodes;
         let (pos, vel) = (&self.state.pos, &self.state.vel);
         let g = self.model.params.gravity;
-        let (mut ke, mut pe) = (0.0, 0.0);
-        for k in 0..n {
-            let m = self.model.masses[k] * self.model.free[k];
-            let v2 = vel[k] * vel[k] + vel[n + k] * vel[n + k] + vel[2 * n + k] * vel[2 * n + k];
-            ke += 0.5 * m * v2;
-            pe -= m * (g[0] * pos[k] + g[1] * pos[n + k] + g[2] * pos[2 * n + k]);
+        let (masses, free) = (&self.model.masses[..n], &self.model.free[..n]);
+        let (px, rest) = pos.split_at(n);
+        let (py, pz) = rest.split_at(n);
+        let (vx, rest) = vel.split_at(n);
+        let (vy, vz) = rest.split_at(n);
+        let (mut ke, mut pe, mut zero) = ([0.0; LANES], [0.0; LANES], [0.0; LANES]);
+        #[inline(always)]
+        fn arr<const N: usize>(s: &[f64], k: usize) -> [f64; N] {
+            *<&[f64; N]>::try_from(&s[k..k + N]).expect("N")
         }
-        let finite = self.state.is_finite() && ke.is_finite() && self.totals.elastic_energy.is_finite();
+        /// Nodes `k..k+N` into lanes `0..N` of the partial sums.
+        #[inline(always)]
+        fn nodes<const N: usize>(
+            k: usize,
+            [masses, free, px, py, pz, vx, vy, vz]: [&[f64]; 8],
+            g: [f64; 3],
+            ke: &mut [f64; LANES],
+            pe: &mut [f64; LANES],
+            zero: &mut [f64; LANES],
+        ) {
+            let (m, fr) = (arr::<N>(masses, k), arr::<N>(free, k));
+            let (x, y, z) = (arr::<N>(px, k), arr::<N>(py, k), arr::<N>(pz, k));
+            let (u, v, w) = (arr::<N>(vx, k), arr::<N>(vy, k), arr::<N>(vz, k));
+            for j in 0..N {
+                let m = m[j] * fr[j];
+                ke[j] += 0.5 * m * (u[j] * u[j] + v[j] * v[j] + w[j] * w[j]);
+                pe[j] -= m * (g[0] * x[j] + g[1] * y[j] + g[2] * z[j]);
+                // x·0 is 0 for finite x and NaN otherwise.
+                zero[j] += x[j] * 0.0 + y[j] * 0.0 + z[j] * 0.0 + u[j] * 0.0 + v[j] * 0.0 + w[j] * 0.0;
+            }
+        }
+        let arrays = [masses, free, px, py, pz, vx, vy, vz];
+        let mut k = 0;
+        while k + LANES <= n {
+            nodes::<LANES>(k, arrays, g, &mut ke, &mut pe, &mut zero);
+            k += LANES;
+        }
+        for k in k..n {
+            nodes::<1>(k, arrays, g, &mut ke, &mut pe, &mut zero);
+        }
+        let sum = |a: [f64; LANES]| a.iter().sum::<f64>();
+        let (ke, pe) = (sum(ke), sum(pe));
+        // `zero` is 0 exactly when every position and velocity is finite
+        // (what `State::is_finite` checks, in the same pass).
+        let finite = sum(zero) == 0.0 && ke.is_finite() && self.totals.elastic_energy.is_finite();
         StepReport {
             step: self.state.step,
             time: self.state.time,

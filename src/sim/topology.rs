@@ -222,15 +222,6 @@ impl Topology {
         self.node_areas.iter().sum()
     }
 
-    /// Longest run of any stencil group (sizes the kernel's scratch).
-    pub(crate) fn max_run_len(&self) -> usize {
-        self.groups
-            .iter()
-            .flat_map(|g| g.runs.iter().map(|r| r.len as usize))
-            .max()
-            .unwrap_or(0)
-    }
-
     /// Largest group without a stencil (sizes the gather scratch).
     pub(crate) fn max_gather_len(&self) -> usize {
         self.groups
