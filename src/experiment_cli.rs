@@ -333,7 +333,7 @@ fn table1(common: &Common, levels: &[usize]) -> Result<()> {
         spec,
         variants: TABLE1_VARIANTS.to_vec(),
         fit: common.fit(frames)?,
-        dt_margin: 0.5,
+        dt_margin: 0.75,
         map_level,
     };
     let started = Instant::now();
