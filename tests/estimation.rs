@@ -187,3 +187,35 @@ fn a_coarse_dt_that_does_not_divide_the_frame_interval_is_refused() {
     .unwrap_err();
     assert!(err.to_string().contains("does not divide"), "{err}");
 }
+
+#[test]
+fn estimation_samples_hold_the_positions_of_the_steps_they_name() {
+    let s = scene(6, "rk4", 2e-4);
+    let spec = RecordSpec {
+        frames: 45,
+        metric_stride: 5,
+        estimate_stride: 10,
+        difference_span: 3,
+    };
+    let reference = Reference::record(s.build().unwrap(), spec, &mut |_, _| {}).unwrap();
+    // Centres 10, 20, 30, 40 (40 + 3 ≤ 45); metric frames at 5, 10, …, 45.
+    assert_eq!(reference.samples.len(), 4);
+    assert_eq!(reference.frame_steps, (1..=9).map(|f| 5 * f).collect::<Vec<u64>>());
+    let mut sim = s.build().unwrap();
+    let mut positions = vec![sim.state().pos.clone()];
+    for _ in 0..45 {
+        sim.step();
+        positions.push(sim.state().pos.clone());
+    }
+    for (i, sample) in reference.samples.iter().enumerate() {
+        let c = 10 * (i + 1);
+        assert_eq!(sample.prev, positions[c - 3], "sample {i} prev");
+        assert_eq!(sample.cur, positions[c], "sample {i} cur");
+        assert_eq!(sample.next, positions[c + 3], "sample {i} next");
+        assert!((sample.time - c as f64 * 2e-4).abs() < 1e-12);
+    }
+    for (f, frame) in reference.frames.iter().enumerate() {
+        let want: Vec<f32> = positions[5 * (f + 1)].iter().map(|&x| x as f32).collect();
+        assert_eq!(frame, &want);
+    }
+}
