@@ -26,6 +26,10 @@ fn bench_step(c: &mut Criterion) {
             let mut scene = base.clone();
             scene.stability = StabilityCheck::Force;
             scene.params.integrator = integrator;
+            // The plain model, as the peers in bench/peers run it; the
+            // strain-limited scene has its own group below.
+            scene.params.strain_limit = None;
+            scene.params.stiffness_adjustment = None;
             let probe = scene.build_at(n, n).expect("builds");
             let limit = match probe.dt_limit() {
                 l if l.is_finite() => l,
@@ -47,6 +51,15 @@ fn bench_step(c: &mut Criterion) {
         }
         group.finish();
     }
+    // The shipped hanging scene as it runs (strain limiting on), 64×64.
+    let mut group = c.benchmark_group("step-strain-limited/symplectic_euler");
+    let mut sim = base.build().expect("builds");
+    for _ in 0..20 {
+        sim.step();
+    }
+    group.throughput(Throughput::Elements(sim.topology().spring_count() as u64));
+    group.bench_function(BenchmarkId::from_parameter(base.nx), |b| b.iter(|| sim.step()));
+    group.finish();
 }
 
 criterion_group! {
