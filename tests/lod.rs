@@ -182,10 +182,70 @@ fn a_mid_run_switch_keeps_positions_and_energy_and_beats_zeroed_velocities() {
     assert!(r.position_jump < 1e-12, "position jump {}", r.position_jump);
     assert!(r.kinetic_jump < 0.05, "kinetic-energy jump {}", r.kinetic_jump);
     assert!(
-        r.error_zero_velocity > 3.0 * r.error_transfer,
+        r.error_transfer <= r.error_never_switched,
+        "after the switch {} vs never switched {}",
+        r.error_transfer,
+        r.error_never_switched
+    );
+    assert!(
+        r.error_zero_velocity > 5.0 * r.error_transfer,
         "zeroed velocities {} vs transfer {}",
         r.error_zero_velocity,
         r.error_transfer
     );
     eprintln!("{r:?}");
+}
+
+/// Regression: the clock counted `step · dt` from t = 0, so a state handed
+/// over from a run with another dt jumped in time (a switch to a level with a
+/// larger dt skipped the rest of a force pulse).
+#[test]
+fn time_continues_from_a_transferred_state_whatever_the_dt() {
+    let s = scene();
+    let mut fine = s.build().unwrap();
+    for _ in 0..1000 {
+        fine.step();
+    }
+    let (t, steps) = (fine.state().time, fine.state().step);
+    let mut coarse_scene = s.clone();
+    coarse_scene.params.dt = 5e-4;
+    let mut coarse = coarse_scene.build_at(11, 11).unwrap();
+    coarse
+        .set_state(transfer_state(fine.topology(), fine.state(), coarse.topology()).unwrap())
+        .unwrap();
+    for k in 1..=10u32 {
+        coarse.step();
+        assert!(
+            (coarse.state().time - (t + f64::from(k) * 5e-4)).abs() < 1e-12,
+            "{}",
+            coarse.state().time
+        );
+    }
+    assert_eq!(coarse.state().step, steps + 10);
+}
+
+#[test]
+fn switching_to_the_same_level_changes_nothing() {
+    let s = scene();
+    let spec = RecordSpec {
+        frames: 3000,
+        metric_stride: 10,
+        estimate_stride: 20,
+        difference_span: 1,
+    };
+    let reference = Arc::new(Reference::record(s.build().unwrap(), spec, &mut |_, _| {}).unwrap());
+    let p = LodProblem::new(
+        &s,
+        reference.clone(),
+        20,
+        20,
+        MassConvention::Lumped,
+        Integrator::SymplecticEuler,
+        2e-4,
+    )
+    .unwrap();
+    let r = switch_test(&p, reference.material, 150, 100).unwrap();
+    assert_eq!(r.position_jump, 0.0);
+    // Only the f32 rounding of the recorded reference frames remains (~1e-8 of O_max).
+    assert!(r.error_transfer < 1e-6 && r.back_error < 1e-6, "{r:?}");
 }

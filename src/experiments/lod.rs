@@ -307,7 +307,16 @@ pub fn table1_scene(
         let (dt, limit) = if dt <= 0.8 * limit {
             (dt, limit)
         } else {
-            level_dt(scene, reference, level, level, variant.mass, integrator, est.material, 0.8)?
+            level_dt(
+                scene,
+                reference,
+                level,
+                level,
+                variant.mass,
+                integrator,
+                est.material,
+                0.8,
+            )?
         };
         let problem = LodProblem::new(scene, reference.clone(), level, level, variant.mass, integrator, dt)?;
         let t1 = Instant::now();

@@ -231,6 +231,11 @@ pub struct Simulation {
     cached: bool,
     modal: ModalEstimate,
     last: Option<StepReport>,
+    /// (time, step) of the state the clock counts from: the initial state or
+    /// the last one set. Time after a step is `t0 + (step − s0)·dt`, computed
+    /// from the count (no drift) yet correct when a state arrives from a run
+    /// with another dt (a level switch).
+    epoch: (f64, u64),
 }
 
 impl Simulation {
@@ -305,7 +310,9 @@ impl Simulation {
             cached: false,
             modal,
             last: None,
+            epoch: (0.0, 0),
         };
+        sim.epoch = (sim.state.time, sim.state.step);
         sim.apply_pins();
         Ok(sim)
     }
@@ -329,6 +336,7 @@ impl Simulation {
         self.state = state;
         self.cached = false;
         self.last = None;
+        self.epoch = (self.state.time, self.state.step);
         self.apply_pins();
         Ok(())
     }
@@ -462,7 +470,7 @@ impl Simulation {
         }
         self.state.step += 1;
         // Time from the step count, not by accumulation: no drift over long runs.
-        self.state.time = self.state.step as f64 * dt;
+        self.state.time = self.epoch.0 + (self.state.step - self.epoch.1) as f64 * dt;
         self.apply_pins();
 
         // Strain limiting runs before the force evaluation, not after it: its
