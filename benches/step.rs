@@ -38,7 +38,11 @@ fn bench_step(c: &mut Criterion) {
             };
             // Explicit Euler is stable only through damping and drifts
             // towards its limit as the cloth stretches: a quarter of it.
-            let fraction = if integrator == Integrator::ExplicitEuler { 0.25 } else { 0.5 };
+            let fraction = if integrator == Integrator::ExplicitEuler {
+                0.25
+            } else {
+                0.5
+            };
             scene.params.dt = fraction * limit;
             let mut sim = scene.build_at(n, n).expect("builds");
             // Let it fall for a moment so springs are stretched and moving.
