@@ -157,26 +157,32 @@ fn pins_stay_pinned_after_a_transfer() {
     }
 }
 
-#[test]
-fn a_mid_run_switch_keeps_positions_and_energy_and_beats_zeroed_velocities() {
-    let s = scene();
+/// Record `frames` steps of `s` and set up its `level`×`level` problem.
+fn problem(s: &Scene, frames: u64, level: usize, dt: f64) -> (Arc<Reference>, LodProblem) {
     let spec = RecordSpec {
-        frames: 4000,
+        frames,
         metric_stride: 10,
         estimate_stride: 20,
         difference_span: 1,
     };
     let reference = Arc::new(Reference::record(s.build().unwrap(), spec, &mut |_, _| {}).unwrap());
     let p = LodProblem::new(
-        &s,
+        s,
         reference.clone(),
-        12,
-        12,
+        level,
+        level,
         MassConvention::Lumped,
         Integrator::SymplecticEuler,
-        4e-4,
+        dt,
     )
     .unwrap();
+    (reference, p)
+}
+
+#[test]
+fn a_mid_run_switch_keeps_positions_and_energy_and_beats_zeroed_velocities() {
+    let s = scene();
+    let (reference, p) = problem(&s, 4000, 12, 4e-4);
     // Switch in the middle of the pull (t = 0.35 s), score the next 0.2 s.
     let r = switch_test(&p, reference.material, 175, 100).unwrap();
     assert!(r.position_jump < 1e-12, "position jump {}", r.position_jump);
@@ -227,23 +233,7 @@ fn time_continues_from_a_transferred_state_whatever_the_dt() {
 #[test]
 fn switching_to_the_same_level_changes_nothing() {
     let s = scene();
-    let spec = RecordSpec {
-        frames: 3000,
-        metric_stride: 10,
-        estimate_stride: 20,
-        difference_span: 1,
-    };
-    let reference = Arc::new(Reference::record(s.build().unwrap(), spec, &mut |_, _| {}).unwrap());
-    let p = LodProblem::new(
-        &s,
-        reference.clone(),
-        20,
-        20,
-        MassConvention::Lumped,
-        Integrator::SymplecticEuler,
-        2e-4,
-    )
-    .unwrap();
+    let (reference, p) = problem(&s, 3000, 20, 2e-4);
     let r = switch_test(&p, reference.material, 150, 100).unwrap();
     assert_eq!(r.position_jump, 0.0);
     // Only the f32 rounding of the recorded reference frames remains (~1e-8 of O_max).
