@@ -60,5 +60,9 @@ fn main() {
         );
     }
     let all = time_steps(full.clone(), &scene) - base;
-    println!("all: {:.1} µs, {:.2} ns/spring", all * 1e6, all * 1e9 / full.spring_count() as f64);
+    println!(
+        "all: {:.1} µs, {:.2} ns/spring",
+        all * 1e6,
+        all * 1e9 / full.spring_count() as f64
+    );
 }
