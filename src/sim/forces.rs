@@ -177,31 +177,52 @@ fn all_springs<const ADJ: bool>(
         gather,
         gather_len,
     } = scratch;
-    let stencil_runs = topology
-        .groups
-        .iter()
-        .filter_map(|g| g.stencil_offset.map(|offset| (g, offset as usize)))
-        .flat_map(|(g, offset)| g.runs.iter().map(move |run| (g, offset, run)));
-    for (group, offset, run) in stencil_runs {
-        let (a0, len, first) = (run.start as usize, run.len as usize, run.first as usize);
-        let b0 = a0 + offset;
-        #[inline(always)]
-        fn sl(s: &[f64], at: usize, len: usize) -> &[f64] {
-            &s[at..at + len]
-        }
-        let run = Run {
-            xa: [sl(p[0], a0, len), sl(p[1], a0, len), sl(p[2], a0, len)],
-            xb: [sl(p[0], b0, len), sl(p[1], b0, len), sl(p[2], b0, len)],
-            va: [sl(v[0], a0, len), sl(v[1], a0, len), sl(v[2], a0, len)],
-            vb: [sl(v[0], b0, len), sl(v[1], b0, len), sl(v[2], b0, len)],
-            rest: sl(&group.rest, first, len),
-            inv_rest: sl(&group.inv_rest, first, len),
+    #[inline(always)]
+    fn sl(s: &[f64], at: usize, len: usize) -> &[f64] {
+        &s[at..at + len]
+    }
+    for group in &topology.groups {
+        let Some(offset) = group.stencil_offset.map(|o| o as usize) else {
+            continue;
         };
+        let coef = coef(group);
         let acc = &mut acc[group.kind.index()];
-        match offset {
-            1 => run_carry::<1, ADJ>(&run, a0, coef(group), &mut f, acc),
-            2 => run_carry::<2, ADJ>(&run, a0, coef(group), &mut f, acc),
-            _ => run_direct::<ADJ>(&run, a0, b0, coef(group), &mut f, acc),
+        // One padded run when the group has one (masked slots between
+        // rows), else its runs one by one.
+        let padded = group
+            .padded
+            .as_ref()
+            .map(|pd| (pd.start as usize, &pd.rest[..], &pd.inv_rest[..], &pd.live[..]));
+        let runs = group.runs.iter().map(|r| {
+            let (first, len) = (r.first as usize, r.len as usize);
+            (
+                r.start as usize,
+                sl(&group.rest, first, len),
+                sl(&group.inv_rest, first, len),
+                &[][..],
+            )
+        });
+        let all: &mut dyn Iterator<Item = (usize, &[f64], &[f64], &[f64])> = match padded {
+            Some(one) => &mut std::iter::once(one),
+            None => &mut { runs },
+        };
+        for (a0, rest, inv_rest, live) in all {
+            let len = rest.len();
+            let b0 = a0 + offset;
+            let run = Run {
+                xa: [sl(p[0], a0, len), sl(p[1], a0, len), sl(p[2], a0, len)],
+                xb: [sl(p[0], b0, len), sl(p[1], b0, len), sl(p[2], b0, len)],
+                va: [sl(v[0], a0, len), sl(v[1], a0, len), sl(v[2], a0, len)],
+                vb: [sl(v[0], b0, len), sl(v[1], b0, len), sl(v[2], b0, len)],
+                rest,
+                inv_rest,
+                live,
+            };
+            match offset {
+                1 => run_carry::<1, ADJ>(&run, a0, coef, &mut f, acc),
+                2 => run_carry::<2, ADJ>(&run, a0, coef, &mut f, acc),
+                _ => run_direct::<ADJ>(&run, a0, b0, coef, &mut f, acc),
+            }
         }
     }
     for group in &topology.groups {
@@ -242,6 +263,8 @@ struct Run<'a> {
     vb: [&'a [f64]; 3],
     rest: &'a [f64],
     inv_rest: &'a [f64],
+    /// Per-slot mask (1 spring, 0 none), or empty when every slot is a spring.
+    live: &'a [f64],
 }
 
 impl Run<'_> {
@@ -410,6 +433,7 @@ fn gather_group<const ADJ: bool>(
         vb: [blk(9), blk(10), blk(11)],
         rest: &group.rest,
         inv_rest: &group.inv_rest,
+        live: &[],
     };
     let out = &mut *ws.out;
     let mut local = *acc;
@@ -477,6 +501,11 @@ fn block<const N: usize, const ADJ: bool>(run: &Run, i: usize, coef: Coef, skip:
     let (ubx, uby, ubz) = (arr::<N>(run.vb[0], i), arr::<N>(run.vb[1], i), arr::<N>(run.vb[2], i));
     let l0 = arr::<N>(run.rest, i);
     let il0 = arr::<N>(run.inv_rest, i);
+    let mask: [f64; N] = if run.live.is_empty() {
+        [1.0; N]
+    } else {
+        arr::<N>(run.live, i)
+    };
     let mut out = BlockOut {
         f: [[0.0; N]; 3],
         ext: [0.0; N],
@@ -513,7 +542,7 @@ fn block<const N: usize, const ADJ: bool>(run: &Run, i: usize, coef: Coef, skip:
             coef.k * ext
         };
         let s = coef.c.mul_add(dvd * inv, elastic) * inv;
-        let live = j >= skip;
+        let live = j >= skip && mask[j] != 0.0;
         let s = if live { s } else { 0.0 };
         out.f[0][j] = s * dx;
         out.f[1][j] = s * dy;

@@ -24,7 +24,7 @@ pub use params::{
 pub use stability::{amplification, dt_limit, modal_estimate, ModalEstimate};
 pub use state::State;
 pub use strain::StrainOutcome;
-pub use topology::{GridShape, Orientation, Run, SpringGroup, Topology};
+pub use topology::{GridShape, Orientation, Padded, Run, SpringGroup, Topology};
 
 use forces::KernelScratch;
 use implicit::{ImplicitInputs, ImplicitWorkspace};
