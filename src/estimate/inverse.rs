@@ -140,6 +140,14 @@ pub struct Observation {
     pub sample: usize,
 }
 
+/// Every observation of one coarse level, and which of its nodes are free
+/// (pinned nodes carry no information about the springs).
+#[derive(Debug, Clone)]
+pub struct Observations {
+    pub free: Vec<bool>,
+    pub samples: Vec<Observation>,
+}
+
 /// Map the reference's estimation samples onto `coarse` (a simulation of the
 /// coarse cloth with the masses and loads to estimate for; its coefficients
 /// are not used).
@@ -148,7 +156,7 @@ pub fn observe(
     correlation: &Correlation,
     coarse: &mut Simulation,
     progress: ProgressFn<'_>,
-) -> Vec<Observation> {
+) -> Observations {
     let n = coarse.topology().n_nodes;
     let nf = reference.topology.n_nodes;
     let dt = reference.dt * reference.spec.difference_span as f64;
@@ -157,6 +165,7 @@ pub fn observe(
     let mut prev = vec![0.0; 3 * n];
     let mut next = vec![0.0; 3 * n];
     let mut ext = vec![0.0; 3 * n];
+    let free: Vec<bool> = pinned_mask(coarse).iter().map(|p| !p).collect();
     let mut out = Vec::with_capacity(reference.samples.len());
     let total = reference.samples.len() as u64;
     for (si, s) in reference.samples.iter().enumerate() {
@@ -183,12 +192,11 @@ pub fn observe(
             })
             .collect();
         coarse.external_forces(s.time, &pos, &vel, &mut ext);
-        let pinned = pinned_mask(coarse);
         let mut spring_force = vec![0.0; 3 * n];
         for c in 0..3 {
             for k in 0..n {
                 let i = c * n + k;
-                if !pinned[k] {
+                if free[k] {
                     let acc = (next[i] - 2.0 * pos[i] + prev[i]) / (dt * dt);
                     spring_force[i] = masses[k] * acc - ext[i];
                 }
@@ -208,7 +216,7 @@ pub fn observe(
             total,
         });
     }
-    out
+    Observations { free, samples: out }
 }
 
 fn pinned_mask(sim: &Simulation) -> Vec<bool> {
@@ -283,7 +291,7 @@ pub fn inverse_estimate(
     reference: &Reference,
     correlation: &Correlation,
     coarse: &Topology,
-    observations: &[Observation],
+    observations: &Observations,
     distribution: Distribution,
     progress: ProgressFn<'_>,
 ) -> InverseEstimate {
@@ -300,14 +308,9 @@ pub fn inverse_estimate(
     let mut rej = Rejections::default();
     let mut sum_k = [0.0; 3];
     let mut sum_c = [0.0; 3];
-    let total = observations.len() as u64;
-    let free: Vec<bool> = {
-        // A pinned node has zero spring force by construction in `observe`.
-        (0..n)
-            .map(|k| (0..3).any(|c| observations.iter().any(|o| o.spring_force[c * n + k] != 0.0)))
-            .collect()
-    };
-    for (oi, obs) in observations.iter().enumerate() {
+    let total = observations.samples.len() as u64;
+    let free = &observations.free;
+    for (oi, obs) in observations.samples.iter().enumerate() {
         let s = &reference.samples[obs.sample];
         fine.compute(&reference.topology, &s.cur, &obs.fine_vel);
         for t in 0..3 {
@@ -450,7 +453,7 @@ pub struct LsqEstimate {
 pub fn lsq_estimate(
     reference_material: &Material,
     coarse: &Topology,
-    observations: &[Observation],
+    observations: &Observations,
     progress: ProgressFn<'_>,
 ) -> LsqEstimate {
     let n = coarse.n_nodes;
@@ -467,16 +470,13 @@ pub fn lsq_estimate(
     let mut btb = 0.0;
     let mut equations = 0u64;
     let mut bases = Bases::new(n);
-    let total = observations.len() as u64;
-    for (oi, obs) in observations.iter().enumerate() {
+    let total = observations.samples.len() as u64;
+    for (oi, obs) in observations.samples.iter().enumerate() {
         bases.compute(coarse, &obs.pos, &obs.vel);
         for c in 0..3 {
-            for k in 0..n {
+            for k in (0..n).filter(|&k| observations.free[k]) {
                 let i = c * n + k;
                 let b = obs.spring_force[i];
-                if b == 0.0 {
-                    continue; // pinned
-                }
                 let row = Vector6::from_fn(|j, _| {
                     let basis = if j < 3 {
                         &bases.elastic[j]

@@ -232,6 +232,37 @@ pub fn default_problem(scene: &Scene, reference: &Arc<Reference>, level: usize) 
     )?)
 }
 
+/// `problem` itself when `material` runs within 0.8 of its predicted
+/// stability limit at `problem.dt`, else the same level at the largest dt
+/// that does; with the model's limit. Every scored model obeys this bound.
+pub fn stable_problem(problem: &LodProblem, material: Material) -> Result<(LodProblem, f64), ExperimentError> {
+    let limit = problem.simulation(material)?.dt_limit();
+    if problem.dt <= 0.8 * limit {
+        return Ok((problem.clone(), limit));
+    }
+    let (nx, ny) = (problem.nx, problem.ny);
+    let (dt, limit) = level_dt(
+        &problem.scene,
+        &problem.reference,
+        nx,
+        ny,
+        problem.mass,
+        problem.integrator,
+        material,
+        0.8,
+    )?;
+    let q = LodProblem::new(
+        &problem.scene,
+        problem.reference.clone(),
+        nx,
+        ny,
+        problem.mass,
+        problem.integrator,
+        dt,
+    )?;
+    Ok((q, limit))
+}
+
 /// Options of [`table1_scene`].
 #[derive(Debug, Clone)]
 pub struct Table1Options {
@@ -303,22 +334,8 @@ pub fn table1_scene(
         fit.train = Some(train.clone());
         let est = estimator.estimate(&problem, variant.method, &fit)?;
         // A model estimated stiffer than the level's dt allows gets its own dt.
-        let limit = problem.simulation(est.material)?.dt_limit();
-        let (dt, limit) = if dt <= 0.8 * limit {
-            (dt, limit)
-        } else {
-            level_dt(
-                scene,
-                reference,
-                level,
-                level,
-                variant.mass,
-                integrator,
-                est.material,
-                0.8,
-            )?
-        };
-        let problem = LodProblem::new(scene, reference.clone(), level, level, variant.mass, integrator, dt)?;
+        let (problem, limit) = stable_problem(&problem, est.material)?;
+        let dt = problem.dt;
         let t1 = Instant::now();
         let all = problem.score(est.material, 0..frames, &mut no_progress)?;
         let cost = t1.elapsed().as_secs_f64() / (frames as f64 * reference.dt * reference.spec.metric_stride as f64);
@@ -775,14 +792,8 @@ pub fn generalisation(
         let mut row = Vec::new();
         for p in &problems {
             // A model fitted elsewhere may need a smaller dt here.
-            let limit = p.simulation(*m)?.dt_limit();
-            let e = if p.dt <= 0.8 * limit {
-                p.score(*m, 0..p.frames(), &mut no_progress)?.mean
-            } else {
-                let (dt, _) = level_dt(&p.scene, &p.reference, level, level, p.mass, p.integrator, *m, 0.8)?;
-                let q = LodProblem::new(&p.scene, p.reference.clone(), level, level, p.mass, p.integrator, dt)?;
-                q.score(*m, 0..q.frames(), &mut no_progress)?.mean
-            };
+            let (q, _) = stable_problem(p, *m)?;
+            let e = q.score(*m, 0..q.frames(), &mut no_progress)?.mean;
             row.push(e);
         }
         log(format!(
