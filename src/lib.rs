@@ -21,12 +21,25 @@
 //!   file per (scene, resolutions, method, mass, integrator, dt), written
 //!   atomically so a crash never leaves a torn file.
 //! - [`experiments`] — longer studies built on the core (stability sweeps).
-//! - `main.rs` — the `lodcloth` command line.
+//! - [`engine`] — the only code that knows threads and the wall clock:
+//!   instances stepping at fixed dt on OS threads, paced to real time;
+//!   commands applied between steps; newest-value state and metrics out;
+//!   level preparation (reference, estimate, calibration) off those threads.
+//! - [`service`] — tokio + zenoh around the engine: config, publishers,
+//!   queryables, liveliness, key expressions (`service::keys`), and the
+//!   client used by the CLI and tests.
+//! - [`proto`] — the wire contract (`proto/lodcloth/v1/lodcloth.proto`) and
+//!   every wire ↔ domain conversion.
+//! - `main.rs` — the `lodcloth` command line: `serve` and its clients,
+//!   `simulate`, `experiment`, `stability`, `inspect`.
 
 pub mod cache;
+pub mod engine;
 pub mod estimate;
 pub mod experiments;
 pub mod lod;
 pub mod output;
+pub mod proto;
 pub mod scene;
+pub mod service;
 pub mod sim;

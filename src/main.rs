@@ -21,6 +21,9 @@ use lodcloth::sim::{Integrator, StabilityCheck};
 #[derive(Parser)]
 #[command(name = "lodcloth", version, about = "Mass-spring cloth at several levels of detail")]
 struct Cli {
+    /// Log as JSON lines (for containers and log collectors) instead of text.
+    #[arg(long, global = true, env = "LODCLOTH_LOG_JSON")]
+    log_json: bool,
     #[command(subcommand)]
     command: Command,
 }
@@ -46,6 +49,49 @@ impl From<IntegratorArg> for Integrator {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Run the daemon: cloth instances stepping in real time, published on
+    /// zenoh, switching levels on request (config/default.toml by default).
+    Serve(serve_cli::ServeArgs),
+    /// List the instances of every reachable daemon.
+    List {
+        #[command(flatten)]
+        connect: serve_cli::Connect,
+    },
+    /// Live view of an instance's metrics.
+    Watch {
+        instance: String,
+        /// Stop after this many metrics messages.
+        #[arg(long)]
+        count: Option<u64>,
+        #[command(flatten)]
+        connect: serve_cli::Connect,
+    },
+    /// Switch an instance to another level (or the cheapest meeting --max-error).
+    Switch {
+        #[command(flatten)]
+        args: serve_cli::SwitchArgs,
+        #[command(flatten)]
+        connect: serve_cli::Connect,
+    },
+    /// Record an instance's published states to a trajectory file (.lct).
+    Record {
+        instance: String,
+        /// How long to record (wall seconds).
+        #[arg(long, default_value_t = 10.0)]
+        seconds: f64,
+        /// Output trajectory file.
+        #[arg(long)]
+        out: PathBuf,
+        #[command(flatten)]
+        connect: serve_cli::Connect,
+    },
+    /// Exit 0 when the daemon answers (every instance, or --instance).
+    Health {
+        #[arg(long)]
+        instance: Option<String>,
+        #[command(flatten)]
+        connect: serve_cli::Connect,
+    },
     /// Run a scene and write its trajectory (.lct), a per-frame CSV report, an
     /// energy chart (SVG) and a PNG of the final shape.
     Simulate {
@@ -116,13 +162,39 @@ enum Command {
 }
 
 mod experiment_cli;
+mod serve_cli;
 
 fn main() -> Result<()> {
-    tracing_subscriber::fmt()
-        .with_env_filter(tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()))
-        .with_writer(std::io::stderr)
-        .init();
-    match Cli::parse().command {
+    let cli = Cli::parse();
+    let filter = || tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info,zenoh=warn".into());
+    if cli.log_json {
+        tracing_subscriber::fmt()
+            .json()
+            .with_env_filter(filter())
+            .with_writer(std::io::stderr)
+            .init();
+    } else {
+        tracing_subscriber::fmt()
+            .with_env_filter(filter())
+            .with_writer(std::io::stderr)
+            .init();
+    }
+    match cli.command {
+        Command::Serve(args) => serve_cli::serve(args),
+        Command::List { connect } => serve_cli::list(connect),
+        Command::Watch {
+            instance,
+            count,
+            connect,
+        } => serve_cli::watch(connect, instance, count),
+        Command::Switch { args, connect } => serve_cli::switch(connect, args),
+        Command::Record {
+            instance,
+            seconds,
+            out,
+            connect,
+        } => serve_cli::record(connect, instance, seconds, out),
+        Command::Health { instance, connect } => serve_cli::health(connect, instance),
         Command::Simulate {
             scene,
             nx,

@@ -1,0 +1,672 @@
+//! The stepping engine: the only code that knows threads and the wall clock.
+//!
+//! Instances are spread over a fixed set of OS threads (one per core by
+//! default; never tokio workers). Each thread runs its instances at their
+//! fixed dt, paced to the wall clock: simulated time tracks real time; an
+//! instance that runs late catches up with at most `max_substeps` steps per
+//! pass (counting an overrun when that is not enough) and, beyond `max_lag`
+//! behind, drops the backlog (a lag reset). dt is never stretched.
+//!
+//! Commands (switch, pause, reset) arrive on a channel and are applied
+//! between steps. States and metrics leave through `watch` channels that
+//! hold only the newest value, so a slow publisher drops frames and never
+//! blocks stepping. The two states at a level switch (old level, new level,
+//! same instant) also go through a small unbounded channel so that both
+//! reach the bus.
+
+pub mod prepare;
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{self, Receiver, Sender, TryRecvError};
+use std::sync::{Arc, Mutex};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant, SystemTime};
+
+use tokio::sync::{oneshot, watch};
+
+use crate::estimate::Method;
+use crate::lod::transfer_state;
+use crate::proto::Level;
+use crate::sim::{Material, Simulation, State, StepReport, Topology};
+
+pub use prepare::{PrepareError, Prepared, Preparer};
+
+/// A snapshot of an instance's cloth, as the engine hands it to the bus.
+#[derive(Debug, Clone)]
+pub struct StateFrame {
+    pub frame: u64,
+    pub time: f64,
+    pub episode: u64,
+    pub level: Level,
+    pub coefficient_version: u32,
+    /// Interleaved x, y, z per node.
+    pub positions: Vec<f32>,
+    pub stepped: SystemTime,
+    pub transition: bool,
+}
+
+/// Metrics over the last interval.
+#[derive(Debug, Clone)]
+pub struct MetricsFrame {
+    pub frame: u64,
+    pub time: f64,
+    pub level: Level,
+    pub method: Method,
+    pub predicted_error: Option<f64>,
+    pub live_error: Option<f64>,
+    pub step_cost_us: f64,
+    pub real_time_factor: f64,
+    pub overruns: u64,
+    pub lag_resets: u64,
+    pub divergences: u64,
+    pub kinetic_energy: f64,
+    pub potential_energy: f64,
+    pub max_strain: f64,
+    pub coefficient_version: u32,
+    pub paused: bool,
+    pub dt: f64,
+}
+
+/// What `info` replies describe: updated at every switch, pause and reset.
+#[derive(Debug, Clone)]
+pub struct Status {
+    pub level: Level,
+    pub method: Method,
+    pub material: Material,
+    pub dt: f64,
+    pub coefficient_version: u32,
+    pub predicted_error: Option<f64>,
+    pub paused: bool,
+    pub topology: Arc<Topology>,
+    pub pinned: Vec<u32>,
+    pub frame: u64,
+    pub o_max: Option<f64>,
+}
+
+/// A level switch done.
+#[derive(Debug, Clone)]
+pub struct SwitchOutcome {
+    pub previous: Level,
+    pub level: Level,
+    pub method: Method,
+    pub material: Material,
+    pub predicted_error: Option<f64>,
+    pub dt: f64,
+    pub coefficient_version: u32,
+    pub frame: u64,
+}
+
+/// State after a control command.
+#[derive(Debug, Clone, Copy)]
+pub struct ControlOutcome {
+    pub paused: bool,
+    pub frame: u64,
+}
+
+/// Commands, applied between steps.
+pub enum Command {
+    /// Continue at `prepared`'s level from the current state (transferred).
+    /// `sim` is the new level at rest, built off the stepping thread.
+    Switch {
+        prepared: Arc<Prepared>,
+        sim: Box<Simulation>,
+        reply: oneshot::Sender<Result<SwitchOutcome, String>>,
+    },
+    Pause {
+        paused: bool,
+        reply: oneshot::Sender<ControlOutcome>,
+    },
+    /// Start the scene over from rest at the current level.
+    Reset { reply: oneshot::Sender<ControlOutcome> },
+}
+
+/// Everything an instance starts with.
+pub struct InstanceSetup {
+    pub name: String,
+    pub sim: Simulation,
+    pub level: Level,
+    pub method: Method,
+    pub publish_hz: f64,
+    /// Scene duration (s): the scene starts over there when `looping`.
+    pub duration: f64,
+    pub looping: bool,
+}
+
+/// The service's side of one running instance.
+#[derive(Clone)]
+pub struct InstanceHandle {
+    pub name: String,
+    commands: Sender<Command>,
+    thread: std::thread::Thread,
+    pub states: watch::Receiver<Option<Arc<StateFrame>>>,
+    pub metrics: watch::Receiver<Option<Arc<MetricsFrame>>>,
+    pub transitions: Arc<tokio::sync::Mutex<tokio::sync::mpsc::UnboundedReceiver<Arc<StateFrame>>>>,
+    status: Arc<Mutex<Status>>,
+}
+
+impl InstanceHandle {
+    /// Queue a command and wake the instance's thread. Err when the engine
+    /// has stopped.
+    pub fn send(&self, command: Command) -> Result<(), &'static str> {
+        self.commands.send(command).map_err(|_| "the engine has stopped")?;
+        self.thread.unpark();
+        Ok(())
+    }
+
+    pub fn status(&self) -> Status {
+        prepare::lock(&self.status).clone()
+    }
+}
+
+/// Engine settings.
+#[derive(Debug, Clone, Copy)]
+pub struct EngineSettings {
+    pub threads: usize,
+    pub max_substeps: u32,
+    pub max_lag: f64,
+    pub metrics_hz: f64,
+}
+
+/// The running engine.
+pub struct Engine {
+    stop: Arc<AtomicBool>,
+    threads: Vec<JoinHandle<()>>,
+    handles: Vec<InstanceHandle>,
+}
+
+impl Engine {
+    /// Start stepping `instances`, spread over `settings.threads` threads by
+    /// their cost (nodes / dt, heavier integrators weighted up).
+    pub fn start(instances: Vec<InstanceSetup>, settings: EngineSettings) -> std::io::Result<Engine> {
+        let stop = Arc::new(AtomicBool::new(false));
+        let n_threads = settings.threads.clamp(1, instances.len().max(1));
+        let mut buckets: Vec<(f64, Vec<Runner>)> = (0..n_threads).map(|_| (0.0, Vec::new())).collect();
+        // Heaviest first onto the least loaded thread; handles come back in
+        // the caller's order.
+        let mut order: Vec<(usize, InstanceSetup)> = instances.into_iter().enumerate().collect();
+        order.sort_by(|a, b| cost(&b.1).total_cmp(&cost(&a.1)));
+        let mut receivers = Vec::new();
+        let mut pending = Vec::new();
+        for (index, setup) in order {
+            let c = cost(&setup);
+            let (tx, rx) = mpsc::channel();
+            let (runner, handle_parts) = Runner::new(setup, rx, settings);
+            let b = (0..n_threads)
+                .min_by(|&i, &j| buckets[i].0.total_cmp(&buckets[j].0))
+                .unwrap_or(0);
+            buckets[b].0 += c;
+            buckets[b].1.push(runner);
+            receivers.push(b);
+            pending.push((index, tx, handle_parts));
+        }
+        let mut threads = Vec::new();
+        for (i, (_, runners)) in buckets.into_iter().enumerate() {
+            let stop = stop.clone();
+            let h = std::thread::Builder::new()
+                .name(format!("lodcloth-step-{i}"))
+                .spawn(move || worker(runners, stop, settings))?;
+            threads.push(h);
+        }
+        let mut handles: Vec<(usize, InstanceHandle)> = pending
+            .into_iter()
+            .zip(receivers)
+            .map(|((index, tx, parts), b)| {
+                (
+                    index,
+                    InstanceHandle {
+                name: parts.name,
+                commands: tx,
+                thread: threads[b].thread().clone(),
+                states: parts.states,
+                metrics: parts.metrics,
+                transitions: Arc::new(tokio::sync::Mutex::new(parts.transitions)),
+                        status: parts.status,
+                    },
+                )
+            })
+            .collect();
+        handles.sort_by_key(|(i, _)| *i);
+        let handles = handles.into_iter().map(|(_, h)| h).collect();
+        Ok(Engine { stop, threads, handles })
+    }
+
+    pub fn handles(&self) -> &[InstanceHandle] {
+        &self.handles
+    }
+
+    /// Finish the current steps and join every thread.
+    pub fn stop(self) {
+        self.stop.store(true, Ordering::SeqCst);
+        for t in &self.threads {
+            t.thread().unpark();
+        }
+        for t in self.threads {
+            if t.join().is_err() {
+                tracing::error!("a stepping thread panicked");
+            }
+        }
+    }
+}
+
+/// Relative cost of one simulated second.
+fn cost(s: &InstanceSetup) -> f64 {
+    let p = s.sim.params();
+    let per_step = match p.integrator {
+        crate::sim::Integrator::Rk4 => 4.5,
+        crate::sim::Integrator::ImplicitEuler => 25.0,
+        _ => 1.0,
+    };
+    s.sim.topology().n_nodes as f64 * per_step / p.dt
+}
+
+struct HandleParts {
+    name: String,
+    states: watch::Receiver<Option<Arc<StateFrame>>>,
+    metrics: watch::Receiver<Option<Arc<MetricsFrame>>>,
+    transitions: tokio::sync::mpsc::UnboundedReceiver<Arc<StateFrame>>,
+    status: Arc<Mutex<Status>>,
+}
+
+/// The reference replayed beside a running level.
+struct Shadow {
+    prepared: Arc<Prepared>,
+    /// Metric frame interval of the reference (s).
+    interval: f64,
+    mapped: Vec<f64>,
+}
+
+/// One instance on its stepping thread.
+struct Runner {
+    name: String,
+    sim: Simulation,
+    level: Level,
+    method: Method,
+    material: Material,
+    predicted_error: Option<f64>,
+    coefficient_version: u32,
+    shadow: Option<Shadow>,
+    live_error: Option<f64>,
+    duration: f64,
+    looping: bool,
+    commands: Receiver<Command>,
+    settings: EngineSettings,
+    // Pacing: step `steps_since_origin` is due at origin + steps·dt.
+    origin: Instant,
+    steps_since_origin: u64,
+    paused: bool,
+    frames: u64,
+    episode: u64,
+    overruns: u64,
+    lag_resets: u64,
+    divergences: u64,
+    last: Option<StepReport>,
+    // Metrics window.
+    window_start: Instant,
+    window_sim: f64,
+    window_steps: u64,
+    window_busy: Duration,
+    next_publish: Instant,
+    publish_every: Duration,
+    next_metrics: Instant,
+    metrics_every: Duration,
+    states: watch::Sender<Option<Arc<StateFrame>>>,
+    metrics: watch::Sender<Option<Arc<MetricsFrame>>>,
+    transitions: tokio::sync::mpsc::UnboundedSender<Arc<StateFrame>>,
+    status: Arc<Mutex<Status>>,
+}
+
+impl Runner {
+    fn new(setup: InstanceSetup, commands: Receiver<Command>, settings: EngineSettings) -> (Runner, HandleParts) {
+        let now = Instant::now();
+        let (states_tx, states_rx) = watch::channel(None);
+        let (metrics_tx, metrics_rx) = watch::channel(None);
+        let (trans_tx, trans_rx) = tokio::sync::mpsc::unbounded_channel();
+        let material = setup.sim.params().material;
+        let status = Arc::new(Mutex::new(Status {
+            level: setup.level,
+            method: setup.method,
+            material,
+            dt: setup.sim.params().dt,
+            coefficient_version: 1,
+            predicted_error: None,
+            paused: false,
+            topology: setup.sim.topology().clone(),
+            pinned: setup.sim.loads().pins.iter().map(|p| p.node).collect(),
+            frame: 0,
+            o_max: None,
+        }));
+        let runner = Runner {
+            name: setup.name.clone(),
+            level: setup.level,
+            method: setup.method,
+            material,
+            predicted_error: None,
+            coefficient_version: 1,
+            shadow: None,
+            live_error: None,
+            duration: setup.duration,
+            looping: setup.looping,
+            sim: setup.sim,
+            commands,
+            settings,
+            origin: now,
+            steps_since_origin: 0,
+            paused: false,
+            frames: 0,
+            episode: 0,
+            overruns: 0,
+            lag_resets: 0,
+            divergences: 0,
+            last: None,
+            window_start: now,
+            window_sim: 0.0,
+            window_steps: 0,
+            window_busy: Duration::ZERO,
+            next_publish: now,
+            publish_every: Duration::from_secs_f64(1.0 / setup.publish_hz),
+            next_metrics: now,
+            metrics_every: Duration::from_secs_f64(1.0 / settings.metrics_hz),
+            states: states_tx,
+            metrics: metrics_tx,
+            transitions: trans_tx,
+            status: status.clone(),
+        };
+        let parts = HandleParts {
+            name: setup.name,
+            states: states_rx,
+            metrics: metrics_rx,
+            transitions: trans_rx,
+            status,
+        };
+        (runner, parts)
+    }
+
+    fn dt(&self) -> f64 {
+        self.sim.params().dt
+    }
+
+    /// When the next step is due.
+    fn next_due(&self) -> Instant {
+        if self.paused {
+            return self.next_metrics;
+        }
+        self.origin + Duration::from_secs_f64((self.steps_since_origin + 1) as f64 * self.dt())
+    }
+
+    fn reanchor(&mut self, now: Instant) {
+        self.origin = now;
+        self.steps_since_origin = 0;
+    }
+
+    /// Apply queued commands.
+    fn poll_commands(&mut self) {
+        loop {
+            match self.commands.try_recv() {
+                Ok(c) => self.apply(c),
+                Err(TryRecvError::Empty | TryRecvError::Disconnected) => return,
+            }
+        }
+    }
+
+    fn apply(&mut self, command: Command) {
+        match command {
+            Command::Switch { prepared, sim, reply } => {
+                let outcome = self.switch(prepared, *sim);
+                let _ = reply.send(outcome);
+            }
+            Command::Pause { paused, reply } => {
+                self.paused = paused;
+                self.reanchor(Instant::now());
+                self.update_status();
+                let _ = reply.send(ControlOutcome {
+                    paused,
+                    frame: self.frames,
+                });
+            }
+            Command::Reset { reply } => {
+                self.restart();
+                self.reanchor(Instant::now());
+                let _ = reply.send(ControlOutcome {
+                    paused: self.paused,
+                    frame: self.frames,
+                });
+            }
+        }
+    }
+
+    fn switch(&mut self, prepared: Arc<Prepared>, mut sim: Simulation) -> Result<SwitchOutcome, String> {
+        let previous = self.level;
+        let old_topology = self.sim.topology().clone();
+        let before = self.snapshot(true);
+        let state = if Arc::ptr_eq(&old_topology, sim.topology()) || old_topology.n_nodes == sim.topology().n_nodes {
+            self.sim.state().clone()
+        } else {
+            transfer_state(&old_topology, self.sim.state(), sim.topology()).map_err(|e| e.to_string())?
+        };
+        sim.set_state(state).map_err(|e| e.to_string())?;
+        self.sim = sim;
+        self.level = prepared.level;
+        self.method = prepared.method;
+        self.material = prepared.material;
+        self.predicted_error = Some(prepared.predicted_error);
+        self.coefficient_version += 1;
+        let interval = prepared.problem.reference.dt * prepared.problem.reference.spec.metric_stride as f64;
+        self.shadow = Some(Shadow {
+            interval,
+            mapped: vec![0.0; 3 * self.sim.topology().n_nodes],
+            prepared: prepared.clone(),
+        });
+        self.live_error = None;
+        self.reanchor(Instant::now());
+        self.update_status();
+        let after = self.snapshot(true);
+        let _ = self.transitions.send(Arc::new(before));
+        let after = Arc::new(after);
+        let _ = self.transitions.send(after.clone());
+        self.states.send_replace(Some(after));
+        Ok(SwitchOutcome {
+            previous,
+            level: self.level,
+            method: self.method,
+            material: self.material,
+            predicted_error: self.predicted_error,
+            dt: self.dt(),
+            coefficient_version: self.coefficient_version,
+            frame: self.frames,
+        })
+    }
+
+    /// Back to rest at the current level; a new episode.
+    fn restart(&mut self) {
+        let rest = State::at_rest(self.sim.topology());
+        if let Err(e) = self.sim.set_state(rest) {
+            tracing::error!(instance = %self.name, "reset failed: {e}");
+        }
+        self.episode += 1;
+        self.live_error = None;
+        self.update_status();
+    }
+
+    fn update_status(&self) {
+        let mut s = prepare::lock(&self.status);
+        s.level = self.level;
+        s.method = self.method;
+        s.material = self.material;
+        s.dt = self.dt();
+        s.coefficient_version = self.coefficient_version;
+        s.predicted_error = self.predicted_error;
+        s.paused = self.paused;
+        if !Arc::ptr_eq(&s.topology, self.sim.topology()) {
+            s.topology = self.sim.topology().clone();
+            s.pinned = self.sim.loads().pins.iter().map(|p| p.node).collect();
+        }
+        s.frame = self.frames;
+        s.o_max = self.shadow.as_ref().map(|sh| sh.prepared.problem.reference.o_max);
+    }
+
+    /// Take the steps due at `now`.
+    fn advance(&mut self, now: Instant) {
+        if self.paused {
+            self.reanchor(now);
+            return;
+        }
+        let dt = self.dt();
+        let elapsed = now.saturating_duration_since(self.origin).as_secs_f64();
+        let mut due = ((elapsed / dt) as u64).saturating_sub(self.steps_since_origin);
+        if due as f64 * dt > self.settings.max_lag {
+            self.lag_resets += 1;
+            tracing::warn!(instance = %self.name, behind_s = due as f64 * dt, "fell behind real time; dropping the backlog");
+            self.reanchor(now);
+            due = 1;
+        }
+        let n = due.min(u64::from(self.settings.max_substeps));
+        if due > n {
+            self.overruns += 1;
+        }
+        if n == 0 {
+            return;
+        }
+        let t0 = Instant::now();
+        for _ in 0..n {
+            self.step_once();
+        }
+        self.window_busy += t0.elapsed();
+        self.window_steps += n;
+        self.window_sim += n as f64 * dt;
+        self.steps_since_origin += n;
+    }
+
+    fn step_once(&mut self) {
+        let report = self.sim.step();
+        self.frames += 1;
+        if !report.finite {
+            self.divergences += 1;
+            tracing::error!(
+                instance = %self.name,
+                level = %self.level,
+                time = report.time,
+                "the simulation diverged; starting the scene over"
+            );
+            self.restart();
+            return;
+        }
+        self.last = Some(report);
+        if let Some(sh) = self.shadow.as_mut() {
+            // A metric frame f of the reference is at time (f + 1)·interval.
+            let t = report.time;
+            let f = (t / sh.interval).round();
+            if f >= 1.0 && (t - f * sh.interval).abs() < 0.25 * self.sim.params().dt {
+                let reference = &sh.prepared.problem.reference;
+                let idx = f as usize - 1;
+                self.live_error = if idx < reference.frames.len() {
+                    sh.prepared.problem.correlation().map(&reference.frames[idx], &mut sh.mapped);
+                    let pos = &self.sim.state().pos;
+                    let n = pos.len() / 3;
+                    let mut sum = 0.0;
+                    for k in 0..n {
+                        let d2 = (0..3).map(|c| (sh.mapped[c * n + k] - pos[c * n + k]).powi(2)).sum::<f64>();
+                        sum += d2.sqrt();
+                    }
+                    Some(sum / n as f64 / reference.o_max)
+                } else {
+                    None
+                };
+            }
+        }
+        if self.looping && report.time >= self.duration {
+            self.restart();
+        }
+    }
+
+    fn snapshot(&self, transition: bool) -> StateFrame {
+        let s = self.sim.state();
+        let n = s.n_nodes();
+        let mut positions = Vec::with_capacity(3 * n);
+        for k in 0..n {
+            positions.extend_from_slice(&[s.pos[k] as f32, s.pos[n + k] as f32, s.pos[2 * n + k] as f32]);
+        }
+        StateFrame {
+            frame: self.frames,
+            time: s.time,
+            episode: self.episode,
+            level: self.level,
+            coefficient_version: self.coefficient_version,
+            positions,
+            stepped: SystemTime::now(),
+            transition,
+        }
+    }
+
+    /// Hand out a state and metrics when their time has come.
+    fn publish(&mut self, now: Instant) {
+        if now >= self.next_publish {
+            self.next_publish = advance_deadline(self.next_publish, self.publish_every, now);
+            self.states.send_replace(Some(Arc::new(self.snapshot(false))));
+        }
+        if now >= self.next_metrics {
+            self.next_metrics = advance_deadline(self.next_metrics, self.metrics_every, now);
+            let wall = now.saturating_duration_since(self.window_start).as_secs_f64();
+            let report = self.last;
+            let m = MetricsFrame {
+                frame: self.frames,
+                time: self.sim.state().time,
+                level: self.level,
+                method: self.method,
+                predicted_error: self.predicted_error,
+                live_error: self.live_error,
+                step_cost_us: if self.window_steps > 0 {
+                    self.window_busy.as_secs_f64() * 1e6 / self.window_steps as f64
+                } else {
+                    0.0
+                },
+                real_time_factor: if wall > 0.0 { self.window_sim / wall } else { 0.0 },
+                overruns: self.overruns,
+                lag_resets: self.lag_resets,
+                divergences: self.divergences,
+                kinetic_energy: report.map_or(0.0, |r| r.kinetic_energy),
+                potential_energy: report.map_or(0.0, |r| r.elastic_energy + r.gravity_energy),
+                max_strain: report.map_or(0.0, |r| r.max_strain_overall()),
+                coefficient_version: self.coefficient_version,
+                paused: self.paused,
+                dt: self.dt(),
+            };
+            self.metrics.send_replace(Some(Arc::new(m)));
+            self.window_start = now;
+            self.window_sim = 0.0;
+            self.window_steps = 0;
+            self.window_busy = Duration::ZERO;
+            prepare::lock(&self.status).frame = self.frames;
+        }
+    }
+}
+
+/// The next deadline after `now` on the grid `last + k·every` (a late
+/// publisher skips the missed slots instead of bursting).
+fn advance_deadline(last: Instant, every: Duration, now: Instant) -> Instant {
+    let next = last + every;
+    if next > now {
+        next
+    } else {
+        now + every
+    }
+}
+
+/// Longest a stepping thread sleeps before looking at its commands again.
+const MAX_IDLE: Duration = Duration::from_millis(5);
+
+fn worker(mut runners: Vec<Runner>, stop: Arc<AtomicBool>, _settings: EngineSettings) {
+    while !stop.load(Ordering::Relaxed) {
+        let now = Instant::now();
+        let mut wake = now + MAX_IDLE;
+        for r in &mut runners {
+            r.poll_commands();
+            r.advance(now);
+            r.publish(Instant::now());
+            wake = wake.min(r.next_due()).min(r.next_publish).min(r.next_metrics);
+        }
+        let now = Instant::now();
+        if wake > now {
+            std::thread::park_timeout(wake - now);
+        }
+    }
+}

@@ -1,0 +1,180 @@
+//! The wire contract (`proto/lodcloth/v1/lodcloth.proto`, compiled by
+//! `build.rs`) and every conversion between wire and domain types. Nothing
+//! else in the crate builds or reads protobuf messages field by field.
+
+#![allow(missing_docs, clippy::doc_lazy_continuation, clippy::large_enum_variant)]
+
+/// Generated message types of package `lodcloth.v1`.
+pub mod v1 {
+    include!(concat!(env!("OUT_DIR"), "/lodcloth.v1.rs"));
+}
+
+use std::fmt;
+use std::str::FromStr;
+
+use crate::sim::{Material, SpringCoeffs};
+
+/// Schema names sent with every put and reply (`application/protobuf;<schema>`).
+pub mod schema {
+    pub const STATE: &str = "lodcloth.v1.State";
+    pub const METRICS: &str = "lodcloth.v1.Metrics";
+    pub const INSTANCE_INFO: &str = "lodcloth.v1.InstanceInfo";
+    pub const INSTANCE_LIST: &str = "lodcloth.v1.InstanceList";
+    pub const SWITCH_REQUEST: &str = "lodcloth.v1.SwitchRequest";
+    pub const SWITCH_REPLY: &str = "lodcloth.v1.SwitchReply";
+    pub const CONTROL_REQUEST: &str = "lodcloth.v1.ControlRequest";
+    pub const CONTROL_REPLY: &str = "lodcloth.v1.ControlReply";
+    pub const ERROR: &str = "lodcloth.v1.Error";
+}
+
+/// A grid resolution, written `NXxNY` (e.g. `32x32`) in configs and on the
+/// command line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct Level {
+    pub nx: usize,
+    pub ny: usize,
+}
+
+impl Level {
+    pub fn new(nx: usize, ny: usize) -> Level {
+        Level { nx, ny }
+    }
+
+    pub fn nodes(self) -> usize {
+        self.nx * self.ny
+    }
+
+    pub fn to_wire(self) -> v1::Level {
+        v1::Level {
+            nx: self.nx as u32,
+            ny: self.ny as u32,
+        }
+    }
+
+    pub fn from_wire(l: &v1::Level) -> Level {
+        Level {
+            nx: l.nx as usize,
+            ny: l.ny as usize,
+        }
+    }
+}
+
+impl fmt::Display for Level {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}x{}", self.nx, self.ny)
+    }
+}
+
+impl FromStr for Level {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Level, String> {
+        let bad = || format!("'{s}' is not a level; write NXxNY, e.g. 32x32");
+        let (a, b) = s.trim().split_once(['x', 'X']).ok_or_else(bad)?;
+        let nx = a.trim().parse::<usize>().map_err(|_| bad())?;
+        let ny = b.trim().parse::<usize>().map_err(|_| bad())?;
+        Ok(Level { nx, ny })
+    }
+}
+
+impl serde::Serialize for Level {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.collect_str(self)
+    }
+}
+
+impl<'de> serde::Deserialize<'de> for Level {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Level, D::Error> {
+        let s = String::deserialize(d)?;
+        s.parse().map_err(serde::de::Error::custom)
+    }
+}
+
+/// Coefficients on the wire.
+pub fn coefficients(m: &Material) -> v1::Coefficients {
+    let [s, h, b] = m.springs;
+    v1::Coefficients {
+        structural_k: s.k,
+        structural_c: s.c,
+        shear_k: h.k,
+        shear_c: h.c,
+        bend_k: b.k,
+        bend_c: b.c,
+    }
+}
+
+/// Coefficients from the wire.
+pub fn material(c: &v1::Coefficients) -> Material {
+    Material {
+        springs: [
+            SpringCoeffs {
+                k: c.structural_k,
+                c: c.structural_c,
+            },
+            SpringCoeffs { k: c.shear_k, c: c.shear_c },
+            SpringCoeffs { k: c.bend_k, c: c.bend_c },
+        ],
+    }
+}
+
+/// Pack SoA f64 positions (x…, y…, z…) into interleaved little-endian f32
+/// `x0 y0 z0 x1 …`, reusing `out`.
+pub fn pack_positions(soa: &[f64], out: &mut Vec<u8>) {
+    let n = soa.len() / 3;
+    out.clear();
+    out.reserve(12 * n);
+    for k in 0..n {
+        for c in 0..3 {
+            out.extend_from_slice(&(soa[c * n + k] as f32).to_le_bytes());
+        }
+    }
+}
+
+/// Unpack interleaved f32 positions into SoA f64 (x…, y…, z…). None when the
+/// byte count is not a multiple of 12.
+pub fn unpack_positions(bytes: &[u8]) -> Option<Vec<f64>> {
+    if !bytes.len().is_multiple_of(12) {
+        return None;
+    }
+    let n = bytes.len() / 12;
+    let mut soa = vec![0.0; 3 * n];
+    for (i, chunk) in bytes.chunks_exact(4).enumerate() {
+        let v = f32::from_le_bytes([chunk[0], chunk[1], chunk[2], chunk[3]]);
+        soa[(i % 3) * n + i / 3] = f64::from(v);
+    }
+    Some(soa)
+}
+
+/// An error reply.
+pub fn error(code: v1::error::Code, message: impl Into<String>) -> v1::Error {
+    v1::Error {
+        code: code as i32,
+        message: message.into(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn levels_parse_and_print() {
+        assert_eq!("32x24".parse::<Level>(), Ok(Level::new(32, 24)));
+        assert_eq!(" 8X8 ".parse::<Level>(), Ok(Level::new(8, 8)));
+        assert!("32".parse::<Level>().is_err());
+        assert!("-3x4".parse::<Level>().is_err());
+        assert_eq!(Level::new(40, 40).to_string(), "40x40");
+    }
+
+    #[test]
+    fn positions_round_trip_through_the_packed_layout() {
+        let soa = vec![1.0, 2.0, 10.0, 20.0, 100.0, 200.0];
+        let mut bytes = Vec::new();
+        pack_positions(&soa, &mut bytes);
+        assert_eq!(bytes.len(), 24);
+        // Node 0 is (1, 10, 100): the first three f32 of the packed layout.
+        assert_eq!(f32::from_le_bytes(bytes[4..8].try_into().unwrap()), 10.0);
+        assert_eq!(unpack_positions(&bytes), Some(soa));
+        assert_eq!(unpack_positions(&bytes[..5]), None);
+    }
+}

@@ -1,0 +1,356 @@
+//! `lodcloth serve` and its clients: `list`, `watch`, `switch`, `record`,
+//! `health`.
+
+use std::io::{IsTerminal, Write};
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use prost::Message;
+
+use lodcloth::output::{Precision, TrajectoryWriter};
+use lodcloth::proto::{unpack_positions, v1, Level};
+use lodcloth::service::client::Client;
+use lodcloth::service::config::ServiceConfig;
+use lodcloth::service::keys;
+use lodcloth::sim::State;
+
+/// Where a client finds the daemon.
+#[derive(Args, Clone)]
+pub struct Connect {
+    /// zenoh endpoint(s) of a daemon or router, e.g. tcp/127.0.0.1:7450
+    /// (the default config's endpoint). Empty: discover peers by multicast.
+    #[arg(long, env = "LODCLOTH_CONNECT", value_delimiter = ',', default_value = "tcp/127.0.0.1:7450")]
+    pub connect: Vec<String>,
+    /// Key prefix of the daemon.
+    #[arg(long, default_value = "lodcloth")]
+    pub prefix: String,
+}
+
+/// `serve` options.
+#[derive(Args)]
+pub struct ServeArgs {
+    /// Service config (TOML).
+    #[arg(long, default_value = "config/default.toml")]
+    pub config: PathBuf,
+    /// Override the config's zenoh listen endpoints (comma separated).
+    #[arg(long, env = "LODCLOTH_LISTEN", value_delimiter = ',')]
+    pub listen: Vec<String>,
+    /// Override the config's zenoh connect endpoints (comma separated).
+    #[arg(long, env = "LODCLOTH_CONNECT", value_delimiter = ',')]
+    pub connect: Vec<String>,
+    /// Override the zenoh mode (peer, client, router).
+    #[arg(long, env = "LODCLOTH_MODE")]
+    pub mode: Option<String>,
+}
+
+fn runtime() -> Result<tokio::runtime::Runtime> {
+    tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .thread_name("lodcloth-io")
+        .build()
+        .context("starting the tokio runtime")
+}
+
+/// SIGINT or SIGTERM.
+async fn shutdown_signal() {
+    let ctrl_c = async {
+        if tokio::signal::ctrl_c().await.is_err() {
+            std::future::pending::<()>().await;
+        }
+    };
+    #[cfg(unix)]
+    let term = async {
+        match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
+            Ok(mut s) => {
+                s.recv().await;
+            }
+            Err(_) => std::future::pending::<()>().await,
+        }
+    };
+    #[cfg(not(unix))]
+    let term = std::future::pending::<()>();
+    tokio::select! {
+        _ = ctrl_c => tracing::info!("SIGINT received"),
+        _ = term => tracing::info!("SIGTERM received"),
+    }
+}
+
+pub fn serve(args: ServeArgs) -> Result<()> {
+    let mut config = ServiceConfig::load(&args.config)?;
+    if !args.listen.is_empty() {
+        config.zenoh.listen = Some(args.listen);
+    }
+    if !args.connect.is_empty() {
+        config.zenoh.connect = Some(args.connect);
+    }
+    if args.mode.is_some() {
+        config.zenoh.mode = args.mode;
+    }
+    config.check_zenoh("command line")?;
+    runtime()?.block_on(lodcloth::service::run(config, shutdown_signal()))?;
+    Ok(())
+}
+
+async fn connect(c: &Connect) -> Result<Client> {
+    Client::connect(&c.connect, &c.prefix)
+        .await
+        .with_context(|| format!("connecting to {}", c.connect.join(", ")))
+}
+
+fn level(l: &Option<v1::Level>) -> String {
+    l.as_ref().map_or("?".into(), |l| Level::from_wire(l).to_string())
+}
+
+fn pct(e: Option<f64>) -> String {
+    e.map_or("—".into(), |e| format!("{:.2} %", 100.0 * e))
+}
+
+pub fn list(c: Connect) -> Result<()> {
+    runtime()?.block_on(async {
+        let client = connect(&c).await?;
+        let alive = client.alive().await?;
+        let lists = client.list().await?;
+        if lists.is_empty() && alive.is_empty() {
+            bail!("no daemon answered on {}", c.connect.join(", "));
+        }
+        println!("{:<20} {:<22} {:>8} {:>6} {:>7}  daemon", "instance", "scene", "level", "method", "pub Hz");
+        for l in &lists {
+            for i in &l.instances {
+                println!(
+                    "{:<20} {:<22} {:>8} {:>6} {:>7.1}  {}",
+                    i.instance,
+                    i.scene,
+                    level(&i.level),
+                    i.method,
+                    i.publish_hz,
+                    l.daemon
+                );
+            }
+        }
+        let listed: Vec<&str> = lists.iter().flat_map(|l| l.instances.iter().map(|i| i.instance.as_str())).collect();
+        for a in alive.iter().filter(|a| !listed.contains(&a.as_str())) {
+            println!("{a:<20} (alive, did not answer the list query)");
+        }
+        let _ = client.session.close().await;
+        Ok(())
+    })
+}
+
+pub fn watch(c: Connect, instance: String, count: Option<u64>) -> Result<()> {
+    runtime()?.block_on(async {
+        let client = connect(&c).await?;
+        let info = client.info(&instance).await?;
+        println!(
+            "{} — scene {} ({}), reference {}, levels {}",
+            info.instance,
+            info.scene,
+            info.integrator,
+            level(&info.reference),
+            info.levels.iter().map(|l| level(&l.level)).collect::<Vec<_>>().join(" ")
+        );
+        let sub = client
+            .session
+            .declare_subscriber(keys::metrics(&c.prefix, &instance))
+            .await
+            .map_err(|e| anyhow::anyhow!("subscribing: {e}"))?;
+        let tty = std::io::stdout().is_terminal();
+        let header = format!(
+            "{:>10} {:>8} {:>7} {:>6} {:>9} {:>9} {:>9} {:>6} {:>8} {:>9} {:>8}",
+            "frame", "time s", "level", "method", "predicted", "live err", "step µs", "RTF", "overruns", "energy J", "strain"
+        );
+        println!("{header}");
+        let mut seen = 0u64;
+        loop {
+            let sample = tokio::select! {
+                s = sub.recv_async() => s.map_err(|e| anyhow::anyhow!("{e}"))?,
+                _ = tokio::signal::ctrl_c() => break,
+            };
+            let m = match v1::Metrics::decode(sample.payload().to_bytes().as_ref()) {
+                Ok(m) => m,
+                Err(e) => {
+                    eprintln!("undecodable metrics: {e}");
+                    continue;
+                }
+            };
+            let line = format!(
+                "{:>10} {:>8.3} {:>7} {:>6} {:>9} {:>9} {:>9.1} {:>6.2} {:>8} {:>9.4} {:>7.2}%{}",
+                m.frame,
+                m.time,
+                level(&m.level),
+                m.method,
+                pct(m.predicted_error),
+                pct(m.live_error),
+                m.step_cost_us,
+                m.real_time_factor,
+                m.overruns,
+                m.kinetic_energy + m.potential_energy,
+                100.0 * m.max_strain,
+                if m.paused { "  paused" } else { "" }
+            );
+            if tty {
+                // A live view: the line is rewritten in place.
+                print!("\r\x1b[2K{line}");
+                let _ = std::io::stdout().flush();
+            } else {
+                println!("{line}");
+            }
+            seen += 1;
+            if count.is_some_and(|n| seen >= n) {
+                break;
+            }
+        }
+        if tty {
+            println!();
+        }
+        let _ = client.session.close().await;
+        Ok(())
+    })
+}
+
+/// `switch` options.
+#[derive(Args)]
+pub struct SwitchArgs {
+    pub instance: String,
+    /// Target level, e.g. 32x32.
+    pub level: Option<Level>,
+    /// Instead of a level: the cheapest level with at most this predicted
+    /// relative error (0.05 = 5 %).
+    #[arg(long, conflicts_with = "level")]
+    pub max_error: Option<f64>,
+    /// Estimation method (default: the instance's).
+    #[arg(long)]
+    pub method: Option<String>,
+    /// Seconds to wait for the reply (an uncached level is estimated first).
+    #[arg(long, default_value_t = 600.0)]
+    pub timeout: f64,
+}
+
+pub fn switch(c: Connect, args: SwitchArgs) -> Result<()> {
+    let target = match (args.level, args.max_error) {
+        (Some(l), None) => v1::switch_request::Target::Level(l.to_wire()),
+        (None, Some(e)) => v1::switch_request::Target::MaxError(e),
+        _ => bail!("give a level (e.g. 32x32) or --max-error"),
+    };
+    let request = v1::SwitchRequest {
+        target: Some(target),
+        method: args.method.unwrap_or_default(),
+    };
+    runtime()?.block_on(async {
+        let client = connect(&c).await?;
+        let r = client
+            .switch(&args.instance, &request, Duration::from_secs_f64(args.timeout))
+            .await?;
+        let k = r.coefficients.unwrap_or_default();
+        println!(
+            "{}: {} → {} ({}), predicted error {}, dt {:.3e} s, took {:.3} s{}, coefficient version {}",
+            r.instance,
+            level(&r.previous),
+            level(&r.level),
+            r.method,
+            pct(r.predicted_error),
+            r.dt,
+            r.seconds,
+            if r.cached { " (prepared)" } else { " (estimated now)" },
+            r.coefficient_version
+        );
+        println!(
+            "  K/C structural {:.4e}/{:.4e}  shear {:.4e}/{:.4e}  bend {:.4e}/{:.4e}",
+            k.structural_k, k.structural_c, k.shear_k, k.shear_c, k.bend_k, k.bend_c
+        );
+        let _ = client.session.close().await;
+        Ok(())
+    })
+}
+
+pub fn record(c: Connect, instance: String, seconds: f64, out: PathBuf) -> Result<()> {
+    if !(seconds > 0.0 && seconds.is_finite()) {
+        bail!("--seconds {seconds} must be positive");
+    }
+    runtime()?.block_on(async {
+        let client = connect(&c).await?;
+        let info = client.info(&instance).await?;
+        let sub = client
+            .session
+            .declare_subscriber(keys::state(&c.prefix, &instance))
+            .await
+            .map_err(|e| anyhow::anyhow!("subscribing: {e}"))?;
+        let deadline = Instant::now() + Duration::from_secs_f64(seconds);
+        let mut writer: Option<(TrajectoryWriter, Level)> = None;
+        let mut frames = 0u64;
+        loop {
+            let left = deadline.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                break;
+            }
+            let Ok(Ok(sample)) = tokio::time::timeout(left, sub.recv_async()).await else {
+                break;
+            };
+            let s = v1::State::decode(sample.payload().to_bytes().as_ref()).context("undecodable state")?;
+            let lv = s.level.as_ref().map(Level::from_wire).unwrap_or(Level::new(0, 0));
+            let Some(pos) = unpack_positions(&s.positions) else {
+                bail!("state frame {} has {} position bytes, not a multiple of 12", s.frame, s.positions.len());
+            };
+            if pos.len() != 3 * lv.nodes() {
+                bail!("state frame {} carries {} nodes for level {lv}", s.frame, pos.len() / 3);
+            }
+            if let Some((_, l)) = &writer {
+                if *l != lv {
+                    eprintln!("the level changed from {l} to {lv}; stopping (a trajectory has one level)");
+                    break;
+                }
+            }
+            if writer.is_none() {
+                let dt = 1.0 / info.publish_hz.max(1e-9);
+                let w = TrajectoryWriter::create(&out, lv.nodes(), Some((lv.nx, lv.ny)), dt, 1, Precision::F32, false)?;
+                writer = Some((w, lv));
+            }
+            let n = pos.len() / 3;
+            let state = State {
+                vel: vec![0.0; 3 * n],
+                pos,
+                time: s.time,
+                step: s.frame,
+            };
+            if let Some((w, _)) = writer.as_mut() {
+                w.write(&state)?;
+            }
+            frames += 1;
+        }
+        let Some((w, l)) = writer else {
+            bail!("no state of '{instance}' arrived within {seconds} s");
+        };
+        w.finish()?;
+        println!("{}: {frames} frames of {instance} at {l}", out.display());
+        let _ = client.session.close().await;
+        Ok(())
+    })
+}
+
+pub fn health(c: Connect, instance: Option<String>) -> Result<()> {
+    runtime()?.block_on(async {
+        let mut client = connect(&c).await?;
+        client.timeout = Duration::from_secs(3);
+        let names = match instance {
+            Some(i) => vec![i],
+            None => {
+                let lists = client.list().await?;
+                let names: Vec<String> = lists
+                    .iter()
+                    .flat_map(|l| l.instances.iter().map(|i| i.instance.clone()))
+                    .collect();
+                if names.is_empty() {
+                    bail!("unhealthy: no daemon answered on {}", c.connect.join(", "));
+                }
+                names
+            }
+        };
+        for n in &names {
+            let info = client.info(n).await.with_context(|| format!("unhealthy: {n}"))?;
+            println!("{n}: ok, level {}, {}", level(&info.level), info.method);
+        }
+        let _ = client.session.close().await;
+        Ok(())
+    })
+}

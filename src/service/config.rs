@@ -1,0 +1,571 @@
+//! The daemon's configuration: raw TOML (every field documented, unknown
+//! fields rejected) validated into a ready-to-run [`ServiceConfig`], with
+//! every problem reported by its path in one error.
+
+use std::path::{Path, PathBuf};
+
+use serde::Deserialize;
+
+use crate::estimate::{Method, RecordSpec};
+use crate::proto::Level;
+use crate::scene::Scene;
+use crate::sim::Integrator;
+
+/// Why a config was rejected.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    #[error("cannot read {path}: {source}")]
+    Io { path: String, source: std::io::Error },
+    #[error("{origin}: {message}")]
+    Parse { origin: String, message: String },
+    #[error("{origin}: {} problem(s):\n  {}", problems.len(), problems.join("\n  "))]
+    Invalid { origin: String, problems: Vec<String> },
+}
+
+/// `config/default.toml` and its siblings, as written.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RawConfig {
+    /// First segment of every key expression (default `lodcloth`).
+    #[serde(default = "default_prefix")]
+    pub prefix: String,
+    /// Directory of the on-disk coefficient cache (default `out/cache`),
+    /// relative to the working directory.
+    #[serde(default = "default_cache")]
+    pub cache: PathBuf,
+    #[serde(default)]
+    pub zenoh: RawZenoh,
+    #[serde(default)]
+    pub engine: RawEngine,
+    #[serde(default)]
+    pub estimation: RawEstimation,
+    #[serde(default)]
+    pub instances: Vec<RawInstance>,
+}
+
+fn default_prefix() -> String {
+    "lodcloth".into()
+}
+
+fn default_cache() -> PathBuf {
+    "out/cache".into()
+}
+
+/// The zenoh session. `config_file` (JSON5, zenoh's own format) is read
+/// first; the fields here override it when given.
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RawZenoh {
+    /// A zenoh JSON5 config file (relative paths from the working directory).
+    pub config_file: Option<PathBuf>,
+    /// `peer` (default when neither this nor the file says), `client` or `router`.
+    pub mode: Option<String>,
+    /// Endpoints to listen on, e.g. `tcp/127.0.0.1:7450`.
+    pub listen: Option<Vec<String>>,
+    /// Endpoints to connect to, e.g. a router's `tcp/10.0.0.2:7447`.
+    pub connect: Option<Vec<String>>,
+    /// Multicast scouting (discovering peers on the LAN); off in containers
+    /// and tests, where endpoints are explicit.
+    pub multicast_scouting: Option<bool>,
+}
+
+/// The stepping engine.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RawEngine {
+    /// Stepping threads; 0 (default) = one per core.
+    #[serde(default)]
+    pub threads: usize,
+    /// Most physics steps one instance may take in one pass of its thread
+    /// when catching up after running late (default 64). A pass that needs
+    /// more counts as an overrun.
+    #[serde(default = "default_max_substeps")]
+    pub max_substeps: u32,
+    /// An instance that falls this far behind real time (s) drops the
+    /// backlog and continues from now (default 0.25), counted as a lag reset.
+    #[serde(default = "default_max_lag")]
+    pub max_lag: f64,
+    /// Metrics messages per second per instance (default 10).
+    #[serde(default = "default_metrics_hz")]
+    pub metrics_hz: f64,
+    /// Default state messages per second per instance (default 60).
+    #[serde(default = "default_publish_hz")]
+    pub publish_hz: f64,
+}
+
+impl Default for RawEngine {
+    fn default() -> Self {
+        RawEngine {
+            threads: 0,
+            max_substeps: default_max_substeps(),
+            max_lag: default_max_lag(),
+            metrics_hz: default_metrics_hz(),
+            publish_hz: default_publish_hz(),
+        }
+    }
+}
+
+fn default_max_substeps() -> u32 {
+    64
+}
+fn default_max_lag() -> f64 {
+    0.25
+}
+fn default_metrics_hz() -> f64 {
+    10.0
+}
+fn default_publish_hz() -> f64 {
+    60.0
+}
+
+/// How coefficients are estimated and levels calibrated.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RawEstimation {
+    /// Reference steps recorded per instance for estimation and calibration
+    /// (default 10000).
+    #[serde(default = "default_reference_steps")]
+    pub reference_steps: u64,
+    /// Reference steps per metric frame (default 40). A level's dt must
+    /// divide dt_ref × metric_stride.
+    #[serde(default = "default_metric_stride")]
+    pub metric_stride: u64,
+    /// Reference steps between estimation samples (default 40).
+    #[serde(default = "default_estimate_stride")]
+    pub estimate_stride: u64,
+    /// `fit`: metric frames simulated per residual evaluation (default 40).
+    #[serde(default = "default_fit_frames")]
+    pub fit_frames: usize,
+    /// `fit`: Levenberg–Marquardt iterations (default 6).
+    #[serde(default = "default_fit_iterations")]
+    pub fit_iterations: u32,
+    /// Prepare every allowed level of every instance in the background at
+    /// start-up, so that switches answer from memory (default true).
+    #[serde(default = "yes")]
+    pub precompute: bool,
+}
+
+impl Default for RawEstimation {
+    fn default() -> Self {
+        RawEstimation {
+            reference_steps: default_reference_steps(),
+            metric_stride: default_metric_stride(),
+            estimate_stride: default_estimate_stride(),
+            fit_frames: default_fit_frames(),
+            fit_iterations: default_fit_iterations(),
+            precompute: true,
+        }
+    }
+}
+
+fn default_reference_steps() -> u64 {
+    10_000
+}
+fn default_metric_stride() -> u64 {
+    40
+}
+fn default_estimate_stride() -> u64 {
+    40
+}
+fn default_fit_frames() -> usize {
+    40
+}
+fn default_fit_iterations() -> u32 {
+    6
+}
+fn yes() -> bool {
+    true
+}
+
+/// One cloth instance.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RawInstance {
+    /// Unique name: letters, digits, `-` and `_` (it is a key-expression chunk).
+    pub name: String,
+    /// Scene file (TOML), relative to the working directory.
+    pub scene: PathBuf,
+    /// Reference resolution (default: the scene's own).
+    pub reference: Option<Level>,
+    /// Levels a client may switch to, e.g. `["16x16", "24x24", "32x32"]`.
+    pub levels: Vec<Level>,
+    /// Level at start-up (must be in `levels`).
+    pub start: Level,
+    /// Estimation method: same, bcd, gkd, lsq or fit (default gkd).
+    #[serde(default = "default_method")]
+    pub method: String,
+    /// Integrator (default: the scene's).
+    pub integrator: Option<String>,
+    /// Fixed time step for every level (s). Default: per level, the largest
+    /// dt ≤ 0.75 × the level's predicted stability limit that divides the
+    /// reference's metric frame interval.
+    pub dt: Option<f64>,
+    /// State messages per second (default: `engine.publish_hz`).
+    pub publish_hz: Option<f64>,
+    /// Compare every metric frame with the recorded reference and publish
+    /// the live error (default false).
+    #[serde(default)]
+    pub shadow_reference: bool,
+    /// Start the scene over when it reaches its duration (default true).
+    #[serde(default = "yes", rename = "loop")]
+    pub looping: bool,
+}
+
+fn default_method() -> String {
+    "gkd".into()
+}
+
+/// A validated configuration.
+#[derive(Debug, Clone)]
+pub struct ServiceConfig {
+    pub prefix: String,
+    pub cache: PathBuf,
+    pub zenoh: RawZenoh,
+    pub engine: EngineConfig,
+    pub estimation: EstimationConfig,
+    pub instances: Vec<InstanceConfig>,
+}
+
+/// Validated engine settings.
+#[derive(Debug, Clone, Copy)]
+pub struct EngineConfig {
+    pub threads: usize,
+    pub max_substeps: u32,
+    pub max_lag: f64,
+    pub metrics_hz: f64,
+}
+
+/// Validated estimation settings.
+#[derive(Debug, Clone, Copy)]
+pub struct EstimationConfig {
+    pub spec: RecordSpec,
+    pub fit_frames: usize,
+    pub fit_iterations: u32,
+    pub precompute: bool,
+}
+
+/// A validated instance: its scene loaded, at the reference resolution.
+#[derive(Debug, Clone)]
+pub struct InstanceConfig {
+    pub name: String,
+    /// The scene at the reference resolution, with the instance's integrator.
+    pub scene: Scene,
+    pub levels: Vec<Level>,
+    pub start: Level,
+    pub method: Method,
+    pub integrator: Integrator,
+    pub dt: Option<f64>,
+    pub publish_hz: f64,
+    pub shadow_reference: bool,
+    pub looping: bool,
+}
+
+impl InstanceConfig {
+    pub fn reference(&self) -> Level {
+        Level::new(self.scene.nx, self.scene.ny)
+    }
+}
+
+/// Smallest grid side of a level.
+pub const MIN_SIDE: usize = 2;
+/// Largest grid side of a level (a 512×512 cloth is 262,144 nodes).
+pub const MAX_SIDE: usize = 512;
+
+/// Whether `name` can be an instance name (one key-expression chunk).
+pub fn valid_instance_name(name: &str) -> bool {
+    !name.is_empty()
+        && name.len() <= 64
+        && name.chars().all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
+        && !RESERVED.contains(&name)
+}
+
+/// Chunks used by the daemon itself under `<prefix>/`.
+pub const RESERVED: [&str; 2] = ["instances", "alive"];
+
+impl ServiceConfig {
+    /// Read and validate a config file.
+    pub fn load(path: &Path) -> Result<ServiceConfig, ConfigError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Io {
+            path: path.display().to_string(),
+            source,
+        })?;
+        ServiceConfig::from_toml(&text, &path.display().to_string())
+    }
+
+    /// Parse and validate config text; `origin` names it in messages.
+    pub fn from_toml(text: &str, origin: &str) -> Result<ServiceConfig, ConfigError> {
+        let raw: RawConfig = toml::from_str(text).map_err(|e| ConfigError::Parse {
+            origin: origin.to_string(),
+            message: e.to_string(),
+        })?;
+        ServiceConfig::validate(raw, origin)
+    }
+
+    /// Validate, listing every problem with its path.
+    pub fn validate(raw: RawConfig, origin: &str) -> Result<ServiceConfig, ConfigError> {
+        let mut p: Vec<String> = Vec::new();
+        if raw.prefix.is_empty()
+            || !raw
+                .prefix
+                .split('/')
+                .all(|c| !c.is_empty() && c.chars().all(|ch| ch.is_ascii_alphanumeric() || "-_.".contains(ch)))
+        {
+            p.push(format!(
+                "prefix: '{}' must be one or more '/'-separated chunks of letters, digits, '-', '_' or '.'",
+                raw.prefix
+            ));
+        }
+        p.extend(zenoh_problems(&raw.zenoh));
+        let e = &raw.engine;
+        if e.max_substeps == 0 {
+            p.push("engine.max_substeps: must be at least 1".into());
+        }
+        if !(e.max_lag > 0.0 && e.max_lag.is_finite()) {
+            p.push(format!("engine.max_lag: {} must be positive and finite", e.max_lag));
+        }
+        for (name, hz) in [("engine.metrics_hz", e.metrics_hz), ("engine.publish_hz", e.publish_hz)] {
+            if !(hz > 0.0 && hz <= 1000.0) {
+                p.push(format!("{name}: {hz} must be in (0, 1000] messages per second"));
+            }
+        }
+        let s = &raw.estimation;
+        if s.reference_steps < 3 * s.metric_stride.max(1) {
+            p.push(format!(
+                "estimation.reference_steps: {} must cover at least 3 metric frames ({} steps)",
+                s.reference_steps,
+                3 * s.metric_stride.max(1)
+            ));
+        }
+        if s.metric_stride == 0 {
+            p.push("estimation.metric_stride: must be at least 1".into());
+        }
+        if s.estimate_stride < 2 {
+            p.push("estimation.estimate_stride: must be at least 2".into());
+        }
+        if s.fit_frames < 2 {
+            p.push("estimation.fit_frames: must be at least 2".into());
+        }
+        if raw.instances.is_empty() {
+            p.push("instances: at least one instance is needed".into());
+        }
+        let mut instances = Vec::new();
+        for (i, r) in raw.instances.iter().enumerate() {
+            let at = format!("instances[{i}]");
+            if !valid_instance_name(&r.name) {
+                p.push(format!(
+                    "{at}.name: '{}' must be 1–64 letters, digits, '-' or '_' and not one of {RESERVED:?}",
+                    r.name
+                ));
+            }
+            if raw.instances[..i].iter().any(|o| o.name == r.name) {
+                p.push(format!("{at}.name: '{}' is used by an earlier instance", r.name));
+            }
+            let method = Method::from_name(&r.method);
+            if method.is_none() {
+                p.push(format!(
+                    "{at}.method: '{}' is not one of same, bcd, gkd, lsq, fit",
+                    r.method
+                ));
+            }
+            let integrator = match &r.integrator {
+                None => None,
+                Some(name) => {
+                    let it = Integrator::from_name(name);
+                    if it.is_none() {
+                        p.push(format!(
+                            "{at}.integrator: '{name}' is not one of explicit_euler, symplectic_euler, rk4, implicit_euler"
+                        ));
+                    }
+                    it
+                }
+            };
+            if let Some(dt) = r.dt {
+                if !(dt > 0.0 && dt.is_finite()) {
+                    p.push(format!("{at}.dt: {dt} must be positive and finite"));
+                }
+            }
+            if let Some(hz) = r.publish_hz {
+                if !(hz > 0.0 && hz <= 1000.0) {
+                    p.push(format!("{at}.publish_hz: {hz} must be in (0, 1000] messages per second"));
+                }
+            }
+            if r.levels.is_empty() {
+                p.push(format!("{at}.levels: at least one level is needed"));
+            }
+            for (j, l) in r.levels.iter().enumerate() {
+                if l.nx < MIN_SIDE || l.ny < MIN_SIDE || l.nx > MAX_SIDE || l.ny > MAX_SIDE {
+                    p.push(format!(
+                        "{at}.levels[{j}]: {l} is outside {MIN_SIDE}..={MAX_SIDE} nodes per side"
+                    ));
+                }
+                if r.levels[..j].contains(l) {
+                    p.push(format!("{at}.levels[{j}]: {l} is listed twice"));
+                }
+            }
+            if !r.levels.contains(&r.start) {
+                p.push(format!("{at}.start: {} is not one of the instance's levels", r.start));
+            }
+            let scene = match Scene::load(&r.scene) {
+                Ok(s) => Some(s),
+                Err(err) => {
+                    p.push(format!("{at}.scene: {err}"));
+                    None
+                }
+            };
+            let (Some(mut scene), Some(method)) = (scene, method) else {
+                continue;
+            };
+            if let Some(reference) = r.reference {
+                if reference.nx < MIN_SIDE || reference.ny < MIN_SIDE || reference.nx > MAX_SIDE || reference.ny > MAX_SIDE
+                {
+                    p.push(format!(
+                        "{at}.reference: {reference} is outside {MIN_SIDE}..={MAX_SIDE} nodes per side"
+                    ));
+                    continue;
+                }
+                scene.nx = reference.nx;
+                scene.ny = reference.ny;
+            }
+            for (j, l) in r.levels.iter().enumerate() {
+                if l.nx > scene.nx || l.ny > scene.ny {
+                    p.push(format!(
+                        "{at}.levels[{j}]: {l} is finer than the reference {}x{}",
+                        scene.nx, scene.ny
+                    ));
+                }
+            }
+            let integrator = integrator.unwrap_or(scene.params.integrator);
+            instances.push(InstanceConfig {
+                name: r.name.clone(),
+                scene,
+                levels: r.levels.clone(),
+                start: r.start,
+                method,
+                integrator,
+                dt: r.dt,
+                publish_hz: r.publish_hz.unwrap_or(e.publish_hz),
+                shadow_reference: r.shadow_reference,
+                looping: r.looping,
+            });
+        }
+        if !p.is_empty() {
+            return Err(ConfigError::Invalid {
+                origin: origin.to_string(),
+                problems: p,
+            });
+        }
+        let threads = if e.threads == 0 {
+            std::thread::available_parallelism().map_or(1, |n| n.get())
+        } else {
+            e.threads
+        };
+        Ok(ServiceConfig {
+            prefix: raw.prefix,
+            cache: raw.cache,
+            zenoh: raw.zenoh,
+            engine: EngineConfig {
+                threads,
+                max_substeps: e.max_substeps,
+                max_lag: e.max_lag,
+                metrics_hz: e.metrics_hz,
+            },
+            estimation: EstimationConfig {
+                spec: RecordSpec {
+                    frames: s.reference_steps,
+                    metric_stride: s.metric_stride,
+                    estimate_stride: s.estimate_stride,
+                    difference_span: 1,
+                },
+                fit_frames: s.fit_frames,
+                fit_iterations: s.fit_iterations,
+                precompute: s.precompute,
+            },
+            instances,
+        })
+    }
+
+    /// Check the zenoh section again after command-line overrides.
+    pub fn check_zenoh(&self, origin: &str) -> Result<(), ConfigError> {
+        let problems = zenoh_problems(&self.zenoh);
+        if problems.is_empty() {
+            Ok(())
+        } else {
+            Err(ConfigError::Invalid {
+                origin: origin.to_string(),
+                problems,
+            })
+        }
+    }
+
+    /// The zenoh session config: the JSON5 file if any, then the overrides.
+    pub fn zenoh_config(&self) -> Result<zenoh::Config, ConfigError> {
+        let z = &self.zenoh;
+        let origin = z
+            .config_file
+            .as_ref()
+            .map_or("zenoh config".to_string(), |f| f.display().to_string());
+        let fail = |message: String| ConfigError::Parse {
+            origin: origin.clone(),
+            message,
+        };
+        let mut config = match &z.config_file {
+            Some(f) => zenoh::Config::from_file(f).map_err(|e| fail(e.to_string()))?,
+            None => zenoh::Config::default(),
+        };
+        if let Some(mode) = &z.mode {
+            config
+                .insert_json5("mode", &json(mode))
+                .map_err(|e| fail(format!("mode: {e}")))?;
+        } else if z.config_file.is_none() {
+            config
+                .insert_json5("mode", "\"peer\"")
+                .map_err(|e| fail(format!("mode: {e}")))?;
+        }
+        if let Some(listen) = &z.listen {
+            config
+                .insert_json5("listen/endpoints", &json(listen))
+                .map_err(|e| fail(format!("listen: {e}")))?;
+        }
+        if let Some(connect) = &z.connect {
+            config
+                .insert_json5("connect/endpoints", &json(connect))
+                .map_err(|e| fail(format!("connect: {e}")))?;
+        }
+        if let Some(on) = z.multicast_scouting {
+            config
+                .insert_json5("scouting/multicast/enabled", &json(&on))
+                .map_err(|e| fail(format!("multicast_scouting: {e}")))?;
+        }
+        Ok(config)
+    }
+}
+
+/// JSON text of a value for `zenoh::Config::insert_json5`.
+fn json<T: serde::Serialize + ?Sized>(value: &T) -> String {
+    serde_json::to_string(value).unwrap_or_default()
+}
+
+/// Problems of the zenoh section, by path.
+fn zenoh_problems(z: &RawZenoh) -> Vec<String> {
+    let mut p = Vec::new();
+    if let Some(mode) = &z.mode {
+        if !["peer", "client", "router"].contains(&mode.as_str()) {
+            p.push(format!("zenoh.mode: '{mode}' is not one of peer, client, router"));
+        }
+    }
+    for (field, list) in [("listen", &z.listen), ("connect", &z.connect)] {
+        for (i, e) in list.iter().flatten().enumerate() {
+            if e.parse::<zenoh::config::EndPoint>().is_err() {
+                p.push(format!(
+                    "zenoh.{field}[{i}]: '{e}' is not a zenoh endpoint (e.g. tcp/127.0.0.1:7450)"
+                ));
+            }
+        }
+    }
+    if let Some(f) = &z.config_file {
+        if !f.exists() {
+            p.push(format!("zenoh.config_file: {} does not exist", f.display()));
+        }
+    }
+    p
+}

@@ -1,0 +1,756 @@
+//! The daemon: tokio + zenoh around the [`crate::engine`].
+//!
+//! [`run`] opens the zenoh session, starts the engine, declares per instance
+//! a state and a metrics publisher and a liveliness token, and serves the
+//! queryables (`info`, `switch`, `control`, `instances`) until the shutdown
+//! future completes. Then it stops publishing, lets the stepping threads
+//! finish their current steps, and closes the session.
+//!
+//! Level preparation (reference recording, estimation, calibration) runs on
+//! background OS threads at a lower scheduling priority, so stepping keeps
+//! the cores; a switch to a level that is not ready waits for it while every
+//! instance keeps stepping.
+
+pub mod client;
+pub mod config;
+pub mod keys;
+
+use std::collections::BTreeMap;
+use std::future::Future;
+use std::sync::Arc;
+use std::time::{Duration, Instant, UNIX_EPOCH};
+
+use prost::Message;
+use tokio::sync::{oneshot, watch};
+use zenoh::bytes::Encoding;
+use zenoh::qos::CongestionControl;
+use zenoh::query::Query;
+use zenoh::Session;
+
+use crate::cache::CoefficientCache;
+use crate::engine::{
+    Command, Engine, EngineSettings, InstanceHandle, InstanceSetup, MetricsFrame, PrepareError, Prepared, Preparer,
+    StateFrame,
+};
+use crate::estimate::Method;
+use crate::proto::{self, schema, v1, Level};
+use crate::sim::Simulation;
+use config::{ConfigError, ServiceConfig};
+use v1::error::Code;
+
+/// Why the daemon could not start or stopped with an error.
+#[derive(Debug, thiserror::Error)]
+pub enum ServiceError {
+    #[error(transparent)]
+    Config(#[from] ConfigError),
+    #[error("zenoh: {0}")]
+    Zenoh(String),
+    #[error("instance {instance}: {source}")]
+    Prepare { instance: String, source: PrepareError },
+    #[error("starting the stepping threads: {0}")]
+    Threads(#[from] std::io::Error),
+}
+
+fn zerr(e: zenoh::Error) -> ServiceError {
+    ServiceError::Zenoh(e.to_string())
+}
+
+/// The protobuf encoding with the message's schema name.
+pub fn encoding(schema: &'static str) -> Encoding {
+    Encoding::APPLICATION_PROTOBUF.with_schema(schema)
+}
+
+/// One instance as the service sees it.
+struct Instance {
+    handle: InstanceHandle,
+    preparer: Arc<Preparer>,
+    /// One switch at a time per instance; later requests queue here.
+    switching: tokio::sync::Mutex<()>,
+}
+
+struct Context {
+    prefix: String,
+    daemon: String,
+    instances: BTreeMap<String, Arc<Instance>>,
+    /// Set when shutting down: new switches are refused.
+    closing: watch::Receiver<bool>,
+}
+
+/// Open the zenoh session from `config` and serve until `shutdown` completes.
+pub async fn run(config: ServiceConfig, shutdown: impl Future<Output = ()>) -> Result<(), ServiceError> {
+    let session = zenoh::open(config.zenoh_config()?).await.map_err(zerr)?;
+    tracing::info!(zid = %session.zid(), "zenoh session open");
+    let result = serve(config, &session, shutdown).await;
+    if let Err(e) = session.close().await {
+        tracing::warn!("closing the zenoh session: {e}");
+    }
+    tracing::info!("stopped");
+    result
+}
+
+/// Serve on an open session until `shutdown` completes.
+pub async fn serve(
+    config: ServiceConfig,
+    session: &Session,
+    shutdown: impl Future<Output = ()>,
+) -> Result<(), ServiceError> {
+    // Estimation's parallel loops (rayon) run below the stepping threads'
+    // priority; ignore the error when the pool already exists (tests).
+    let _ = rayon::ThreadPoolBuilder::new()
+        .start_handler(|_| lower_priority())
+        .build_global();
+    let cache = match CoefficientCache::open(&config.cache) {
+        Ok(c) => Some(c),
+        Err(e) => {
+            tracing::warn!("coefficient cache unavailable ({e}); estimating without it");
+            None
+        }
+    };
+    let mut setups = Vec::new();
+    let mut preparers = Vec::new();
+    for ic in &config.instances {
+        let preparer = Arc::new(Preparer::new(Arc::new(ic.clone()), config.estimation, cache.clone()));
+        let (sim, dt) = preparer.quick_start().map_err(|source| ServiceError::Prepare {
+            instance: ic.name.clone(),
+            source,
+        })?;
+        tracing::info!(instance = %ic.name, level = %ic.start, dt, "starting with the scene's coefficients");
+        setups.push(InstanceSetup {
+            name: ic.name.clone(),
+            sim,
+            level: ic.start,
+            method: Method::Same,
+            publish_hz: ic.publish_hz,
+            duration: ic.scene.duration,
+            looping: ic.looping,
+        });
+        preparers.push(preparer);
+    }
+    let engine = Engine::start(
+        setups,
+        EngineSettings {
+            threads: config.engine.threads,
+            max_substeps: config.engine.max_substeps,
+            max_lag: config.engine.max_lag,
+            metrics_hz: config.engine.metrics_hz,
+        },
+    )?;
+    let (closing_tx, closing) = watch::channel(false);
+    let mut instances = BTreeMap::new();
+    for (handle, preparer) in engine.handles().iter().zip(&preparers) {
+        debug_assert_eq!(handle.name, preparer.config().name);
+        instances.insert(
+            handle.name.clone(),
+            Arc::new(Instance {
+                handle: handle.clone(),
+                preparer: preparer.clone(),
+                switching: tokio::sync::Mutex::new(()),
+            }),
+        );
+    }
+    let ctx = Arc::new(Context {
+        prefix: config.prefix.clone(),
+        daemon: session.zid().to_string(),
+        instances,
+        closing: closing.clone(),
+    });
+
+    let mut tasks = tokio::task::JoinSet::new();
+    let mut tokens = Vec::new();
+    for inst in ctx.instances.values() {
+        let name = &inst.handle.name;
+        let states = session
+            .declare_publisher(keys::state(&ctx.prefix, name))
+            .encoding(encoding(schema::STATE))
+            .congestion_control(CongestionControl::Drop)
+            .express(true)
+            .await
+            .map_err(zerr)?;
+        let metrics = session
+            .declare_publisher(keys::metrics(&ctx.prefix, name))
+            .encoding(encoding(schema::METRICS))
+            .congestion_control(CongestionControl::Drop)
+            .await
+            .map_err(zerr)?;
+        tasks.spawn(publish_states(inst.handle.clone(), states, closing.clone()));
+        tasks.spawn(publish_metrics(inst.handle.clone(), metrics, closing.clone()));
+        tokens.push(
+            session
+                .liveliness()
+                .declare_token(keys::alive(&ctx.prefix, name))
+                .await
+                .map_err(zerr)?,
+        );
+    }
+    let info_q = session
+        .declare_queryable(keys::info(&ctx.prefix, "*"))
+        .await
+        .map_err(zerr)?;
+    let switch_q = session
+        .declare_queryable(keys::switch(&ctx.prefix, "*"))
+        .await
+        .map_err(zerr)?;
+    let control_q = session
+        .declare_queryable(keys::control(&ctx.prefix, "*"))
+        .await
+        .map_err(zerr)?;
+    let list_q = session
+        .declare_queryable(keys::instances(&ctx.prefix))
+        .await
+        .map_err(zerr)?;
+    tasks.spawn(precompute(ctx.clone(), config.estimation.precompute));
+    tracing::info!(
+        prefix = %ctx.prefix,
+        instances = ctx.instances.len(),
+        threads = config.engine.threads,
+        "serving"
+    );
+
+    tokio::pin!(shutdown);
+    let mut requests = tokio::task::JoinSet::new();
+    loop {
+        tokio::select! {
+            _ = &mut shutdown => break,
+            Ok(q) = info_q.recv_async() => answer_info(&ctx, q).await,
+            Ok(q) = list_q.recv_async() => answer_list(&ctx, q).await,
+            Ok(q) = switch_q.recv_async() => {
+                requests.spawn(answer_switch(ctx.clone(), q));
+            }
+            Ok(q) = control_q.recv_async() => {
+                requests.spawn(answer_control(ctx.clone(), q));
+            }
+            Some(_) = requests.join_next(), if !requests.is_empty() => {}
+        }
+    }
+
+    tracing::info!("shutting down: stop publishing, finish the current steps");
+    let _ = closing_tx.send(true);
+    requests.abort_all();
+    tasks.abort_all();
+    while tasks.join_next().await.is_some() {}
+    drop(tokens);
+    drop((info_q, switch_q, control_q, list_q));
+    let stopped = tokio::task::spawn_blocking(move || engine.stop()).await;
+    if stopped.is_err() {
+        tracing::error!("the engine did not stop cleanly");
+    }
+    Ok(())
+}
+
+/// Lower the calling thread's scheduling priority (nice 10), for background
+/// estimation beside the stepping threads.
+pub fn lower_priority() {
+    #[cfg(target_os = "linux")]
+    // SAFETY: setpriority has no memory-safety preconditions; on Linux,
+    // PRIO_PROCESS with id 0 applies to the calling thread only.
+    unsafe {
+        libc::setpriority(libc::PRIO_PROCESS, 0, 10);
+    }
+}
+
+/// Prepare `level` on a background thread; the new level's simulation is
+/// built there too, so the stepping thread only transfers the state.
+async fn prepare(
+    preparer: Arc<Preparer>,
+    level: Level,
+    method: Method,
+) -> Result<(Arc<Prepared>, Simulation), PrepareError> {
+    let (tx, rx) = oneshot::channel();
+    let spawned = std::thread::Builder::new()
+        .name("lodcloth-prepare".into())
+        .spawn(move || {
+            lower_priority();
+            let result = preparer.prepare(level, method).and_then(|p| {
+                let sim = p.simulation()?;
+                Ok((p, sim))
+            });
+            let _ = tx.send(result);
+        });
+    let failed = |message: String| PrepareError::Failed { level, method, message };
+    spawned.map_err(|e| failed(format!("cannot start a thread: {e}")))?;
+    rx.await.map_err(|_| failed("the preparation thread stopped".into()))?
+}
+
+/// At start-up: give every instance its configured method's coefficients at
+/// its start level, then prepare the other levels.
+async fn precompute(ctx: Arc<Context>, all_levels: bool) {
+    for inst in ctx.instances.values() {
+        let config = inst.preparer.config().clone();
+        let level = config.start;
+        let _guard = inst.switching.lock().await;
+        if inst.handle.status().level != level {
+            continue;
+        }
+        match prepare(inst.preparer.clone(), level, config.method).await {
+            Ok((prepared, sim)) => match switch_to(&inst.handle, prepared, sim).await {
+                Ok(o) => tracing::info!(
+                    instance = %config.name,
+                    %level,
+                    method = %config.method,
+                    predicted_error = o.predicted_error,
+                    "estimated coefficients live"
+                ),
+                Err(e) => tracing::error!(instance = %config.name, "applying the estimate: {e}"),
+            },
+            Err(e) => tracing::error!(instance = %config.name, "preparing the start level: {e}"),
+        }
+    }
+    if !all_levels {
+        return;
+    }
+    for inst in ctx.instances.values() {
+        let config = inst.preparer.config().clone();
+        for &level in &config.levels {
+            if let Err(e) = prepare(inst.preparer.clone(), level, config.method).await {
+                tracing::warn!(instance = %config.name, %level, "cannot prepare: {e}");
+            }
+        }
+    }
+    tracing::info!("every configured level is prepared");
+}
+
+async fn switch_to(
+    handle: &InstanceHandle,
+    prepared: Arc<Prepared>,
+    sim: Simulation,
+) -> Result<crate::engine::SwitchOutcome, String> {
+    let (tx, rx) = oneshot::channel();
+    handle
+        .send(Command::Switch {
+            prepared,
+            sim: Box::new(sim),
+            reply: tx,
+        })
+        .map_err(str::to_string)?;
+    match tokio::time::timeout(Duration::from_secs(30), rx).await {
+        Ok(Ok(outcome)) => outcome,
+        Ok(Err(_)) => Err("the engine stopped before the switch".into()),
+        Err(_) => Err("the engine did not apply the switch within 30 s".into()),
+    }
+}
+
+async fn publish_states(handle: InstanceHandle, publisher: zenoh::pubsub::Publisher<'static>, closing: watch::Receiver<bool>) {
+    let mut states = handle.states.clone();
+    let mut transitions = handle.transitions.lock().await;
+    let mut closing = closing;
+    let mut buf = Vec::new();
+    loop {
+        let frame: Arc<StateFrame> = tokio::select! {
+            biased;
+            _ = closing.changed() => break,
+            Some(f) = transitions.recv() => f,
+            changed = states.changed() => {
+                if changed.is_err() {
+                    break;
+                }
+                let Some(f) = states.borrow_and_update().clone() else { continue };
+                // Transition frames go out through `transitions`, in order.
+                if f.transition {
+                    continue;
+                }
+                f
+            }
+        };
+        // Skip the encoding when nobody listens.
+        if !frame.transition && !publisher.matching_status().await.map(|m| m.matching()).unwrap_or(true) {
+            continue;
+        }
+        buf.clear();
+        state_message(&handle.name, &frame).encode(&mut buf).expect("Vec grows");
+        if let Err(e) = publisher.put(buf.clone()).await {
+            tracing::warn!(instance = %handle.name, "publishing a state: {e}");
+        }
+    }
+}
+
+async fn publish_metrics(
+    handle: InstanceHandle,
+    publisher: zenoh::pubsub::Publisher<'static>,
+    closing: watch::Receiver<bool>,
+) {
+    let mut metrics = handle.metrics.clone();
+    let mut closing = closing;
+    loop {
+        tokio::select! {
+            _ = closing.changed() => break,
+            changed = metrics.changed() => {
+                if changed.is_err() {
+                    break;
+                }
+                let Some(m) = metrics.borrow_and_update().clone() else { continue };
+                let bytes = metrics_message(&handle.name, &m).encode_to_vec();
+                if let Err(e) = publisher.put(bytes).await {
+                    tracing::warn!(instance = %handle.name, "publishing metrics: {e}");
+                }
+            }
+        }
+    }
+}
+
+/// `State` on the wire.
+pub fn state_message(instance: &str, f: &StateFrame) -> v1::State {
+    let mut positions = Vec::with_capacity(4 * f.positions.len());
+    for v in &f.positions {
+        positions.extend_from_slice(&v.to_le_bytes());
+    }
+    v1::State {
+        instance: instance.to_string(),
+        frame: f.frame,
+        time: f.time,
+        level: Some(f.level.to_wire()),
+        coefficient_version: f.coefficient_version,
+        positions,
+        episode: f.episode,
+        stepped_unix_nanos: f.stepped.duration_since(UNIX_EPOCH).map_or(0, |d| d.as_nanos() as u64),
+        transition: f.transition,
+    }
+}
+
+/// `Metrics` on the wire.
+pub fn metrics_message(instance: &str, m: &MetricsFrame) -> v1::Metrics {
+    v1::Metrics {
+        instance: instance.to_string(),
+        frame: m.frame,
+        time: m.time,
+        level: Some(m.level.to_wire()),
+        method: m.method.to_string(),
+        predicted_error: m.predicted_error,
+        live_error: m.live_error,
+        step_cost_us: m.step_cost_us,
+        real_time_factor: m.real_time_factor,
+        overruns: m.overruns,
+        kinetic_energy: m.kinetic_energy,
+        potential_energy: m.potential_energy,
+        max_strain: m.max_strain,
+        coefficient_version: m.coefficient_version,
+        paused: m.paused,
+        dt: m.dt,
+        steps: m.frame,
+        lag_resets: m.lag_resets,
+        divergences: m.divergences,
+    }
+}
+
+async fn reply_error(q: &Query, code: Code, message: impl Into<String>) {
+    let message = message.into();
+    tracing::info!(key = %q.key_expr(), ?code, "refused: {message}");
+    let e = proto::error(code, message);
+    if let Err(err) = q.reply_err(e.encode_to_vec()).encoding(encoding(schema::ERROR)).await {
+        tracing::warn!("sending an error reply: {err}");
+    }
+}
+
+async fn reply_ok(q: &Query, key: String, schema: &'static str, bytes: Vec<u8>) {
+    if let Err(err) = q.reply(key, bytes).encoding(encoding(schema)).await {
+        tracing::warn!("sending a reply: {err}");
+    }
+}
+
+fn unknown_instance(ctx: &Context, name: &str) -> String {
+    format!(
+        "no instance '{name}' on this daemon; it runs {}",
+        ctx.instances.keys().cloned().collect::<Vec<_>>().join(", ")
+    )
+}
+
+/// Which instances a query's key expression names.
+fn addressed<'a>(ctx: &'a Context, q: &Query, key_of: fn(&str, &str) -> String) -> Vec<&'a Arc<Instance>> {
+    ctx.instances
+        .iter()
+        .filter(|(name, _)| {
+            zenoh::key_expr::KeyExpr::new(key_of(&ctx.prefix, name)).is_ok_and(|k| k.intersects(q.key_expr()))
+        })
+        .map(|(_, i)| i)
+        .collect()
+}
+
+async fn answer_info(ctx: &Context, q: Query) {
+    let matched = addressed(ctx, &q, keys::info);
+    if matched.is_empty() {
+        if let Some(name) = keys::instance_of(&ctx.prefix, "info", q.key_expr().as_str()) {
+            reply_error(&q, Code::UnknownInstance, unknown_instance(ctx, name)).await;
+        }
+        return;
+    }
+    for inst in matched {
+        let info = instance_info(inst);
+        reply_ok(
+            &q,
+            keys::info(&ctx.prefix, &inst.handle.name),
+            schema::INSTANCE_INFO,
+            info.encode_to_vec(),
+        )
+        .await;
+    }
+}
+
+fn instance_info(inst: &Instance) -> v1::InstanceInfo {
+    let s = inst.handle.status();
+    let c = inst.preparer.config();
+    let levels = c
+        .levels
+        .iter()
+        .map(|&l| {
+            let p = inst.preparer.get(l, c.method);
+            v1::LevelInfo {
+                level: Some(l.to_wire()),
+                predicted_error: p.as_ref().map(|p| p.predicted_error),
+                dt: p.as_ref().map_or(0.0, |p| p.problem.dt),
+                ready: p.is_some(),
+            }
+        })
+        .collect();
+    v1::InstanceInfo {
+        instance: c.name.clone(),
+        scene: c.scene.name.clone(),
+        description: c.scene.description.clone(),
+        level: Some(s.level.to_wire()),
+        reference: Some(c.reference().to_wire()),
+        levels,
+        method: s.method.to_string(),
+        integrator: c.integrator.name().to_string(),
+        dt: s.dt,
+        coefficients: Some(proto::coefficients(&s.material)),
+        coefficient_version: s.coefficient_version,
+        triangles: s.topology.triangles.iter().flatten().copied().collect(),
+        pinned: s.pinned.clone(),
+        publish_hz: c.publish_hz,
+        o_max: s.o_max.unwrap_or(0.0),
+        shadow_reference: c.shadow_reference,
+        paused: s.paused,
+    }
+}
+
+async fn answer_list(ctx: &Context, q: Query) {
+    let list = v1::InstanceList {
+        daemon: ctx.daemon.clone(),
+        instances: ctx
+            .instances
+            .values()
+            .map(|inst| {
+                let s = inst.handle.status();
+                let c = inst.preparer.config();
+                v1::InstanceSummary {
+                    instance: c.name.clone(),
+                    scene: c.scene.name.clone(),
+                    level: Some(s.level.to_wire()),
+                    method: s.method.to_string(),
+                    publish_hz: c.publish_hz,
+                }
+            })
+            .collect(),
+    };
+    reply_ok(&q, keys::instances(&ctx.prefix), schema::INSTANCE_LIST, list.encode_to_vec()).await;
+}
+
+/// Decode a request payload, or say exactly what is wrong with it.
+fn decode<M: Message + Default>(q: &Query, schema: &str) -> Result<M, String> {
+    let Some(payload) = q.payload() else {
+        return Err(format!("empty request; send a {schema} payload"));
+    };
+    if let Some(enc) = q.encoding() {
+        let text = enc.to_string();
+        let base = text.split(';').next().unwrap_or_default();
+        if base != "application/protobuf" && base != "zenoh/bytes" {
+            return Err(format!("payload encoding is {enc}; expected application/protobuf ({schema})"));
+        }
+    }
+    M::decode(payload.to_bytes().as_ref()).map_err(|e| format!("malformed {schema}: {e}"))
+}
+
+/// The instance a request for `<prefix>/<instance>/<leaf>` addresses.
+async fn target<'a>(ctx: &'a Context, q: &Query, leaf: &str) -> Option<&'a Arc<Instance>> {
+    let key = q.key_expr().as_str();
+    let Some(name) = keys::instance_of(&ctx.prefix, leaf, key) else {
+        reply_error(
+            q,
+            Code::BadRequest,
+            format!("'{key}' names no single instance; send to {}/<instance>/{leaf}", ctx.prefix),
+        )
+        .await;
+        return None;
+    };
+    match ctx.instances.get(name) {
+        Some(i) => Some(i),
+        None => {
+            reply_error(q, Code::UnknownInstance, unknown_instance(ctx, name)).await;
+            None
+        }
+    }
+}
+
+async fn answer_switch(ctx: Arc<Context>, q: Query) {
+    let arrived = Instant::now();
+    let Some(inst) = target(&ctx, &q, "switch").await else { return };
+    let req: v1::SwitchRequest = match decode(&q, schema::SWITCH_REQUEST) {
+        Ok(r) => r,
+        Err(e) => return reply_error(&q, Code::BadRequest, e).await,
+    };
+    let config = inst.preparer.config().clone();
+    let method = if req.method.is_empty() {
+        config.method
+    } else {
+        match Method::from_name(&req.method) {
+            Some(m) => m,
+            None => {
+                return reply_error(
+                    &q,
+                    Code::BadRequest,
+                    format!("method '{}' is not one of same, bcd, gkd, lsq, fit", req.method),
+                )
+                .await
+            }
+        }
+    };
+    let allowed = crate::engine::prepare::allowed(&config.levels);
+    let level = match req.target {
+        None => {
+            return reply_error(&q, Code::BadRequest, "no target: set either level or max_error").await;
+        }
+        Some(v1::switch_request::Target::Level(l)) => {
+            let level = Level::from_wire(&l);
+            if !config.levels.contains(&level) {
+                return reply_error(
+                    &q,
+                    Code::LevelNotAllowed,
+                    format!("level {level} is not allowed for '{}'; allowed: {allowed}", config.name),
+                )
+                .await;
+            }
+            level
+        }
+        Some(v1::switch_request::Target::MaxError(e)) => {
+            if !(e > 0.0 && e.is_finite()) {
+                return reply_error(
+                    &q,
+                    Code::BadRequest,
+                    format!("max_error {e} must be a positive finite fraction (0.05 = 5 %)"),
+                )
+                .await;
+            }
+            // Every level's predicted error is needed: prepare them all
+            // (cheapest first), then take the cheapest that meets the bound.
+            let mut levels = config.levels.clone();
+            levels.sort_by_key(|l| l.nodes());
+            let mut best: Option<(Level, f64)> = None;
+            let mut chosen = None;
+            for l in levels {
+                match prepare(inst.preparer.clone(), l, method).await {
+                    Ok((p, _)) => {
+                        if p.predicted_error <= e {
+                            chosen = Some(l);
+                            break;
+                        }
+                        if best.is_none_or(|(_, b)| p.predicted_error < b) {
+                            best = Some((l, p.predicted_error));
+                        }
+                    }
+                    Err(err) => tracing::warn!(instance = %config.name, %l, "skipped for max_error: {err}"),
+                }
+            }
+            match chosen {
+                Some(l) => l,
+                None => {
+                    let best = best.map_or("no level could be prepared".to_string(), |(l, b)| {
+                        format!("the best is {l} at {:.2} %", 100.0 * b)
+                    });
+                    return reply_error(
+                        &q,
+                        Code::NoLevelMeetsError,
+                        format!(
+                            "no allowed level of '{}' has a predicted error ≤ {:.2} %; {best}",
+                            config.name,
+                            100.0 * e
+                        ),
+                    )
+                    .await;
+                }
+            }
+        }
+    };
+    if *ctx.closing.borrow() {
+        return reply_error(&q, Code::Unavailable, "the daemon is shutting down").await;
+    }
+    let was_ready = inst.preparer.get(level, method).is_some();
+    let _guard = inst.switching.lock().await;
+    let (prepared, sim) = match prepare(inst.preparer.clone(), level, method).await {
+        Ok(p) => p,
+        Err(e) => {
+            let code = match e {
+                PrepareError::Unstable { .. } => Code::Unstable,
+                PrepareError::NotAllowed { .. } => Code::LevelNotAllowed,
+                _ => Code::EstimationFailed,
+            };
+            return reply_error(&q, code, e.to_string()).await;
+        }
+    };
+    match switch_to(&inst.handle, prepared.clone(), sim).await {
+        Ok(o) => {
+            tracing::info!(instance = %config.name, from = %o.previous, to = %o.level, %method, "switched");
+            let reply = v1::SwitchReply {
+                instance: config.name.clone(),
+                previous: Some(o.previous.to_wire()),
+                level: Some(o.level.to_wire()),
+                method: o.method.to_string(),
+                coefficients: Some(proto::coefficients(&o.material)),
+                predicted_error: o.predicted_error,
+                dt: o.dt,
+                seconds: arrived.elapsed().as_secs_f64(),
+                cached: was_ready || prepared.cached,
+                coefficient_version: o.coefficient_version,
+                frame: o.frame,
+            };
+            reply_ok(
+                &q,
+                keys::switch(&ctx.prefix, &config.name),
+                schema::SWITCH_REPLY,
+                reply.encode_to_vec(),
+            )
+            .await;
+        }
+        Err(e) => reply_error(&q, Code::Unavailable, e).await,
+    }
+}
+
+async fn answer_control(ctx: Arc<Context>, q: Query) {
+    let Some(inst) = target(&ctx, &q, "control").await else { return };
+    let req: v1::ControlRequest = match decode(&q, schema::CONTROL_REQUEST) {
+        Ok(r) => r,
+        Err(e) => return reply_error(&q, Code::BadRequest, e).await,
+    };
+    use v1::control_request::Action;
+    let (tx, rx) = oneshot::channel();
+    let command = match Action::try_from(req.action) {
+        Ok(Action::Pause) => Command::Pause { paused: true, reply: tx },
+        Ok(Action::Resume) => Command::Pause { paused: false, reply: tx },
+        Ok(Action::Reset) => Command::Reset { reply: tx },
+        _ => {
+            return reply_error(
+                &q,
+                Code::BadRequest,
+                format!("action {} is not one of PAUSE, RESUME, RESET", req.action),
+            )
+            .await
+        }
+    };
+    if let Err(e) = inst.handle.send(command) {
+        return reply_error(&q, Code::Unavailable, e).await;
+    }
+    match tokio::time::timeout(Duration::from_secs(5), rx).await {
+        Ok(Ok(o)) => {
+            let reply = v1::ControlReply {
+                instance: inst.handle.name.clone(),
+                paused: o.paused,
+                frame: o.frame,
+            };
+            reply_ok(
+                &q,
+                keys::control(&ctx.prefix, &inst.handle.name),
+                schema::CONTROL_REPLY,
+                reply.encode_to_vec(),
+            )
+            .await;
+        }
+        _ => reply_error(&q, Code::Unavailable, "the engine did not apply the command").await,
+    }
+}
