@@ -22,7 +22,7 @@ use lodcloth::sim::{Integrator, StabilityCheck};
 #[command(name = "lodcloth", version, about = "Mass-spring cloth at several levels of detail")]
 struct Cli {
     /// Log as JSON lines (for containers and log collectors) instead of text.
-    #[arg(long, global = true, env = "LODCLOTH_LOG_JSON")]
+    #[arg(long, global = true, env = "LODCLOTH_LOG_JSON", value_parser = clap::builder::FalseyValueParser::new())]
     log_json: bool,
     #[command(subcommand)]
     command: Command,

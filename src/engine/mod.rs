@@ -130,6 +130,8 @@ pub struct InstanceSetup {
     /// Scene duration (s): the scene starts over there when `looping`.
     pub duration: f64,
     pub looping: bool,
+    /// Compare with the recorded reference and publish the live error.
+    pub shadow: bool,
 }
 
 /// The service's side of one running instance.
@@ -272,7 +274,40 @@ struct Shadow {
     prepared: Arc<Prepared>,
     /// Metric frame interval of the reference (s).
     interval: f64,
+    /// The last interval compared.
+    last_slot: i64,
     mapped: Vec<f64>,
+    mapped_next: Vec<f64>,
+}
+
+impl Shadow {
+    /// Mean relative distance of `pos` (SoA) from the reference at time `t`;
+    /// None outside the recording.
+    fn error_at(&mut self, t: f64, pos: &[f64]) -> Option<f64> {
+        let reference = &self.prepared.problem.reference;
+        let times = &reference.frame_times;
+        let i = times.partition_point(|&ft| ft <= t);
+        if i == 0 || i >= times.len() {
+            return None;
+        }
+        let (a, b) = (i - 1, i);
+        let w = ((t - times[a]) / (times[b] - times[a])).clamp(0.0, 1.0);
+        let correlation = self.prepared.problem.correlation();
+        correlation.map(&reference.frames[a], &mut self.mapped);
+        correlation.map(&reference.frames[b], &mut self.mapped_next);
+        let n = pos.len() / 3;
+        let mut sum = 0.0;
+        for k in 0..n {
+            let d2 = (0..3)
+                .map(|c| {
+                    let r = (1.0 - w) * self.mapped[c * n + k] + w * self.mapped_next[c * n + k];
+                    (r - pos[c * n + k]).powi(2)
+                })
+                .sum::<f64>();
+            sum += d2.sqrt();
+        }
+        Some(sum / n as f64 / reference.o_max)
+    }
 }
 
 /// One instance on its stepping thread.
@@ -285,7 +320,10 @@ struct Runner {
     predicted_error: Option<f64>,
     coefficient_version: u32,
     shadow: Option<Shadow>,
+    shadow_wanted: bool,
     live_error: Option<f64>,
+    /// The reference's largest displacement, once calibrated.
+    o_max: Option<f64>,
     duration: f64,
     looping: bool,
     commands: Receiver<Command>,
@@ -343,7 +381,9 @@ impl Runner {
             predicted_error: None,
             coefficient_version: 1,
             shadow: None,
+            shadow_wanted: setup.shadow,
             live_error: None,
+            o_max: None,
             duration: setup.duration,
             looping: setup.looping,
             sim: setup.sim,
@@ -449,11 +489,15 @@ impl Runner {
         self.method = prepared.method;
         self.material = prepared.material;
         self.predicted_error = Some(prepared.predicted_error);
+        self.o_max = Some(prepared.problem.reference.o_max);
         self.coefficient_version += 1;
         let interval = prepared.problem.reference.dt * prepared.problem.reference.spec.metric_stride as f64;
-        self.shadow = Some(Shadow {
+        let n = self.sim.topology().n_nodes;
+        self.shadow = self.shadow_wanted.then(|| Shadow {
             interval,
-            mapped: vec![0.0; 3 * self.sim.topology().n_nodes],
+            last_slot: -1,
+            mapped: vec![0.0; 3 * n],
+            mapped_next: vec![0.0; 3 * n],
             prepared: prepared.clone(),
         });
         self.live_error = None;
@@ -501,7 +545,7 @@ impl Runner {
             s.pinned = self.sim.loads().pins.iter().map(|p| p.node).collect();
         }
         s.frame = self.frames;
-        s.o_max = self.shadow.as_ref().map(|sh| sh.prepared.problem.reference.o_max);
+        s.o_max = self.o_max;
     }
 
     /// Take the steps due at `now`.
@@ -552,25 +596,14 @@ impl Runner {
         }
         self.last = Some(report);
         if let Some(sh) = self.shadow.as_mut() {
-            // A metric frame f of the reference is at time (f + 1)·interval.
+            // Once per reference metric frame interval, compare with the
+            // reference interpolated linearly to this step's time (frame f
+            // of the recording is at time (f + 1)·interval).
             let t = report.time;
-            let f = (t / sh.interval).round();
-            if f >= 1.0 && (t - f * sh.interval).abs() < 0.25 * self.sim.params().dt {
-                let reference = &sh.prepared.problem.reference;
-                let idx = f as usize - 1;
-                self.live_error = if idx < reference.frames.len() {
-                    sh.prepared.problem.correlation().map(&reference.frames[idx], &mut sh.mapped);
-                    let pos = &self.sim.state().pos;
-                    let n = pos.len() / 3;
-                    let mut sum = 0.0;
-                    for k in 0..n {
-                        let d2 = (0..3).map(|c| (sh.mapped[c * n + k] - pos[c * n + k]).powi(2)).sum::<f64>();
-                        sum += d2.sqrt();
-                    }
-                    Some(sum / n as f64 / reference.o_max)
-                } else {
-                    None
-                };
+            let slot = (t / sh.interval).floor() as i64;
+            if slot != sh.last_slot {
+                sh.last_slot = slot;
+                self.live_error = sh.error_at(t, &self.sim.state().pos);
             }
         }
         if self.looping && report.time >= self.duration {

@@ -4,7 +4,7 @@
 use std::time::Duration;
 
 use prost::Message;
-use zenoh::query::QueryTarget;
+use zenoh::query::{ConsolidationMode, QueryTarget};
 use zenoh::Session;
 
 use super::{encoding, keys};
@@ -95,7 +95,14 @@ impl Client {
         payload: Option<(Vec<u8>, &'static str)>,
         timeout: Duration,
     ) -> Result<(Vec<Vec<u8>>, Vec<ClientError>), ClientError> {
-        let mut get = self.session.get(key).target(QueryTarget::All).timeout(timeout);
+        // Every reply counts (several daemons answer `<prefix>/instances`
+        // on the same key): no consolidation.
+        let mut get = self
+            .session
+            .get(key)
+            .target(QueryTarget::All)
+            .consolidation(ConsolidationMode::None)
+            .timeout(timeout);
         if let Some((bytes, schema)) = payload {
             get = get.payload(bytes).encoding(encoding(schema));
         }

@@ -123,7 +123,7 @@ fn default_publish_hz() -> f64 {
 #[serde(deny_unknown_fields)]
 pub struct RawEstimation {
     /// Reference steps recorded per instance for estimation and calibration
-    /// (default 10000).
+    /// (default 15000).
     #[serde(default = "default_reference_steps")]
     pub reference_steps: u64,
     /// Reference steps per metric frame (default 40). A level's dt must
@@ -159,7 +159,7 @@ impl Default for RawEstimation {
 }
 
 fn default_reference_steps() -> u64 {
-    10_000
+    15_000
 }
 fn default_metric_stride() -> u64 {
     40

@@ -123,6 +123,7 @@ pub async fn serve(
             publish_hz: ic.publish_hz,
             duration: ic.scene.duration,
             looping: ic.looping,
+            shadow: ic.shadow_reference,
         });
         preparers.push(preparer);
     }
@@ -277,11 +278,15 @@ async fn precompute(ctx: Arc<Context>, all_levels: bool) {
     for inst in ctx.instances.values() {
         let config = inst.preparer.config().clone();
         let level = config.start;
+        // Prepare without holding the switch lock (client switches go on
+        // meanwhile); apply only if nobody has switched the instance since.
+        let prepared = prepare(inst.preparer.clone(), level, config.method).await;
         let _guard = inst.switching.lock().await;
-        if inst.handle.status().level != level {
+        let status = inst.handle.status();
+        if status.level != level || status.coefficient_version != 1 {
             continue;
         }
-        match prepare(inst.preparer.clone(), level, config.method).await {
+        match prepared {
             Ok((prepared, sim)) => match switch_to(&inst.handle, prepared, sim).await {
                 Ok(o) => tracing::info!(
                     instance = %config.name,
