@@ -42,20 +42,20 @@ fn refused(bytes: &[u8]) -> ClientError {
     }
 }
 
-/// A zenoh session config for a client: `client` mode connected to
-/// `connect` with multicast scouting off, or a scouting peer when empty.
+/// A zenoh session config for a client: a peer connected to every endpoint
+/// in `connect` with multicast scouting off (several daemons on different
+/// endpoints are all reached; zenoh's `client` mode would keep only one
+/// connection), or a peer discovering others by multicast when empty.
 pub fn client_config(connect: &[String]) -> Result<zenoh::Config, ClientError> {
     let mut c = zenoh::Config::default();
-    let set = |c: &mut zenoh::Config, k: &str, v: &str| c.insert_json5(k, v).map_err(|e| ClientError::Zenoh(format!("{k}: {e}")));
-    if connect.is_empty() {
-        set(&mut c, "mode", "\"peer\"")?;
-    } else {
-        set(&mut c, "mode", "\"client\"")?;
-        set(
-            &mut c,
-            "connect/endpoints",
-            &serde_json::to_string(connect).map_err(|e| ClientError::Zenoh(e.to_string()))?,
-        )?;
+    let set =
+        |c: &mut zenoh::Config, k: &str, v: &str| c.insert_json5(k, v).map_err(|e| ClientError::Zenoh(format!("{k}: {e}")));
+    set(&mut c, "mode", "\"peer\"")?;
+    // A client listens on nothing.
+    set(&mut c, "listen/endpoints", "[]")?;
+    if !connect.is_empty() {
+        let endpoints = serde_json::to_string(connect).map_err(|e| ClientError::Zenoh(e.to_string()))?;
+        set(&mut c, "connect/endpoints", &endpoints)?;
         set(&mut c, "scouting/multicast/enabled", "false")?;
     }
     Ok(c)

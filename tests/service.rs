@@ -1,0 +1,529 @@
+//! The daemon over real zenoh sessions on 127.0.0.1 (multicast scouting
+//! off, a timeout on every await): publishing rate, switches and the
+//! continuity of the motion across them, refusals of bad requests,
+//! liveliness, two daemons seen by one client, graceful shutdown.
+
+use std::collections::HashMap;
+use std::future::Future;
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use prost::Message;
+use tokio::sync::oneshot;
+use tokio::task::JoinHandle;
+
+use lodcloth::lod::Correlation;
+use lodcloth::proto::{unpack_positions, v1, Level};
+use lodcloth::scene::Scene;
+use lodcloth::service::client::{Client, ClientError};
+use lodcloth::service::config::ServiceConfig;
+use lodcloth::service::{keys, ServiceError};
+use lodcloth::sim::Topology;
+
+const PREFIX: &str = "lodtest";
+
+/// Fail the test instead of hanging.
+async fn within<T>(seconds: u64, what: &str, f: impl Future<Output = T>) -> T {
+    match tokio::time::timeout(Duration::from_secs(seconds), f).await {
+        Ok(v) => v,
+        Err(_) => panic!("{what}: no result within {seconds} s"),
+    }
+}
+
+fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .map(|a| a.port())
+        .expect("a free loopback port")
+}
+
+fn scene_path(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("config/scenes").join(name)
+}
+
+/// A small daemon: paper scene 1 with a 24×24 reference at levels 8², 12²,
+/// 16² (method `same`: preparation takes well under a second), and a
+/// fixed-dt instance whose finest level is unstable at that dt.
+fn config_text(port: u16, cache: &std::path::Path, names: (&str, &str)) -> String {
+    format!(
+        r#"
+prefix = "{PREFIX}"
+cache = "{cache}"
+[zenoh]
+mode = "peer"
+listen = ["tcp/127.0.0.1:{port}"]
+multicast_scouting = false
+[engine]
+threads = 2
+publish_hz = 50.0
+[estimation]
+reference_steps = 5000
+metric_stride = 25
+estimate_stride = 25
+[[instances]]
+name = "{a}"
+scene = "{scene1}"
+reference = "24x24"
+levels = ["8x8", "12x12", "16x16"]
+start = "16x16"
+method = "same"
+shadow_reference = true
+[[instances]]
+name = "{b}"
+scene = "{scene1}"
+reference = "24x24"
+levels = ["8x8", "16x16"]
+start = "8x8"
+method = "same"
+dt = 2.5e-3
+publish_hz = 20.0
+"#,
+        cache = cache.display(),
+        a = names.0,
+        b = names.1,
+        scene1 = scene_path("paper-1-top-edge.toml").display(),
+    )
+}
+
+struct Daemon {
+    port: u16,
+    stop: Option<oneshot::Sender<()>>,
+    task: JoinHandle<Result<(), ServiceError>>,
+    _dir: tempfile::TempDir,
+}
+
+impl Daemon {
+    fn start(names: (&str, &str)) -> Daemon {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let port = free_port();
+        let config = ServiceConfig::from_toml(&config_text(port, dir.path(), names), "test").expect("valid config");
+        let (tx, rx) = oneshot::channel();
+        let task = tokio::spawn(lodcloth::service::run(config, async {
+            let _ = rx.await;
+        }));
+        Daemon {
+            port,
+            stop: Some(tx),
+            task,
+            _dir: dir,
+        }
+    }
+
+    fn endpoint(&self) -> String {
+        format!("tcp/127.0.0.1:{}", self.port)
+    }
+
+    async fn shutdown(mut self) -> Result<(), ServiceError> {
+        if let Some(tx) = self.stop.take() {
+            let _ = tx.send(());
+        }
+        within(20, "graceful shutdown", self.task).await.expect("daemon task")
+    }
+}
+
+async fn client(endpoints: &[String]) -> Client {
+    // The daemon may still be opening its listener.
+    let deadline = Instant::now() + Duration::from_secs(10);
+    loop {
+        match Client::connect(endpoints, PREFIX).await {
+            Ok(mut c) => {
+                c.timeout = Duration::from_secs(5);
+                return c;
+            }
+            Err(e) if Instant::now() > deadline => panic!("cannot connect to {endpoints:?}: {e}"),
+            Err(_) => tokio::time::sleep(Duration::from_millis(100)).await,
+        }
+    }
+}
+
+/// Info once the daemon answers.
+async fn wait_info(c: &Client, instance: &str) -> v1::InstanceInfo {
+    let deadline = Instant::now() + Duration::from_secs(15);
+    loop {
+        match c.info(instance).await {
+            Ok(i) => return i,
+            Err(e) if Instant::now() > deadline => panic!("info of {instance}: {e}"),
+            Err(_) => tokio::time::sleep(Duration::from_millis(100)).await,
+        }
+    }
+}
+
+/// States of `instance` received for `seconds`.
+async fn collect_states(c: &Client, instance: &str, seconds: f64) -> Vec<v1::State> {
+    let sub = c
+        .session
+        .declare_subscriber(keys::state(PREFIX, instance))
+        .await
+        .expect("subscriber");
+    let end = Instant::now() + Duration::from_secs_f64(seconds);
+    let mut out = Vec::new();
+    while let Ok(Ok(s)) = tokio::time::timeout(end.saturating_duration_since(Instant::now()), sub.recv_async()).await {
+        out.push(v1::State::decode(s.payload().to_bytes().as_ref()).expect("a State"));
+    }
+    out
+}
+
+fn refused_code(r: Result<v1::SwitchReply, ClientError>) -> (String, String) {
+    match r {
+        Err(ClientError::Refused { code, message }) => (code, message),
+        other => panic!("expected a refusal, got {other:?}"),
+    }
+}
+
+fn level_of(s: &v1::State) -> Level {
+    Level::from_wire(s.level.as_ref().expect("level"))
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn states_arrive_at_the_configured_rate_and_pinned_nodes_stay_put() {
+    let d = Daemon::start(("rate", "rate-fixed"));
+    let c = client(&[d.endpoint()]).await;
+    let info = wait_info(&c, "rate").await;
+    assert_eq!(info.publish_hz, 50.0);
+    // Let the stepping settle, then count over 3 s.
+    collect_states(&c, "rate", 0.5).await;
+    let states = collect_states(&c, "rate", 3.0).await;
+    let rate = states.len() as f64 / 3.0;
+    assert!((45.0..=55.0).contains(&rate), "{rate} states/s, configured 50");
+    let mut pinned_at: HashMap<u32, [f64; 3]> = HashMap::new();
+    let mut last_frame = 0;
+    for s in states.iter().filter(|s| !s.transition) {
+        assert!(s.frame > last_frame, "frames increase");
+        last_frame = s.frame;
+        let lv = level_of(s);
+        let pos = unpack_positions(&s.positions).expect("packed positions");
+        assert_eq!(pos.len(), 3 * lv.nodes());
+        assert!(pos.iter().all(|v| v.is_finite()));
+        if lv != Level::from_wire(info.level.as_ref().unwrap()) {
+            continue; // the estimate went live at another level (not here: same method)
+        }
+        let n = lv.nodes();
+        for &k in &info.pinned {
+            let p = [pos[k as usize], pos[n + k as usize], pos[2 * n + k as usize]];
+            let first = *pinned_at.entry(k).or_insert(p);
+            assert_eq!(p, first, "pinned node {k} moved");
+        }
+    }
+    assert!(!info.pinned.is_empty());
+    // Time advances with the wall clock: 3 s of states span about 3 s of
+    // simulated time (modulo the scene's 6 s loop).
+    let span = states.last().unwrap().time - states[0].time;
+    assert!(span < 0.0 || (2.7..3.3).contains(&span), "simulated span {span} s over 3 s");
+    d.shutdown().await.expect("clean exit");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_switch_is_answered_and_the_motion_continues_without_a_jump() {
+    let d = Daemon::start(("sw", "sw-fixed"));
+    let c = client(&[d.endpoint()]).await;
+    wait_info(&c, "sw").await;
+    let sub = c
+        .session
+        .declare_subscriber(keys::state(PREFIX, "sw"))
+        .await
+        .expect("subscriber");
+    // Let the cloth fall for a while so that it is moving at the switch.
+    tokio::time::sleep(Duration::from_millis(1500)).await;
+    let request = v1::SwitchRequest {
+        target: Some(v1::switch_request::Target::Level(Level::new(8, 8).to_wire())),
+        method: String::new(),
+    };
+    let reply = within(60, "switch", c.switch("sw", &request, Duration::from_secs(60)))
+        .await
+        .expect("switch accepted");
+    assert_eq!(Level::from_wire(reply.level.as_ref().unwrap()), Level::new(8, 8));
+    assert_eq!(Level::from_wire(reply.previous.as_ref().unwrap()), Level::new(16, 16));
+    let predicted = reply.predicted_error.expect("calibrated");
+    assert!(predicted > 0.0 && predicted < 0.5, "predicted error {predicted}");
+
+    // Read states until three after the 16² → 8² transition pair (the
+    // start-up estimate going live is a transition pair too, 16² → 16²).
+    let mut transitions: Vec<v1::State> = Vec::new();
+    let mut pair: Option<(v1::State, v1::State)> = None;
+    let mut after = 0;
+    within(10, "states after the switch", async {
+        while after < 3 {
+            let s = sub.recv_async().await.expect("state");
+            let s = v1::State::decode(s.payload().to_bytes().as_ref()).expect("State");
+            if s.transition {
+                transitions.push(s);
+                if let [.., a, b] = transitions.as_slice() {
+                    if level_of(a) == Level::new(16, 16) && level_of(b) == Level::new(8, 8) {
+                        pair = Some((a.clone(), b.clone()));
+                    }
+                }
+            } else if pair.is_some() {
+                assert_eq!(level_of(&s), Level::new(8, 8), "states after the switch carry the new level");
+                after += 1;
+            }
+        }
+    })
+    .await;
+    let (old, new) = pair.as_ref().map(|(a, b)| (a, b)).expect("a transition pair");
+    assert_eq!(level_of(old), Level::new(16, 16));
+    assert_eq!(level_of(new), Level::new(8, 8));
+    assert_eq!(old.frame, new.frame);
+    assert_eq!(old.time, new.time);
+    assert!(new.coefficient_version > old.coefficient_version);
+
+    // The visible jump: the new (coarse) surface sampled at the old nodes,
+    // against the old nodes, relative to the reference's largest
+    // displacement. Within the level's predicted error.
+    let info = c.info("sw").await.expect("info");
+    assert!(info.o_max > 0.0);
+    let scene = Scene::load(&scene_path("paper-1-top-edge.toml")).unwrap();
+    let fine = Topology::grid(scene.shape(16, 16), scene.orientation);
+    let coarse = Topology::grid(scene.shape(8, 8), scene.orientation);
+    let coarse_to_fine = Correlation::between(&coarse, &fine).unwrap();
+    let old_pos = unpack_positions(&old.positions).unwrap();
+    let new_pos = unpack_positions(&new.positions).unwrap();
+    let mut sampled = vec![0.0; old_pos.len()];
+    coarse_to_fine.map(&new_pos, &mut sampled);
+    let n = fine.n_nodes;
+    let jump = (0..n)
+        .map(|k| {
+            (0..3)
+                .map(|c| (sampled[c * n + k] - old_pos[c * n + k]).powi(2))
+                .sum::<f64>()
+                .sqrt()
+        })
+        .sum::<f64>()
+        / n as f64
+        / info.o_max;
+    let moving = (0..n).any(|k| (old_pos[n + k] - fine.rest_positions[k][1]).abs() > 1e-3);
+    assert!(moving, "the cloth should be moving at the switch");
+    eprintln!("switch 16x16 -> 8x8 at t = {:.3} s: jump {jump:.5}, predicted error {predicted:.5}", old.time);
+    assert!(jump <= predicted, "jump {jump} above the predicted error {predicted}");
+    d.shutdown().await.expect("clean exit");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn bad_requests_get_errors_naming_the_problem_and_publishing_goes_on() {
+    let d = Daemon::start(("bad", "bad-fixed"));
+    let c = client(&[d.endpoint()]).await;
+    wait_info(&c, "bad").await;
+    let level = |nx, ny| v1::SwitchRequest {
+        target: Some(v1::switch_request::Target::Level(v1::Level { nx, ny })),
+        method: String::new(),
+    };
+    let max_error = |e| v1::SwitchRequest {
+        target: Some(v1::switch_request::Target::MaxError(e)),
+        method: String::new(),
+    };
+    let t = Duration::from_secs(30);
+    let cases: Vec<(&str, Result<v1::SwitchReply, ClientError>, &str, &str)> = vec![
+        (
+            "unknown instance",
+            c.switch("nope", &level(8, 8), t).await,
+            "CODE_UNKNOWN_INSTANCE",
+            "no instance 'nope'",
+        ),
+        (
+            "level outside the allowed set",
+            c.switch("bad", &level(17, 17), t).await,
+            "CODE_LEVEL_NOT_ALLOWED",
+            "17x17 is not allowed",
+        ),
+        (
+            "huge level",
+            c.switch("bad", &level(u32::MAX, 3), t).await,
+            "CODE_LEVEL_NOT_ALLOWED",
+            "not allowed",
+        ),
+        (
+            "malformed protobuf",
+            c.switch_raw("bad", Some(vec![0xff, 0xff, 0xff, 0x01])).await,
+            "CODE_BAD_REQUEST",
+            "malformed lodcloth.v1.SwitchRequest",
+        ),
+        (
+            "empty payload",
+            c.switch_raw("bad", None).await,
+            "CODE_BAD_REQUEST",
+            "empty request",
+        ),
+        (
+            "no target",
+            c.switch_raw("bad", Some(Vec::new())).await,
+            "CODE_BAD_REQUEST",
+            "no target",
+        ),
+        (
+            "NaN max error",
+            c.switch("bad", &max_error(f64::NAN), t).await,
+            "CODE_BAD_REQUEST",
+            "max_error NaN",
+        ),
+        (
+            "negative max error",
+            c.switch("bad", &max_error(-0.1), t).await,
+            "CODE_BAD_REQUEST",
+            "max_error -0.1",
+        ),
+        (
+            "unknown method",
+            c.switch(
+                "bad",
+                &v1::SwitchRequest {
+                    method: "magic".into(),
+                    ..level(8, 8)
+                },
+                t,
+            )
+            .await,
+            "CODE_BAD_REQUEST",
+            "method 'magic'",
+        ),
+        (
+            "a level unstable at the instance's fixed dt",
+            c.switch("bad-fixed", &level(16, 16), t).await,
+            "CODE_UNSTABLE",
+            "unstable at dt = 2.5e-3",
+        ),
+    ];
+    for (what, result, code, needle) in cases {
+        let (got_code, message) = refused_code(result);
+        assert_eq!(got_code, code, "{what}: {message}");
+        assert!(message.contains(needle), "{what}: '{message}' should mention '{needle}'");
+    }
+    // A query on a wildcard names no single instance.
+    let replies = c
+        .session
+        .get(format!("{PREFIX}/*/switch"))
+        .payload(level(8, 8).encode_to_vec())
+        .timeout(Duration::from_secs(5))
+        .await
+        .expect("get");
+    let reply = within(10, "wildcard reply", replies.recv_async()).await.expect("a reply");
+    let err = reply.result().expect_err("refused");
+    let e = v1::Error::decode(err.payload().to_bytes().as_ref()).unwrap();
+    assert_eq!(e.code, v1::error::Code::BadRequest as i32, "{}", e.message);
+
+    // Nothing was disturbed: both instances still publish at their rate and
+    // sit at their levels.
+    let states = collect_states(&c, "bad", 2.0).await;
+    assert!(states.len() >= 90, "{} states in 2 s at 50 Hz", states.len());
+    assert!(states.iter().all(|s| level_of(s) == Level::new(16, 16)));
+    let fixed = collect_states(&c, "bad-fixed", 2.0).await;
+    assert!(fixed.len() >= 36, "{} states in 2 s at 20 Hz", fixed.len());
+    assert!(fixed.iter().all(|s| level_of(s) == Level::new(8, 8)));
+    d.shutdown().await.expect("clean exit");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn clients_see_instances_appear_and_disappear() {
+    // The client listens first; the daemon connects to it.
+    let port = free_port();
+    let listen = format!("tcp/127.0.0.1:{port}");
+    let mut zc = zenoh::Config::default();
+    zc.insert_json5("mode", "\"peer\"").unwrap();
+    zc.insert_json5("listen/endpoints", &format!("[\"{listen}\"]")).unwrap();
+    zc.insert_json5("scouting/multicast/enabled", "false").unwrap();
+    let session = within(10, "open", async { zenoh::open(zc).await }).await.expect("session");
+    let alive = session
+        .liveliness()
+        .declare_subscriber(keys::alive(PREFIX, "*"))
+        .history(true)
+        .await
+        .expect("liveliness subscriber");
+
+    let dir = tempfile::tempdir().unwrap();
+    let text = config_text(free_port(), dir.path(), ("live-a", "live-b")).replace(
+        "multicast_scouting = false",
+        &format!("multicast_scouting = false\nconnect = [\"{listen}\"]"),
+    );
+    let config = ServiceConfig::from_toml(&text, "test").unwrap();
+    let (tx, rx) = oneshot::channel::<()>();
+    let task = tokio::spawn(lodcloth::service::run(config, async {
+        let _ = rx.await;
+    }));
+    let mut present = std::collections::BTreeSet::new();
+    within(20, "tokens appear", async {
+        while present.len() < 2 {
+            let s = alive.recv_async().await.expect("sample");
+            assert_eq!(s.kind(), zenoh::sample::SampleKind::Put);
+            present.insert(keys::alive_instance(PREFIX, s.key_expr().as_str()).unwrap().to_string());
+        }
+    })
+    .await;
+    assert_eq!(present.into_iter().collect::<Vec<_>>(), ["live-a", "live-b"]);
+
+    let _ = tx.send(());
+    within(20, "shutdown", task).await.unwrap().expect("clean exit");
+    let mut gone = std::collections::BTreeSet::new();
+    within(20, "tokens disappear", async {
+        while gone.len() < 2 {
+            let s = alive.recv_async().await.expect("sample");
+            if s.kind() == zenoh::sample::SampleKind::Delete {
+                gone.insert(keys::alive_instance(PREFIX, s.key_expr().as_str()).unwrap().to_string());
+            }
+        }
+    })
+    .await;
+    assert_eq!(gone.len(), 2);
+    session.close().await.unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn one_client_sees_the_instances_of_two_daemons() {
+    let a = Daemon::start(("east-1", "east-2"));
+    let b = Daemon::start(("west-1", "west-2"));
+    let c = client(&[a.endpoint(), b.endpoint()]).await;
+    wait_info(&c, "east-1").await;
+    wait_info(&c, "west-1").await;
+    let lists = within(15, "list", c.list()).await.expect("list");
+    assert_eq!(lists.len(), 2, "one list per daemon");
+    let mut names: Vec<String> = lists
+        .iter()
+        .flat_map(|l| l.instances.iter().map(|i| i.instance.clone()))
+        .collect();
+    names.sort();
+    assert_eq!(names, ["east-1", "east-2", "west-1", "west-2"]);
+    let mut alive = within(15, "alive", c.alive()).await.expect("alive");
+    alive.sort();
+    assert_eq!(alive, names);
+    // Each daemon's states reach the one client.
+    assert!(!collect_states(&c, "west-2", 1.0).await.is_empty());
+    assert!(!collect_states(&c, "east-1", 1.0).await.is_empty());
+    a.shutdown().await.expect("clean exit");
+    b.shutdown().await.expect("clean exit");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_invalid_config_is_refused_with_every_problem_by_path() {
+    let text = r#"
+prefix = "bad prefix"
+[zenoh]
+mode = "satellite"
+listen = ["carrier-pigeon"]
+[engine]
+max_substeps = 0
+[[instances]]
+name = "instances"
+scene = "no/such/scene.toml"
+levels = ["1x1", "8x8", "8x8"]
+start = "9x9"
+method = "guess"
+integrator = "leapfrog"
+dt = -1.0
+"#;
+    let err = ServiceConfig::from_toml(text, "bad.toml").expect_err("rejected").to_string();
+    for needle in [
+        "prefix:",
+        "zenoh.mode: 'satellite'",
+        "zenoh.listen[0]: 'carrier-pigeon'",
+        "engine.max_substeps",
+        "instances[0].name: 'instances'",
+        "instances[0].scene:",
+        "instances[0].levels[0]: 1x1",
+        "instances[0].levels[2]: 8x8 is listed twice",
+        "instances[0].start: 9x9",
+        "instances[0].method: 'guess'",
+        "instances[0].integrator: 'leapfrog'",
+        "instances[0].dt: -1",
+    ] {
+        assert!(err.contains(needle), "missing '{needle}' in:\n{err}");
+    }
+    let unknown = ServiceConfig::from_toml("[engine]\nthreadz = 2\n", "typo.toml").expect_err("rejected");
+    assert!(unknown.to_string().contains("threadz"), "{unknown}");
+}
