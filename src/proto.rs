@@ -111,8 +111,14 @@ pub fn material(c: &v1::Coefficients) -> Material {
                 k: c.structural_k,
                 c: c.structural_c,
             },
-            SpringCoeffs { k: c.shear_k, c: c.shear_c },
-            SpringCoeffs { k: c.bend_k, c: c.bend_c },
+            SpringCoeffs {
+                k: c.shear_k,
+                c: c.shear_c,
+            },
+            SpringCoeffs {
+                k: c.bend_k,
+                c: c.bend_c,
+            },
         ],
     }
 }

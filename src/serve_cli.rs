@@ -21,7 +21,12 @@ use lodcloth::sim::State;
 pub struct Connect {
     /// zenoh endpoint(s) of a daemon or router, e.g. tcp/127.0.0.1:7450
     /// (the default config's endpoint). Empty: discover peers by multicast.
-    #[arg(long, env = "LODCLOTH_CONNECT", value_delimiter = ',', default_value = "tcp/127.0.0.1:7450")]
+    #[arg(
+        long,
+        env = "LODCLOTH_CONNECT",
+        value_delimiter = ',',
+        default_value = "tcp/127.0.0.1:7450"
+    )]
     pub connect: Vec<String>,
     /// Key prefix of the daemon.
     #[arg(long, default_value = "lodcloth")]
@@ -115,7 +120,10 @@ pub fn list(c: Connect) -> Result<()> {
         if lists.is_empty() && alive.is_empty() {
             bail!("no daemon answered on {}", c.connect.join(", "));
         }
-        println!("{:<20} {:<22} {:>8} {:>6} {:>7}  daemon", "instance", "scene", "level", "method", "pub Hz");
+        println!(
+            "{:<20} {:<22} {:>8} {:>6} {:>7}  daemon",
+            "instance", "scene", "level", "method", "pub Hz"
+        );
         for l in &lists {
             for i in &l.instances {
                 println!(
@@ -129,7 +137,10 @@ pub fn list(c: Connect) -> Result<()> {
                 );
             }
         }
-        let listed: Vec<&str> = lists.iter().flat_map(|l| l.instances.iter().map(|i| i.instance.as_str())).collect();
+        let listed: Vec<&str> = lists
+            .iter()
+            .flat_map(|l| l.instances.iter().map(|i| i.instance.as_str()))
+            .collect();
         for a in alive.iter().filter(|a| !listed.contains(&a.as_str())) {
             println!("{a:<20} (alive, did not answer the list query)");
         }
@@ -148,7 +159,11 @@ pub fn watch(c: Connect, instance: String, count: Option<u64>) -> Result<()> {
             info.scene,
             info.integrator,
             level(&info.reference),
-            info.levels.iter().map(|l| level(&l.level)).collect::<Vec<_>>().join(" ")
+            info.levels
+                .iter()
+                .map(|l| level(&l.level))
+                .collect::<Vec<_>>()
+                .join(" ")
         );
         let sub = client
             .session
@@ -158,7 +173,17 @@ pub fn watch(c: Connect, instance: String, count: Option<u64>) -> Result<()> {
         let tty = std::io::stdout().is_terminal();
         let header = format!(
             "{:>10} {:>8} {:>7} {:>6} {:>9} {:>9} {:>9} {:>6} {:>8} {:>9} {:>8}",
-            "frame", "time s", "level", "method", "predicted", "live err", "step µs", "RTF", "overruns", "energy J", "strain"
+            "frame",
+            "time s",
+            "level",
+            "method",
+            "predicted",
+            "live err",
+            "step µs",
+            "RTF",
+            "overruns",
+            "energy J",
+            "strain"
         );
         println!("{header}");
         let mut seen = 0u64;
@@ -290,7 +315,11 @@ pub fn record(c: Connect, instance: String, seconds: f64, out: PathBuf) -> Resul
             let s = v1::State::decode(sample.payload().to_bytes().as_ref()).context("undecodable state")?;
             let lv = s.level.as_ref().map(Level::from_wire).unwrap_or(Level::new(0, 0));
             let Some(pos) = unpack_positions(&s.positions) else {
-                bail!("state frame {} has {} position bytes, not a multiple of 12", s.frame, s.positions.len());
+                bail!(
+                    "state frame {} has {} position bytes, not a multiple of 12",
+                    s.frame,
+                    s.positions.len()
+                );
             };
             if pos.len() != 3 * lv.nodes() {
                 bail!("state frame {} carries {} nodes for level {lv}", s.frame, pos.len() / 3);

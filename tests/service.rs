@@ -38,7 +38,9 @@ fn free_port() -> u16 {
 }
 
 fn scene_path(name: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("config/scenes").join(name)
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("config/scenes")
+        .join(name)
 }
 
 /// A small daemon: paper scene 1 with a 24×24 reference at levels 8², 12²,
@@ -208,7 +210,10 @@ async fn states_arrive_at_the_configured_rate_and_pinned_nodes_stay_put() {
     // Time advances with the wall clock: 3 s of states span about 3 s of
     // simulated time (modulo the scene's 6 s loop).
     let span = states.last().unwrap().time - states[0].time;
-    assert!(span < 0.0 || (2.7..3.3).contains(&span), "simulated span {span} s over 3 s");
+    assert!(
+        span < 0.0 || (2.7..3.3).contains(&span),
+        "simulated span {span} s over 3 s"
+    );
     d.shutdown().await.expect("clean exit");
 }
 
@@ -253,7 +258,11 @@ async fn a_switch_is_answered_and_the_motion_continues_without_a_jump() {
                     }
                 }
             } else if pair.is_some() {
-                assert_eq!(level_of(&s), Level::new(8, 8), "states after the switch carry the new level");
+                assert_eq!(
+                    level_of(&s),
+                    Level::new(8, 8),
+                    "states after the switch carry the new level"
+                );
                 after += 1;
             }
         }
@@ -292,7 +301,10 @@ async fn a_switch_is_answered_and_the_motion_continues_without_a_jump() {
         / info.o_max;
     let moving = (0..n).any(|k| (old_pos[n + k] - fine.rest_positions[k][1]).abs() > 1e-3);
     assert!(moving, "the cloth should be moving at the switch");
-    eprintln!("switch 16x16 -> 8x8 at t = {:.3} s: jump {jump:.5}, predicted error {predicted:.5}", old.time);
+    eprintln!(
+        "switch 16x16 -> 8x8 at t = {:.3} s: jump {jump:.5}, predicted error {predicted:.5}",
+        old.time
+    );
     assert!(jump <= predicted, "jump {jump} above the predicted error {predicted}");
     d.shutdown().await.expect("clean exit");
 }
@@ -384,7 +396,10 @@ async fn bad_requests_get_errors_naming_the_problem_and_publishing_goes_on() {
     for (what, result, code, needle) in cases {
         let (got_code, message) = refused_code(result);
         assert_eq!(got_code, code, "{what}: {message}");
-        assert!(message.contains(needle), "{what}: '{message}' should mention '{needle}'");
+        assert!(
+            message.contains(needle),
+            "{what}: '{message}' should mention '{needle}'"
+        );
     }
     // A query on a wildcard names no single instance.
     let replies = c
@@ -394,7 +409,9 @@ async fn bad_requests_get_errors_naming_the_problem_and_publishing_goes_on() {
         .timeout(Duration::from_secs(5))
         .await
         .expect("get");
-    let reply = within(10, "wildcard reply", replies.recv_async()).await.expect("a reply");
+    let reply = within(10, "wildcard reply", replies.recv_async())
+        .await
+        .expect("a reply");
     let err = reply.result().expect_err("refused");
     let e = v1::Error::decode(err.payload().to_bytes().as_ref()).unwrap();
     assert_eq!(e.code, v1::error::Code::BadRequest as i32, "{}", e.message);
@@ -419,7 +436,9 @@ async fn clients_see_instances_appear_and_disappear() {
     zc.insert_json5("mode", "\"peer\"").unwrap();
     zc.insert_json5("listen/endpoints", &format!("[\"{listen}\"]")).unwrap();
     zc.insert_json5("scouting/multicast/enabled", "false").unwrap();
-    let session = within(10, "open", async { zenoh::open(zc).await }).await.expect("session");
+    let session = within(10, "open", async { zenoh::open(zc).await })
+        .await
+        .expect("session");
     let alive = session
         .liveliness()
         .declare_subscriber(keys::alive(PREFIX, "*"))
@@ -507,7 +526,9 @@ method = "guess"
 integrator = "leapfrog"
 dt = -1.0
 "#;
-    let err = ServiceConfig::from_toml(text, "bad.toml").expect_err("rejected").to_string();
+    let err = ServiceConfig::from_toml(text, "bad.toml")
+        .expect_err("rejected")
+        .to_string();
     for needle in [
         "prefix:",
         "zenoh.mode: 'satellite'",

@@ -216,12 +216,12 @@ impl Engine {
                 (
                     index,
                     InstanceHandle {
-                name: parts.name,
-                commands: tx,
-                thread: threads[b].thread().clone(),
-                states: parts.states,
-                metrics: parts.metrics,
-                transitions: Arc::new(tokio::sync::Mutex::new(parts.transitions)),
+                        name: parts.name,
+                        commands: tx,
+                        thread: threads[b].thread().clone(),
+                        states: parts.states,
+                        metrics: parts.metrics,
+                        transitions: Arc::new(tokio::sync::Mutex::new(parts.transitions)),
                         status: parts.status,
                     },
                 )

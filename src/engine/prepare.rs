@@ -61,11 +61,13 @@ pub struct Prepared {
 impl Prepared {
     /// A simulation of this level at rest.
     pub fn simulation(&self) -> Result<Simulation, PrepareError> {
-        self.problem.simulation(self.material).map_err(|e| PrepareError::Failed {
-            level: self.level,
-            method: self.method,
-            message: e.to_string(),
-        })
+        self.problem
+            .simulation(self.material)
+            .map_err(|e| PrepareError::Failed {
+                level: self.level,
+                method: self.method,
+                message: e.to_string(),
+            })
     }
 }
 

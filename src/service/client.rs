@@ -48,8 +48,10 @@ fn refused(bytes: &[u8]) -> ClientError {
 /// connection), or a peer discovering others by multicast when empty.
 pub fn client_config(connect: &[String]) -> Result<zenoh::Config, ClientError> {
     let mut c = zenoh::Config::default();
-    let set =
-        |c: &mut zenoh::Config, k: &str, v: &str| c.insert_json5(k, v).map_err(|e| ClientError::Zenoh(format!("{k}: {e}")));
+    let set = |c: &mut zenoh::Config, k: &str, v: &str| {
+        c.insert_json5(k, v)
+            .map_err(|e| ClientError::Zenoh(format!("{k}: {e}")))
+    };
     set(&mut c, "mode", "\"peer\"")?;
     // A client listens on nothing.
     set(&mut c, "listen/endpoints", "[]")?;
@@ -179,7 +181,8 @@ impl Client {
     }
 
     pub async fn info(&self, instance: &str) -> Result<v1::InstanceInfo, ClientError> {
-        self.request(&keys::info(&self.prefix, instance), None, self.timeout).await
+        self.request(&keys::info(&self.prefix, instance), None, self.timeout)
+            .await
     }
 
     /// Send a switch request; waits up to `timeout` (an uncached level is

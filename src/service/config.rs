@@ -386,7 +386,9 @@ impl ServiceConfig {
             }
             if let Some(hz) = r.publish_hz {
                 if !(hz > 0.0 && hz <= 1000.0) {
-                    p.push(format!("{at}.publish_hz: {hz} must be in (0, 1000] messages per second"));
+                    p.push(format!(
+                        "{at}.publish_hz: {hz} must be in (0, 1000] messages per second"
+                    ));
                 }
             }
             if r.levels.is_empty() {
@@ -416,7 +418,10 @@ impl ServiceConfig {
                 continue;
             };
             if let Some(reference) = r.reference {
-                if reference.nx < MIN_SIDE || reference.ny < MIN_SIDE || reference.nx > MAX_SIDE || reference.ny > MAX_SIDE
+                if reference.nx < MIN_SIDE
+                    || reference.ny < MIN_SIDE
+                    || reference.nx > MAX_SIDE
+                    || reference.ny > MAX_SIDE
                 {
                     p.push(format!(
                         "{at}.reference: {reference} is outside {MIN_SIDE}..={MAX_SIDE} nodes per side"

@@ -334,7 +334,11 @@ async fn switch_to(
     }
 }
 
-async fn publish_states(handle: InstanceHandle, publisher: zenoh::pubsub::Publisher<'static>, closing: watch::Receiver<bool>) {
+async fn publish_states(
+    handle: InstanceHandle,
+    publisher: zenoh::pubsub::Publisher<'static>,
+    closing: watch::Receiver<bool>,
+) {
     let mut states = handle.states.clone();
     let mut transitions = handle.transitions.lock().await;
     let mut closing = closing;
@@ -545,7 +549,13 @@ async fn answer_list(ctx: &Context, q: Query) {
             })
             .collect(),
     };
-    reply_ok(&q, keys::instances(&ctx.prefix), schema::INSTANCE_LIST, list.encode_to_vec()).await;
+    reply_ok(
+        &q,
+        keys::instances(&ctx.prefix),
+        schema::INSTANCE_LIST,
+        list.encode_to_vec(),
+    )
+    .await;
 }
 
 /// Decode a request payload, or say exactly what is wrong with it.
@@ -557,7 +567,9 @@ fn decode<M: Message + Default>(q: &Query, schema: &str) -> Result<M, String> {
         let text = enc.to_string();
         let base = text.split(';').next().unwrap_or_default();
         if base != "application/protobuf" && base != "zenoh/bytes" {
-            return Err(format!("payload encoding is {enc}; expected application/protobuf ({schema})"));
+            return Err(format!(
+                "payload encoding is {enc}; expected application/protobuf ({schema})"
+            ));
         }
     }
     M::decode(payload.to_bytes().as_ref()).map_err(|e| format!("malformed {schema}: {e}"))
@@ -570,7 +582,10 @@ async fn target<'a>(ctx: &'a Context, q: &Query, leaf: &str) -> Option<&'a Arc<I
         reply_error(
             q,
             Code::BadRequest,
-            format!("'{key}' names no single instance; send to {}/<instance>/{leaf}", ctx.prefix),
+            format!(
+                "'{key}' names no single instance; send to {}/<instance>/{leaf}",
+                ctx.prefix
+            ),
         )
         .await;
         return None;
@@ -586,7 +601,9 @@ async fn target<'a>(ctx: &'a Context, q: &Query, leaf: &str) -> Option<&'a Arc<I
 
 async fn answer_switch(ctx: Arc<Context>, q: Query) {
     let arrived = Instant::now();
-    let Some(inst) = target(&ctx, &q, "switch").await else { return };
+    let Some(inst) = target(&ctx, &q, "switch").await else {
+        return;
+    };
     let req: v1::SwitchRequest = match decode(&q, schema::SWITCH_REQUEST) {
         Ok(r) => r,
         Err(e) => return reply_error(&q, Code::BadRequest, e).await,
@@ -718,7 +735,9 @@ async fn answer_switch(ctx: Arc<Context>, q: Query) {
 }
 
 async fn answer_control(ctx: Arc<Context>, q: Query) {
-    let Some(inst) = target(&ctx, &q, "control").await else { return };
+    let Some(inst) = target(&ctx, &q, "control").await else {
+        return;
+    };
     let req: v1::ControlRequest = match decode(&q, schema::CONTROL_REQUEST) {
         Ok(r) => r,
         Err(e) => return reply_error(&q, Code::BadRequest, e).await,
@@ -726,8 +745,14 @@ async fn answer_control(ctx: Arc<Context>, q: Query) {
     use v1::control_request::Action;
     let (tx, rx) = oneshot::channel();
     let command = match Action::try_from(req.action) {
-        Ok(Action::Pause) => Command::Pause { paused: true, reply: tx },
-        Ok(Action::Resume) => Command::Pause { paused: false, reply: tx },
+        Ok(Action::Pause) => Command::Pause {
+            paused: true,
+            reply: tx,
+        },
+        Ok(Action::Resume) => Command::Pause {
+            paused: false,
+            reply: tx,
+        },
         Ok(Action::Reset) => Command::Reset { reply: tx },
         _ => {
             return reply_error(

@@ -1,0 +1,30 @@
+#!/usr/bin/env bash
+# Start `lodcloth serve` (config/default.toml, peer on tcp/127.0.0.1:7450),
+# drive it with the Rust CLI clients and the Python example client, then stop
+# it with SIGTERM and require a clean exit.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+BIN=target/release/lodcloth
+PY="/tmp/lodcloth-pyvenv/bin/python examples/python/lodcloth_client.py"
+LOG=out/ci-serve.log
+mkdir -p out
+"$BIN" serve > "$LOG" 2>&1 &
+DAEMON=$!
+trap 'kill $DAEMON 2>/dev/null || true' EXIT
+for _ in $(seq 50); do "$BIN" health > /dev/null 2>&1 && break; sleep 0.2; done
+"$BIN" health
+"$BIN" list
+"$BIN" watch paper-1 --count 3
+"$BIN" switch paper-1 16x16 --timeout 300
+if "$BIN" switch paper-1 17x17; then echo "a level outside the allowed set was accepted" >&2; exit 1; fi
+"$BIN" record paper-1 --seconds 1 --out out/ci-record.lct
+"$BIN" inspect out/ci-record.lct
+$PY list --timeout 10
+$PY watch hanging --count 3 --timeout 10
+$PY switch hanging --level 24x24 --timeout 300
+if $PY switch nope --level 16x16 --timeout 10; then echo "an unknown instance was accepted" >&2; exit 1; fi
+kill -TERM $DAEMON
+wait $DAEMON
+trap - EXIT
+grep -q "stopped" "$LOG"
+echo "daemon smoke test passed"

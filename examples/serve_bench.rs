@@ -1,0 +1,257 @@
+//! Daemon figures for the README: capacity of the stepping engine (how many
+//! instances per size and integrator hold real time at 1 kHz physics and
+//! 60 Hz publishing), state latency from the end of a step to a subscriber
+//! on loopback, bytes per state message, and switch latency (prepared and
+//! not yet prepared).
+//!
+//! `cargo run --release --example serve_bench [-- --quick]`
+
+use std::time::{Duration, Instant};
+
+use prost::Message;
+
+use lodcloth::engine::{Engine, EngineSettings, InstanceSetup, StateFrame};
+use lodcloth::estimate::Method;
+use lodcloth::proto::{v1, Level};
+use lodcloth::scene::Scene;
+use lodcloth::service::client::Client;
+use lodcloth::service::config::ServiceConfig;
+use lodcloth::service::{keys, state_message};
+use lodcloth::sim::{Integrator, Simulation};
+
+const DT: f64 = 1e-3;
+
+/// The paper's first scene at n×n stepping at 1 kHz: its springs softened
+/// just enough that dt = 1 ms is within 0.8 of the predicted limit (the cost
+/// of a step does not depend on the stiffness).
+fn instance(n: usize, integrator: Integrator) -> Simulation {
+    let mut scene = Scene::load(std::path::Path::new("config/scenes/paper-1-top-edge.toml")).expect("scene");
+    scene.params.integrator = integrator;
+    scene.params.dt = DT;
+    scene.stability = lodcloth::sim::StabilityCheck::Force;
+    let probe = scene.build_at(n, n).expect("build");
+    let limit = probe.dt_limit();
+    if limit < DT / 0.8 {
+        let scale = (limit * 0.8 / DT).powi(2);
+        for s in &mut scene.params.material.springs {
+            s.k *= scale;
+            s.c *= scale.sqrt();
+        }
+    }
+    scene.stability = lodcloth::sim::StabilityCheck::Enforce;
+    scene.build_at(n, n).expect("stable at 1 kHz")
+}
+
+/// Run `count` instances for `seconds`; worst real-time factor and total overruns.
+fn trial(n: usize, integrator: Integrator, count: usize, seconds: f64) -> (f64, u64, f64) {
+    let setups = (0..count)
+        .map(|i| InstanceSetup {
+            name: format!("i{i}"),
+            sim: instance(n, integrator),
+            level: Level::new(n, n),
+            method: Method::Same,
+            publish_hz: 60.0,
+            duration: 1e9,
+            looping: false,
+            shadow: false,
+        })
+        .collect();
+    let engine = Engine::start(
+        setups,
+        EngineSettings {
+            threads: 2,
+            max_substeps: 64,
+            max_lag: 0.25,
+            metrics_hz: 2.0,
+        },
+    )
+    .expect("engine");
+    // Warm up, then measure the simulated time each instance advanced.
+    std::thread::sleep(Duration::from_millis(500));
+    let frames0: Vec<u64> = engine.handles().iter().map(|h| h.status().frame).collect();
+    let t0 = Instant::now();
+    std::thread::sleep(Duration::from_secs_f64(seconds));
+    let wall = t0.elapsed().as_secs_f64();
+    let mut worst = f64::INFINITY;
+    let mut overruns = 0;
+    let mut cost = 0.0;
+    for (h, f0) in engine.handles().iter().zip(frames0) {
+        let f1 = h.status().frame;
+        worst = worst.min((f1 - f0) as f64 * DT / wall);
+        if let Some(m) = h.metrics.borrow().as_ref() {
+            overruns += m.overruns + m.lag_resets;
+            cost += m.step_cost_us;
+        }
+    }
+    engine.stop();
+    (worst, overruns, cost / count as f64)
+}
+
+fn capacity(quick: bool) {
+    println!("## Capacity: instances in real time at 1 kHz physics, 60 Hz snapshots, 2 stepping threads\n");
+    println!("| size | integrator | step µs | instances held | at max+1: worst RTF, overruns |");
+    println!("|---|---|---|---|---|");
+    let seconds = if quick { 1.0 } else { 3.0 };
+    for n in [24usize, 40, 64, 128] {
+        for integrator in [Integrator::SymplecticEuler, Integrator::Rk4] {
+            // Grow until an instance falls behind (status frames are refreshed
+            // at the metrics rate, so allow 1 % slack on the factor).
+            let mut held = 0;
+            let mut count = 1;
+            let mut step_us = f64::NAN;
+            let mut fail = (0.0, 0);
+            loop {
+                let (rtf, overruns, cost) = trial(n, integrator, count, seconds);
+                if count == 1 {
+                    step_us = cost;
+                }
+                if rtf >= 0.99 && overruns == 0 {
+                    held = count;
+                    count = if count < 8 { count + 1 } else { count + count / 4 };
+                } else {
+                    fail = (rtf, overruns);
+                    break;
+                }
+                if count > 400 {
+                    break;
+                }
+            }
+            println!(
+                "| {n}×{n} | {integrator} | {step_us:.1} | {held} | {:.2}, {} |",
+                fail.0, fail.1
+            );
+        }
+    }
+    println!();
+}
+
+fn percentile(v: &mut [f64], p: f64) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[((v.len() - 1) as f64 * p).round() as usize]
+}
+
+async fn bus(quick: bool) {
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let cache = tempfile::tempdir().unwrap();
+    let text = format!(
+        r#"
+prefix = "bench"
+cache = "{}"
+[zenoh]
+listen = ["tcp/127.0.0.1:{port}"]
+multicast_scouting = false
+[estimation]
+reference_steps = 15000
+precompute = false
+[[instances]]
+name = "p1"
+scene = "config/scenes/paper-1-top-edge.toml"
+levels = ["16x16", "24x24", "32x32", "40x40"]
+start = "24x24"
+method = "gkd"
+"#,
+        cache.path().display()
+    );
+    let config = ServiceConfig::from_toml(&text, "bench").unwrap();
+    let (tx, rx) = tokio::sync::oneshot::channel::<()>();
+    let daemon = tokio::spawn(lodcloth::service::run(config, async {
+        let _ = rx.await;
+    }));
+    tokio::time::sleep(Duration::from_millis(500)).await;
+    let client = Client::connect(&[format!("tcp/127.0.0.1:{port}")], "bench")
+        .await
+        .unwrap();
+    let sub = client
+        .session
+        .declare_subscriber(keys::state("bench", "p1"))
+        .await
+        .unwrap();
+    // Latency: the end of the step a state was taken after → receipt here.
+    let mut lat = Vec::new();
+    let mut bytes = 0usize;
+    let end = Instant::now() + Duration::from_secs(if quick { 3 } else { 10 });
+    while Instant::now() < end {
+        let Ok(Ok(s)) = tokio::time::timeout(Duration::from_secs(2), sub.recv_async()).await else {
+            break;
+        };
+        let now = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .unwrap()
+            .as_nanos() as f64;
+        let payload = s.payload().to_bytes();
+        bytes = payload.len();
+        let st = v1::State::decode(payload.as_ref()).unwrap();
+        lat.push((now - st.stepped_unix_nanos as f64) / 1e3);
+    }
+    println!("## State latency, end of step → subscriber (loopback, one subscriber, 24×24 at 60 Hz)\n");
+    println!(
+        "{} states: p50 {:.0} µs, p99 {:.0} µs, max {:.0} µs; {} bytes per message\n",
+        lat.len(),
+        percentile(&mut lat, 0.5),
+        percentile(&mut lat, 0.99),
+        percentile(&mut lat, 1.0),
+        bytes
+    );
+    println!("## Bytes per state message\n");
+    println!("| level | nodes | bytes |");
+    println!("|---|---|---|");
+    for n in [24usize, 40, 64, 128] {
+        let f = StateFrame {
+            frame: 123_456,
+            time: 1.234,
+            episode: 0,
+            level: Level::new(n, n),
+            coefficient_version: 2,
+            positions: vec![0.5; 3 * n * n],
+            stepped: std::time::SystemTime::now(),
+            transition: false,
+        };
+        println!(
+            "| {n}×{n} | {} | {} |",
+            n * n,
+            state_message("paper-1", &f).encode_to_vec().len()
+        );
+    }
+    println!();
+    println!("## Switch latency (request → new level stepping → reply)\n");
+    println!("| switch | prepared before? | seconds |");
+    println!("|---|---|---|");
+    let req = |n| v1::SwitchRequest {
+        target: Some(v1::switch_request::Target::Level(Level::new(n, n).to_wire())),
+        method: String::new(),
+    };
+    let t = Duration::from_secs(600);
+    // Let the start level's estimate go live first (records the reference).
+    let _ = client.switch("p1", &req(24), t).await;
+    for (n, label) in [
+        (40, "24→40, uncached: estimate + calibrate"),
+        (24, "40→24, prepared"),
+        (40, "24→40, prepared"),
+    ] {
+        let t0 = Instant::now();
+        let r = client.switch("p1", &req(n), t).await.unwrap();
+        println!(
+            "| {label} | {} | {:.3} (daemon: {:.3}) |",
+            r.cached,
+            t0.elapsed().as_secs_f64(),
+            r.seconds
+        );
+    }
+    println!();
+    let _ = tx.send(());
+    let _ = daemon.await;
+}
+
+fn main() {
+    let quick = std::env::args().any(|a| a == "--quick");
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+        .unwrap();
+    rt.block_on(bus(quick));
+    capacity(quick);
+}
