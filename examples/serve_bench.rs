@@ -233,7 +233,13 @@ method = "gkd"
         (40, "24→40, prepared"),
     ] {
         let t0 = Instant::now();
-        let r = client.switch("p1", &req(n), t).await.unwrap();
+        let r = match client.switch("p1", &req(n), t).await {
+            Ok(r) => r,
+            Err(e) => {
+                println!("| {label} | — | failed: {e} |");
+                continue;
+            }
+        };
         println!(
             "| {label} | {} | {:.3} (daemon: {:.3}) |",
             r.cached,
@@ -252,6 +258,6 @@ fn main() {
         .enable_all()
         .build()
         .unwrap();
-    rt.block_on(bus(quick));
     capacity(quick);
+    rt.block_on(bus(quick));
 }
