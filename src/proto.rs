@@ -123,17 +123,10 @@ pub fn material(c: &v1::Coefficients) -> Material {
     }
 }
 
-/// Pack SoA f64 positions (x…, y…, z…) into interleaved little-endian f32
-/// `x0 y0 z0 x1 …`, reusing `out`.
-pub fn pack_positions(soa: &[f64], out: &mut Vec<u8>) {
-    let n = soa.len() / 3;
-    out.clear();
-    out.reserve(12 * n);
-    for k in 0..n {
-        for c in 0..3 {
-            out.extend_from_slice(&(soa[c * n + k] as f32).to_le_bytes());
-        }
-    }
+/// Pack interleaved positions `x0 y0 z0 x1 …` (as the engine snapshots
+/// them) into the wire's little-endian f32 bytes.
+pub fn pack_positions(interleaved: &[f32]) -> Vec<u8> {
+    interleaved.iter().flat_map(|v| v.to_le_bytes()).collect()
 }
 
 /// Unpack interleaved f32 positions into SoA f64 (x…, y…, z…). None when the
@@ -174,9 +167,9 @@ mod tests {
 
     #[test]
     fn positions_round_trip_through_the_packed_layout() {
+        // Two nodes, (1, 10, 100) and (2, 20, 200).
         let soa = vec![1.0, 2.0, 10.0, 20.0, 100.0, 200.0];
-        let mut bytes = Vec::new();
-        pack_positions(&soa, &mut bytes);
+        let bytes = pack_positions(&[1.0, 10.0, 100.0, 2.0, 20.0, 200.0]);
         assert_eq!(bytes.len(), 24);
         // Node 0 is (1, 10, 100): the first three f32 of the packed layout.
         assert_eq!(f32::from_le_bytes(bytes[4..8].try_into().unwrap()), 10.0);

@@ -398,17 +398,13 @@ async fn publish_metrics(
 
 /// `State` on the wire.
 pub fn state_message(instance: &str, f: &StateFrame) -> v1::State {
-    let mut positions = Vec::with_capacity(4 * f.positions.len());
-    for v in &f.positions {
-        positions.extend_from_slice(&v.to_le_bytes());
-    }
     v1::State {
         instance: instance.to_string(),
         frame: f.frame,
         time: f.time,
         level: Some(f.level.to_wire()),
         coefficient_version: f.coefficient_version,
-        positions,
+        positions: proto::pack_positions(&f.positions),
         episode: f.episode,
         stepped_unix_nanos: f.stepped.duration_since(UNIX_EPOCH).map_or(0, |d| d.as_nanos() as u64),
         transition: f.transition,
