@@ -39,6 +39,7 @@ pub mod estimate;
 pub mod experiments;
 pub mod lod;
 pub mod output;
+pub mod points;
 pub mod proto;
 pub mod scene;
 pub mod service;

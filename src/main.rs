@@ -29,7 +29,7 @@ struct Cli {
 }
 
 #[derive(Clone, Copy, ValueEnum)]
-enum IntegratorArg {
+pub(crate) enum IntegratorArg {
     ExplicitEuler,
     SymplecticEuler,
     Rk4,
@@ -154,6 +154,10 @@ enum Command {
     /// Level-of-detail experiments: table1, pareto, lod-plan, switch-test.
     #[command(subcommand)]
     Experiment(experiment_cli::Experiment),
+    /// Point-sampled surfaces: generate, simulate (simplified, moved back to
+    /// every point), accuracy against simplification size.
+    #[command(subcommand)]
+    Points(points_cli::Points),
     /// Print the header and a summary of a trajectory file.
     Inspect {
         /// Trajectory file (.lct).
@@ -162,6 +166,7 @@ enum Command {
 }
 
 mod experiment_cli;
+mod points_cli;
 mod serve_cli;
 
 fn main() -> Result<()> {
@@ -229,6 +234,7 @@ fn main() -> Result<()> {
             out,
         } => stability(&scene, sizes, factors, steps, bisections, &out),
         Command::Experiment(e) => experiment_cli::run(e),
+        Command::Points(p) => points_cli::run(p),
         Command::Inspect { file } => inspect(&file),
     }
 }
@@ -247,7 +253,7 @@ struct SimulateArgs {
     force_unstable: bool,
 }
 
-fn progress_bar(len: u64, what: &str) -> ProgressBar {
+pub(crate) fn progress_bar(len: u64, what: &str) -> ProgressBar {
     let bar = ProgressBar::new(len);
     bar.set_style(
         ProgressStyle::with_template("{msg} [{bar:40}] {pos}/{len} ({eta} left)")

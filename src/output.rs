@@ -26,6 +26,7 @@ use std::path::Path;
 
 use plotters::prelude::*;
 
+use crate::sim::vec3::{cross, dot, sub};
 use crate::sim::{SpringKind, State, StepReport, Topology};
 
 /// File magic of trajectory files.
@@ -386,6 +387,58 @@ pub fn render_png(
     Ok(())
 }
 
+/// Render a point cloud (z up, as the generated shapes) to a PNG: every
+/// point a small disc shaded by its normal, far points first, the
+/// `highlight`ed ones (the simulation points) marked in red.
+pub fn render_points_png(
+    path: &Path,
+    positions: &[[f64; 3]],
+    normals: &[[f64; 3]],
+    highlight: &[u32],
+    size: u32,
+) -> Result<(), OutputError> {
+    let draw_err = |e: String| OutputError::Draw {
+        path: path.display().to_string(),
+        reason: e,
+    };
+    // z up → the renderer's y up (a rotation about x).
+    let yup = |p: &[f64; 3]| [p[0], p[2], -p[1]];
+    let pts: Vec<[f64; 3]> = positions.iter().map(yup).collect();
+    let nrm: Vec<[f64; 3]> = normals.iter().map(yup).collect();
+    let proj = project(&pts);
+    let (cx, cy, span) =
+        frame(std::slice::from_ref(&proj)).ok_or_else(|| draw_err("no finite point to draw".into()))?;
+    let s = f64::from(size);
+    let px = |x: f64, y: f64| -> (i32, i32) {
+        (
+            ((x - cx) / span * s + 0.5 * s) as i32,
+            ((cy - y) / span * s + 0.5 * s) as i32,
+        )
+    };
+    // Disc radius from the mean spacing of a surface of this extent.
+    let radius = ((span * span / pts.len().max(1) as f64).sqrt() / span * s * 0.6).clamp(1.0, 6.0) as i32;
+    let root = BitMapBackend::new(path, (size, size)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| draw_err(e.to_string()))?;
+    let mut order: Vec<usize> = (0..pts.len())
+        .filter(|&k| proj[k].0.is_finite() && proj[k].1.is_finite())
+        .collect();
+    order.sort_by(|&a, &b| proj[b].2.total_cmp(&proj[a].2));
+    let light = normalize([0.3, 0.8, 0.5]);
+    for k in order {
+        let shade = 0.25 + 0.75 * dot(nrm.get(k).copied().unwrap_or([0.0, 1.0, 0.0]), light).abs();
+        let color = RGBColor((70.0 * shade) as u8, (120.0 * shade) as u8, (200.0 * shade) as u8);
+        root.draw(&Circle::new(px(proj[k].0, proj[k].1), radius, color.filled()))
+            .map_err(|e| draw_err(e.to_string()))?;
+    }
+    for &k in highlight {
+        let (x, y, _) = proj[k as usize];
+        root.draw(&Circle::new(px(x, y), 2, RED.filled()))
+            .map_err(|e| draw_err(e.to_string()))?;
+    }
+    root.present().map_err(|e| draw_err(e.to_string()))?;
+    Ok(())
+}
+
 /// A named series for [`line_chart_svg`].
 pub struct Series<'a> {
     pub name: &'a str,
@@ -530,22 +583,6 @@ fn frame(projected: &[Vec<(f64, f64, f64)>]) -> Option<(f64, f64, f64)> {
         }
     }
     (x0 <= x1).then(|| (0.5 * (x0 + x1), 0.5 * (y0 + y1), (x1 - x0).max(y1 - y0).max(1e-9) * 1.1))
-}
-
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
 }
 
 fn normalize(a: [f64; 3]) -> [f64; 3] {

@@ -632,6 +632,7 @@ impl Scene {
             forces,
             wind: self.wind,
             pins,
+            tethers: Vec::new(),
         })
     }
 

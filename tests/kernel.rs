@@ -1,6 +1,6 @@
 //! The vectorised force kernel equals a straightforward scalar evaluation of
 //! the model, written here from the equations: springs (Sung 2018 eq. 1, with
-//! the Bayraktar stiffness adjustment), node loads, wind, gravity and drag,
+//! the Bayraktar stiffness adjustment), node loads, tethers, wind, gravity and drag,
 //! on random states; and the gather path (arbitrary node pairs) equals the
 //! grid path (stencil runs) on the same springs.
 
@@ -11,7 +11,7 @@ use std::sync::Arc;
 use common::{as_gather_topology, build, grid, lumped_masses, material, params, Rng};
 use lodcloth::sim::{
     Integrator, Loads, NodeLoad, Orientation, PinPath, Profile, SimParams, Simulation, SpringKind, StabilityCheck,
-    State, StiffnessAdjustment, Topology, Wind,
+    State, StiffnessAdjustment, Tether, Topology, Wind,
 };
 
 /// Random state: rest shape moved by up to ±30% of the spacing, velocities
@@ -78,6 +78,22 @@ fn test_loads(topology: &Topology, with_wind: bool) -> Loads {
                 },
             },
         ],
+        tethers: vec![
+            Tether {
+                node: n / 3,
+                target: [0.2, -0.1, 0.4],
+                stiffness: 3.0,
+                damping: 0.2,
+                profile: Profile::Constant,
+            },
+            Tether {
+                node: 2,
+                target: [-0.1, 0.3, 0.0],
+                stiffness: 1.5,
+                damping: 0.0,
+                profile: Profile::Ramp { start: 0.0, end: 1.0 },
+            },
+        ],
     }
 }
 
@@ -120,6 +136,14 @@ fn scalar_accelerations(sim: &Simulation) -> Vec<[f64; 3]> {
             for c in 0..3 {
                 f[k as usize][c] += share * s * load.force[c];
             }
+        }
+    }
+    for tether in &loads.tethers {
+        // F = s(t) · (k (target − x) − c v).
+        let (k, s) = (tether.node as usize, tether.profile.at(t));
+        let (x, v) = (state.position(k), state.velocity(k));
+        for c in 0..3 {
+            f[k][c] += s * (tether.stiffness * (tether.target[c] - x[c]) - tether.damping * v[c]);
         }
     }
     if let Some(w) = &loads.wind {

@@ -58,6 +58,7 @@ use nalgebra::{Matrix6, Vector6};
 use super::reference::Reference;
 use super::{Progress, ProgressFn};
 use crate::lod::Correlation;
+use crate::sim::vec3::dot;
 use crate::sim::{Integrator, Material, Simulation, SpringCoeffs, Topology};
 
 /// Spring forces per type with unit coefficients, SoA per type.
@@ -417,10 +418,6 @@ pub fn inverse_estimate(
         fallback_k,
         fallback_c,
     }
-}
-
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
 fn mean_rest_lengths(topology: &Topology) -> [f64; 3] {

@@ -54,6 +54,14 @@ impl Profile {
             } => offset + amplitude * (TAU * frequency * t + phase).sin(),
         }
     }
+
+    /// The largest |s(t)| over all t (what a stability bound must assume).
+    pub fn max_abs(&self) -> f64 {
+        match *self {
+            Profile::Constant | Profile::Ramp { .. } | Profile::Pulse { .. } => 1.0,
+            Profile::Sine { amplitude, offset, .. } => offset.abs() + amplitude.abs(),
+        }
+    }
 }
 
 /// A force on a set of nodes, `force · profile(t)` in total, split between
@@ -68,6 +76,25 @@ pub struct NodeLoad {
     /// Total force in newtons at profile value 1.
     pub force: [f64; 3],
     /// Time profile.
+    pub profile: Profile,
+}
+
+/// A spring from one node to a point fixed in the world — Su et al.'s user
+/// spring `k_r (r0 − s_i)` that pulls a surface by one point — with optional
+/// damping against the node's velocity:
+/// `F = profile(t) · (stiffness · (target − x) − damping · v)`.
+/// A profile that drops to 0 releases the node.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Tether {
+    /// The pulled node.
+    pub node: u32,
+    /// World point it is pulled towards (m).
+    pub target: [f64; 3],
+    /// Spring constant k_r (N/m, ≥ 0).
+    pub stiffness: f64,
+    /// Damping (N·s/m, ≥ 0).
+    pub damping: f64,
+    /// Time profile scaling both terms.
     pub profile: Profile,
 }
 
@@ -145,6 +172,9 @@ pub struct Loads {
     pub wind: Option<Wind>,
     /// Pinned nodes (at most one pin per node).
     pub pins: Vec<Pin>,
+    /// Springs from nodes to world points. Their energy is not part of
+    /// [`StepReport`](super::StepReport)'s elastic energy.
+    pub tethers: Vec<Tether>,
 }
 
 impl Loads {
@@ -166,6 +196,17 @@ impl Loads {
                 for c in 0..3 {
                     f[c * n + k as usize] += share * s * load.force[c];
                 }
+            }
+        }
+        for tether in &self.tethers {
+            let s = tether.profile.at(t);
+            if s == 0.0 {
+                continue;
+            }
+            let k = tether.node as usize;
+            for c in 0..3 {
+                let (x, v) = (pos[c * n + k], vel[c * n + k]);
+                f[c * n + k] += s * (tether.stiffness * (tether.target[c] - x) - tether.damping * v);
             }
         }
         if let Some(wind) = &self.wind {

@@ -13,11 +13,12 @@ mod stability;
 mod state;
 mod strain;
 mod topology;
+pub mod vec3;
 
 use std::sync::Arc;
 
 pub use forces::SpringTotals;
-pub use loads::{Loads, NodeLoad, Pin, PinPath, Profile, Wind};
+pub use loads::{Loads, NodeLoad, Pin, PinPath, Profile, Tether, Wind};
 pub use params::{
     CgSettings, Integrator, Material, SimParams, SpringCoeffs, SpringKind, StiffnessAdjustment, StrainLimit,
 };
@@ -280,7 +281,14 @@ impl Simulation {
                 return Err(SimError::DuplicatePin { node: pin.node });
             }
         }
-        let modal = modal_estimate(&topology, &params.material, &masses, &pinned, params.drag);
+        // Tethers stiffen (and damp) their node like a spring to a fixed point.
+        let mut tether_kc = vec![[0.0; 2]; if loads.tethers.is_empty() { 0 } else { n }];
+        for t in &loads.tethers {
+            let s = t.profile.max_abs();
+            tether_kc[t.node as usize][0] += s * t.stiffness;
+            tether_kc[t.node as usize][1] += s * t.damping;
+        }
+        let modal = modal_estimate(&topology, &params.material, &masses, &pinned, &tether_kc, params.drag);
         let limit = modal.dt_limit(params.integrator);
         if check == StabilityCheck::Enforce && params.dt > limit {
             return Err(SimError::UnstableTimeStep {
@@ -744,6 +752,34 @@ fn validate_loads(loads: &Loads, n: usize) -> Result<(), SimError> {
                 "wind",
                 w.air_density.min(w.drag_coefficient),
                 "air density and drag coefficient must be ≥ 0",
+            ));
+        }
+    }
+    for (i, t) in loads.tethers.iter().enumerate() {
+        if t.node as usize >= n {
+            return Err(SimError::NodeOutOfRange {
+                what: "tether",
+                node: t.node,
+                n_nodes: n,
+            });
+        }
+        if let Some(&x) = t
+            .target
+            .iter()
+            .chain([&t.stiffness, &t.damping])
+            .find(|x| !x.is_finite())
+        {
+            return Err(invalid(
+                format!("tethers[{i}]"),
+                x,
+                "tether target, stiffness and damping must be finite",
+            ));
+        }
+        if t.stiffness < 0.0 || t.damping < 0.0 {
+            return Err(invalid(
+                format!("tethers[{i}]"),
+                t.stiffness.min(t.damping),
+                "tether stiffness and damping must be ≥ 0",
             ));
         }
     }

@@ -30,16 +30,23 @@ impl ModalEstimate {
 
 /// Estimate ω_max and its damping for `topology` with `material`, node
 /// `masses` and global `drag` (1/s). Pinned nodes (`pinned[k]`) are held
-/// fixed and excluded. Deterministic: the start vector comes from a fixed
+/// fixed and excluded. `ground[k] = [k, c]` is a spring (and damper) from
+/// node k to a fixed point (a tether); empty when there is none. Deterministic: the start vector comes from a fixed
 /// pseudo-random sequence.
 pub fn modal_estimate(
     topology: &Topology,
     material: &Material,
     masses: &[f64],
     pinned: &[bool],
+    ground: &[[f64; 2]],
     drag: f64,
 ) -> ModalEstimate {
     let n = topology.n_nodes;
+    assert!(
+        ground.is_empty() || ground.len() == n,
+        "one ground spring entry per node"
+    );
+    let ground_of = |i: usize, which: usize| if ground.is_empty() { 0.0 } else { ground[i][which] };
     // Gershgorin: row i of M^{-1}K has |diag| + Σ|offdiag| ≤ 2 Σ_j k_ij / m_i.
     let mut ksum = vec![0.0; n];
     for g in &topology.groups {
@@ -51,7 +58,7 @@ pub fn modal_estimate(
     }
     let omega_gershgorin = (0..n)
         .filter(|&i| !pinned[i])
-        .map(|i| 2.0 * ksum[i] / masses[i])
+        .map(|i| (2.0 * ksum[i] + ground_of(i, 0)) / masses[i])
         .fold(0.0, f64::max)
         .sqrt();
 
@@ -78,9 +85,10 @@ pub fn modal_estimate(
         .collect();
 
     // y = M^{-1/2} L M^{-1/2} w, with L the spring Laplacian of coefficient `coef`.
-    let apply = |w: &[[f64; 3]], y: &mut [[f64; 3]], coef: &dyn Fn(usize) -> f64| {
-        for v in y.iter_mut() {
-            *v = [0.0; 3];
+    let apply = |w: &[[f64; 3]], y: &mut [[f64; 3]], coef: &dyn Fn(usize) -> f64, which: usize| {
+        for (i, v) in y.iter_mut().enumerate() {
+            let g = ground_of(i, which) * inv_sqrt_m[i] * inv_sqrt_m[i];
+            *v = w[i].map(|x| g * x);
         }
         for (gi, g) in topology.groups.iter().enumerate() {
             let k = coef(gi);
@@ -135,7 +143,7 @@ pub fn modal_estimate(
         for v in w.iter_mut() {
             *v = v.map(|x| x / nw);
         }
-        apply(&w, &mut y, &stiff);
+        apply(&w, &mut y, &stiff, 0);
         let rq: f64 = w
             .iter()
             .zip(&y)
@@ -154,7 +162,7 @@ pub fn modal_estimate(
         for v in w.iter_mut() {
             *v = v.map(|x| x / nw);
         }
-        apply(&w, &mut y, &damp);
+        apply(&w, &mut y, &damp, 1);
         w.iter()
             .zip(&y)
             .map(|(a, b)| a[0] * b[0] + a[1] * b[1] + a[2] * b[2])
