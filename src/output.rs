@@ -388,13 +388,16 @@ pub fn render_png(
 }
 
 /// Render a point cloud (z up, as the generated shapes) to a PNG: every
-/// point a small disc shaded by its normal, far points first, the
-/// `highlight`ed ones (the simulation points) marked in red.
+/// point a disc of radius `radius` (m, about the point spacing) shaded by its
+/// normal, far points first; points facing away (the inside of an open
+/// surface) in a warmer colour; the `highlight`ed ones (the simulation
+/// points) marked in red.
 pub fn render_points_png(
     path: &Path,
     positions: &[[f64; 3]],
     normals: &[[f64; 3]],
     highlight: &[u32],
+    radius: f64,
     size: u32,
 ) -> Result<(), OutputError> {
     let draw_err = |e: String| OutputError::Draw {
@@ -406,6 +409,7 @@ pub fn render_points_png(
     let pts: Vec<[f64; 3]> = positions.iter().map(yup).collect();
     let nrm: Vec<[f64; 3]> = normals.iter().map(yup).collect();
     let proj = project(&pts);
+    let nproj = project(&nrm);
     let (cx, cy, span) =
         frame(std::slice::from_ref(&proj)).ok_or_else(|| draw_err("no finite point to draw".into()))?;
     let s = f64::from(size);
@@ -415,8 +419,7 @@ pub fn render_points_png(
             ((cy - y) / span * s + 0.5 * s) as i32,
         )
     };
-    // Disc radius from the mean spacing of a surface of this extent.
-    let radius = ((span * span / pts.len().max(1) as f64).sqrt() / span * s * 0.6).clamp(1.0, 6.0) as i32;
+    let r_px = (radius / span * s).clamp(1.0, 12.0) as i32;
     let root = BitMapBackend::new(path, (size, size)).into_drawing_area();
     root.fill(&WHITE).map_err(|e| draw_err(e.to_string()))?;
     let mut order: Vec<usize> = (0..pts.len())
@@ -425,13 +428,23 @@ pub fn render_points_png(
     order.sort_by(|&a, &b| proj[b].2.total_cmp(&proj[a].2));
     let light = normalize([0.3, 0.8, 0.5]);
     for k in order {
-        let shade = 0.25 + 0.75 * dot(nrm.get(k).copied().unwrap_or([0.0, 1.0, 0.0]), light).abs();
-        let color = RGBColor((70.0 * shade) as u8, (120.0 * shade) as u8, (200.0 * shade) as u8);
-        root.draw(&Circle::new(px(proj[k].0, proj[k].1), radius, color.filled()))
+        let n = nrm.get(k).copied().unwrap_or([0.0, 1.0, 0.0]);
+        let away = nproj.get(k).is_some_and(|p| p.2 > 0.0);
+        let shade = 0.35 + 0.65 * dot(n, light).abs();
+        let color = if away {
+            RGBColor((200.0 * shade) as u8, (140.0 * shade) as u8, (80.0 * shade) as u8)
+        } else {
+            RGBColor((80.0 * shade) as u8, (140.0 * shade) as u8, (230.0 * shade) as u8)
+        };
+        root.draw(&Circle::new(px(proj[k].0, proj[k].1), r_px, color.filled()))
             .map_err(|e| draw_err(e.to_string()))?;
     }
     for &k in highlight {
-        let (x, y, _) = proj[k as usize];
+        let (x, y, z) = proj[k as usize];
+        // Only the simulation points on the visible side.
+        if nproj.get(k as usize).is_some_and(|p| p.2 > 0.0) && z.is_finite() {
+            continue;
+        }
         root.draw(&Circle::new(px(x, y), 2, RED.filled()))
             .map_err(|e| draw_err(e.to_string()))?;
     }
