@@ -699,3 +699,51 @@ fn malformed_point_files_name_the_problem() {
     let missing = io::read(Path::new("/nonexistent/cloud.ply")).unwrap_err().to_string();
     assert!(missing.contains("/nonexistent/cloud.ply"));
 }
+
+mod fuzz {
+    use super::*;
+    use proptest::prelude::*;
+
+    /// Bytes that look like the start of a PLY or XYZ file, then anything.
+    fn near_valid() -> impl Strategy<Value = Vec<u8>> {
+        let ply = "ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\nproperty float z\nend_header\n0 0 0\n1 1 1\n";
+        let bin = "ply\nformat binary_little_endian 1.0\nelement vertex 2\nproperty double x\nproperty double y\nproperty double z\nend_header\n";
+        (
+            prop_oneof![
+                Just(ply.as_bytes().to_vec()),
+                Just(bin.as_bytes().to_vec()),
+                Just(b"0 0 0\n1 2 3\n".to_vec())
+            ],
+            0usize..200,
+            proptest::collection::vec(any::<u8>(), 0..64),
+        )
+            .prop_map(|(mut base, cut, tail)| {
+                base.truncate(cut.min(base.len()));
+                base.extend(tail);
+                base
+            })
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(400))]
+
+        /// Reading never panics: a cloud of finite points (with unit
+        /// normals when present) or an error naming the file.
+        #[test]
+        fn reading_arbitrary_bytes_never_panics(bytes in near_valid(), ply in any::<bool>()) {
+            let dir = tempfile::tempdir().unwrap();
+            let path = dir.path().join(if ply { "f.ply" } else { "f.xyz" });
+            std::fs::write(&path, &bytes).unwrap();
+            match io::read(&path) {
+                Ok(c) => {
+                    prop_assert!(!c.is_empty());
+                    prop_assert!(c.positions.iter().flatten().all(|x| x.is_finite()));
+                    if let Some(n) = &c.normals {
+                        prop_assert!(n.iter().all(|v| (dot(*v, *v) - 1.0).abs() < 1e-9));
+                    }
+                }
+                Err(e) => prop_assert!(e.to_string().contains("f.")),
+            }
+        }
+    }
+}
