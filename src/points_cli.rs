@@ -11,6 +11,7 @@ use clap::{Args, Subcommand, ValueEnum};
 use tracing::info;
 
 use lodcloth::output::{line_chart_svg, render_points_png, Series, PALETTE};
+use lodcloth::points::estimate::{fit, rescaled, restart, score, SurfaceFitOptions, SurfaceReference};
 use lodcloth::points::generate::{extreme_point, generate, Shape};
 use lodcloth::points::knn::Knn;
 use lodcloth::points::model::{PointModel, Pull, SurfaceParams};
@@ -76,6 +77,10 @@ pub enum Points {
         /// Frames compared per simulated second.
         #[arg(long, default_value_t = 50.0)]
         fps: f64,
+        /// Also fit the stretch and bend stiffness of every size to the
+        /// reference's first half and score it (held-out second half reported).
+        #[arg(long)]
+        fit: bool,
         #[arg(long, default_value = "out/points-accuracy")]
         out: PathBuf,
     },
@@ -225,8 +230,9 @@ pub fn run(command: Points) -> Result<()> {
             sizes,
             seconds,
             fps,
+            fit,
             out,
-        } => accuracy(&model, &sizes, seconds, fps, &out),
+        } => accuracy(&model, &sizes, seconds, fps, fit, &out),
     }
 }
 
@@ -470,7 +476,7 @@ fn simulate(a: &ModelArgs, steps: u64, every: u64, out: &Path) -> Result<()> {
     Ok(())
 }
 
-fn accuracy(a: &ModelArgs, sizes: &[usize], seconds: f64, fps: f64, out: &Path) -> Result<()> {
+fn accuracy(a: &ModelArgs, sizes: &[usize], seconds: f64, fps: f64, with_fit: bool, out: &Path) -> Result<()> {
     if !(seconds > 0.0 && seconds.is_finite() && fps > 0.0 && fps.is_finite()) {
         bail!("--seconds and --fps must be positive");
     }
@@ -483,98 +489,133 @@ fn accuracy(a: &ModelArgs, sizes: &[usize], seconds: f64, fps: f64, out: &Path) 
     if a.dt.is_some() {
         bail!("accuracy picks each model's dt (0.8 × its stability limit, dividing the frame interval); drop --dt");
     }
-    let run = |model: &mut PointModel| -> Result<(Vec<Vec<V3>>, f64)> {
-        let per_frame = (interval / model.sim.params().dt).round().max(1.0) as u64;
-        let mut out = Vec::with_capacity(frames);
-        let t = Instant::now();
-        for _ in 0..frames {
-            for _ in 0..per_frame {
-                if !model.step().finite {
-                    bail!("diverged with {} simulation points", model.sim_points());
-                }
-            }
-            model.update_cloud();
-            out.push(model.positions.clone());
-        }
-        // Wall seconds per simulated second, the cloud moved once per frame.
-        let cost = t.elapsed().as_secs_f64() / seconds;
-        Ok((out, cost))
-    };
     info!(points = cloud.len(), "reference: every point simulated");
-    let mut reference = build(a, &cloud, None, None, Some(interval))?;
-    let (ref_frames, ref_cost) = run(&mut reference)?;
-    let o_max = ref_frames
-        .iter()
-        .flat_map(|f| f.iter().zip(&cloud.positions).map(|(p, q)| dist(*p, *q)))
-        .fold(0.0, f64::max);
-    if o_max <= 0.0 {
-        bail!("the reference never moved: add a --pull or --gravity so there is motion to compare");
-    }
+    let mut reference_model = build(a, &cloud, None, None, Some(interval))?;
+    let t = Instant::now();
+    let reference = SurfaceReference::record(&mut reference_model, frames, interval)
+        .context("recording the all-points reference (add a --pull or --gravity so there is motion)")?;
+    let ref_cost = t.elapsed().as_secs_f64() / seconds;
     let csv_path = out.join("accuracy.csv");
     let mut csv = std::io::BufWriter::new(
         fs::File::create(&csv_path).with_context(|| format!("cannot create {}", csv_path.display()))?,
     );
-    writeln!(csv, "sim_points,springs,dt,step_us,error_mean,error_max")?;
     writeln!(
         csv,
-        "{},{},{},{},0,0",
-        cloud.len(),
-        reference.sim.topology().spring_count(),
-        reference.sim.params().dt,
-        ref_cost * 1e6
+        "sim_points,springs,dt,wall_per_sim_second,error_mean,error_max,fit_error_mean,fit_error_max,fit_held_out_mean,stretch_scale,bend_scale,fit_seconds"
     )?;
-    let mut by_size = Vec::new();
-    let mut by_cost = Vec::new();
-    println!("| simulation points | springs | dt (ms) | wall ms per simulated s | mean error | max error |");
-    println!("|---|---|---|---|---|---|");
-    println!(
-        "| {} (reference) | {} | {:.3} | {:.0} | 0 | 0 |",
+    writeln!(
+        csv,
+        "{},{},{},{ref_cost},0,0,0,0,0,1,1,0",
         cloud.len(),
-        reference.sim.topology().spring_count(),
-        reference.sim.params().dt * 1e3,
-        ref_cost * 1e3
+        reference_model.sim.topology().spring_count(),
+        reference_model.sim.params().dt,
+    )?;
+    let mut same_by_size = Vec::new();
+    let mut same_by_cost = Vec::new();
+    let mut fit_by_size = Vec::new();
+    let mut fit_by_cost = Vec::new();
+    println!(
+        "| simulation points | springs | dt (ms) | wall ms per simulated s | mean error | max error |{}",
+        if with_fit {
+            " fit: mean (held-out half) | fit: max | stretch, bend scale | fit s |"
+        } else {
+            ""
+        }
+    );
+    println!(
+        "|---|---|---|---|---|---|{}",
+        if with_fit { "---|---|---|---|" } else { "" }
+    );
+    println!(
+        "| {} (reference) | {} | {:.3} | {:.0} | 0 | 0 |{}",
+        cloud.len(),
+        reference_model.sim.topology().spring_count(),
+        reference_model.sim.params().dt * 1e3,
+        ref_cost * 1e3,
+        if with_fit { " | | | |" } else { "" }
     );
     for &size in sizes {
         if size >= cloud.len() {
             continue;
         }
         let mut model = build(a, &cloud, Some(size), None, Some(interval))?;
-        let (frames_out, cost) = run(&mut model)?;
-        let (mut sum, mut max, mut count) = (0.0, 0.0f64, 0usize);
-        for (f, r) in frames_out.iter().zip(&ref_frames) {
-            for (p, q) in f.iter().zip(r) {
-                let e = dist(*p, *q) / o_max;
-                sum += e;
-                max = max.max(e);
-                count += 1;
-            }
+        let t = Instant::now();
+        let fresh = restart(&model)?;
+        let same = score(&mut model, fresh, &reference, 0..frames)?;
+        let cost = t.elapsed().as_secs_f64() / seconds;
+        if !same.finite {
+            bail!("the {size}-point model diverged");
         }
-        let mean = sum / count as f64;
         let springs = model.sim.topology().spring_count();
         let dt = model.sim.params().dt;
-        writeln!(csv, "{size},{springs},{dt},{cost},{mean},{max}")?;
-        println!(
+        same_by_size.push((size as f64, 100.0 * same.mean));
+        same_by_cost.push((cost * 1e3, 100.0 * same.mean));
+        let mut row = format!(
             "| {size} | {springs} | {:.3} | {:.0} | {:.2}% | {:.2}% |",
             dt * 1e3,
             cost * 1e3,
-            100.0 * mean,
-            100.0 * max
+            100.0 * same.mean,
+            100.0 * same.max
         );
-        by_size.push((size as f64, 100.0 * mean));
-        by_cost.push((cost * 1e3, 100.0 * mean));
+        let mut fit_cols = "0,0,0,1,1,0".to_string();
+        if with_fit {
+            let t = Instant::now();
+            let half = frames / 2;
+            let options = SurfaceFitOptions {
+                train: 0..half,
+                ..SurfaceFitOptions::default()
+            };
+            let fitted = fit(&mut model, &reference, &options, &mut |_| {})?;
+            let fit_seconds = t.elapsed().as_secs_f64();
+            let sim = rescaled(&model, fitted.stretch_scale, fitted.bend_scale, f64::INFINITY)?.expect("no bound");
+            let all = score(&mut model, sim.clone(), &reference, 0..frames)?;
+            let held = score(&mut model, sim, &reference, half..frames)?;
+            row += &format!(
+                " {:.2}% ({:.2}%) | {:.2}% | {:.2}, {:.2} | {fit_seconds:.1} |",
+                100.0 * all.mean,
+                100.0 * held.mean,
+                100.0 * all.max,
+                fitted.stretch_scale,
+                fitted.bend_scale
+            );
+            fit_cols = format!(
+                "{},{},{},{},{},{fit_seconds}",
+                all.mean, all.max, held.mean, fitted.stretch_scale, fitted.bend_scale
+            );
+            fit_by_size.push((size as f64, 100.0 * all.mean));
+            fit_by_cost.push((cost * 1e3, 100.0 * all.mean));
+        }
+        writeln!(
+            csv,
+            "{size},{springs},{dt},{cost},{},{},{fit_cols}",
+            same.mean, same.max
+        )?;
+        println!("{row}");
     }
     csv.flush()?;
+    let series = |same: Vec<(f64, f64)>, fitted: Vec<(f64, f64)>| {
+        let mut v = vec![Series {
+            name: "same coefficients",
+            points: same,
+            markers: true,
+            color: PALETTE[0],
+        }];
+        if !fitted.is_empty() {
+            v.push(Series {
+                name: "fitted stretch and bend stiffness",
+                points: fitted,
+                markers: true,
+                color: PALETTE[1],
+            });
+        }
+        v
+    };
     line_chart_svg(
         &out.join("error_vs_size.svg"),
         &format!("{} points: error of the simplified simulation", cloud.len()),
         "simulation points",
         "mean displacement error (% of max displacement)",
-        &[Series {
-            name: "simplified, moved back by MLS",
-            points: by_size,
-            markers: true,
-            color: PALETTE[0],
-        }],
+        &series(same_by_size, fit_by_size),
         true,
         true,
     )?;
@@ -583,12 +624,7 @@ fn accuracy(a: &ModelArgs, sizes: &[usize], seconds: f64, fps: f64, out: &Path) 
         &format!("{} points: speed against accuracy", cloud.len()),
         "wall ms per simulated second (cloud moved every frame)",
         "mean displacement error (%)",
-        &[Series {
-            name: "simplified, moved back by MLS",
-            points: by_cost,
-            markers: true,
-            color: PALETTE[1],
-        }],
+        &series(same_by_cost, fit_by_cost),
         true,
         true,
     )?;

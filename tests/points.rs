@@ -747,3 +747,60 @@ mod fuzz {
         }
     }
 }
+
+/// The surface fit recovers stiffness scales that generated the reference:
+/// the reference is the simplified model itself with stretch K × 1.8 and
+/// bend K × 0.6, so the fit must find 1.8 (and reach ~zero error).
+#[test]
+fn surface_fit_recovers_known_stiffness() {
+    use lodcloth::points::estimate::{fit, rescaled, SurfaceFitOptions, SurfaceReference};
+    let cloud = generate(Shape::Sphere, 3203, 0.5, 0.0, 1);
+    let interval = 0.02;
+    let params = SurfaceParams {
+        gravity: [0.0, 0.0, -9.81],
+        safety: 0.5,
+        frame_interval: Some(interval),
+        ..SurfaceParams::default()
+    };
+    let options = SimplifyOptions {
+        target: Some(200),
+        ..SimplifyOptions::default()
+    };
+    let build = || {
+        PointModel::build(
+            &cloud,
+            Some(&options),
+            15,
+            &params,
+            Some(-0.35),
+            &[],
+            &TransferOptions::default(),
+            &mut no_progress,
+        )
+        .unwrap()
+    };
+    let mut truth = build();
+    truth.sim = rescaled(&truth, 1.8, 0.6, 0.9).unwrap().expect("stable at 1.8×");
+    let reference = SurfaceReference::record(&mut truth, 50, interval).unwrap();
+    let mut model = build();
+    let fitted = fit(&mut model, &reference, &SurfaceFitOptions::default(), &mut |_| {}).unwrap();
+    assert!(
+        (fitted.stretch_scale / 1.8 - 1.0).abs() < 0.01 && (fitted.bend_scale / 0.6 - 1.0).abs() < 0.05,
+        "stretch scale {:.4} (bend {:.3}), error {:.2e} → {:.2e}",
+        fitted.stretch_scale,
+        fitted.bend_scale,
+        fitted.before.mean,
+        fitted.after.mean
+    );
+    assert!(
+        fitted.before.mean > 0.02,
+        "the start should be visibly off: {:.4}",
+        fitted.before.mean
+    );
+    assert!(
+        fitted.after.mean < 0.05 * fitted.before.mean,
+        "{:.2e} → {:.2e}",
+        fitted.before.mean,
+        fitted.after.mean
+    );
+}

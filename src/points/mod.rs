@@ -16,6 +16,7 @@
 //! - [`surface`] — springs (stretch and bend), masses, a ready [`crate::sim::Topology`];
 //! - [`transfer`] — displacement and normals of the full cloud from the simulated points.
 
+pub mod estimate;
 pub mod generate;
 pub mod io;
 pub mod knn;
