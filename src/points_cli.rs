@@ -158,24 +158,23 @@ pub struct ModelArgs {
     covariance_normals: bool,
 }
 
-fn parse_v3(s: &str) -> Result<V3, String> {
-    let v: Vec<f64> = s
-        .split(',')
+/// Comma-separated numbers.
+fn parse_list(s: &str) -> Result<Vec<f64>, String> {
+    s.split(',')
         .map(|x| x.trim().parse::<f64>().map_err(|e| format!("`{x}`: {e}")))
-        .collect::<Result<_, _>>()?;
-    match v.as_slice() {
-        [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok([*x, *y, *z]),
+        .collect()
+}
+
+fn parse_v3(s: &str) -> Result<V3, String> {
+    match parse_list(s)?.as_slice() {
+        &[x, y, z] if [x, y, z].iter().all(|c| c.is_finite()) => Ok([x, y, z]),
         _ => Err(format!("expected three finite numbers \"x,y,z\", got `{s}`")),
     }
 }
 
 fn parse_coeffs(s: &str) -> Result<SpringCoeffs, String> {
-    let v: Vec<f64> = s
-        .split(',')
-        .map(|x| x.trim().parse::<f64>().map_err(|e| format!("`{x}`: {e}")))
-        .collect::<Result<_, _>>()?;
-    match v.as_slice() {
-        [k, c] => Ok(SpringCoeffs { k: *k, c: *c }),
+    match parse_list(s)?.as_slice() {
+        &[k, c] => Ok(SpringCoeffs { k, c }),
         _ => Err(format!("expected \"K,C\", got `{s}`")),
     }
 }
