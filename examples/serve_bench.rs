@@ -48,6 +48,7 @@ fn trial(n: usize, integrator: Integrator, count: usize, seconds: f64) -> (f64, 
         .map(|i| InstanceSetup {
             name: format!("i{i}"),
             sim: instance(n, integrator),
+            cloud: None,
             level: Level::new(n, n),
             method: Method::Same,
             publish_hz: 60.0,
@@ -218,6 +219,8 @@ method = "gkd"
             level: Level::new(n, n),
             coefficient_version: 2,
             positions: vec![0.5; 3 * n * n],
+            simulation_positions: Vec::new(),
+            normals: Vec::new(),
             stepped: std::time::SystemTime::now(),
             transition: false,
         };

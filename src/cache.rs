@@ -344,9 +344,15 @@ impl CacheEntry {
         let mut p = Vec::new();
         for kind in SpringKind::ALL {
             let s = self.material.get(kind);
-            // `!(x > 0.0)` also rejects NaN.
-            if !(s.k.is_finite() && s.k > 0.0) {
-                p.push(format!("{kind} stiffness k = {} is not finite and > 0", s.k));
+            // `!(x > 0.0)` also rejects NaN. K = 0 is a spring type the
+            // model does not have (surfaces have no shear springs); it must
+            // then have no damping either.
+            let absent = s.k == 0.0 && s.c == 0.0;
+            if !(s.k.is_finite() && s.k > 0.0) && !absent {
+                p.push(format!(
+                    "{kind} stiffness k = {} is not finite and > 0 (nor 0 with c = 0, an absent type)",
+                    s.k
+                ));
             }
             if !(s.c.is_finite() && s.c >= 0.0) {
                 p.push(format!("{kind} damping c = {} is not finite and ≥ 0", s.c));

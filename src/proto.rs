@@ -27,41 +27,72 @@ pub mod schema {
     pub const ERROR: &str = "lodcloth.v1.Error";
 }
 
-/// A grid resolution, written `NXxNY` (e.g. `32x32`) in configs and on the
-/// command line.
+/// A level of detail: a grid cloth of `nx × ny` nodes, written `NXxNY`
+/// (e.g. `32x32`), or a point-sampled surface simulated on `n` points of
+/// its cloud, written `N` or `Npts` (e.g. `300pts`). Configs also accept a
+/// bare integer for a point count.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
-pub struct Level {
-    pub nx: usize,
-    pub ny: usize,
+pub enum Level {
+    Grid { nx: usize, ny: usize },
+    Points(usize),
 }
 
 impl Level {
+    /// A grid level.
     pub fn new(nx: usize, ny: usize) -> Level {
-        Level { nx, ny }
+        Level::Grid { nx, ny }
     }
 
+    /// Simulated nodes (grid nodes or surface points): the level's cost.
     pub fn nodes(self) -> usize {
-        self.nx * self.ny
-    }
-
-    pub fn to_wire(self) -> v1::Level {
-        v1::Level {
-            nx: self.nx as u32,
-            ny: self.ny as u32,
+        match self {
+            Level::Grid { nx, ny } => nx * ny,
+            Level::Points(n) => n,
         }
     }
 
-    pub fn from_wire(l: &v1::Level) -> Level {
-        Level {
-            nx: l.nx as usize,
-            ny: l.ny as usize,
+    /// `(nx, ny)` of a grid level.
+    pub fn grid(self) -> Option<(usize, usize)> {
+        match self {
+            Level::Grid { nx, ny } => Some((nx, ny)),
+            Level::Points(_) => None,
+        }
+    }
+
+    pub fn to_wire(self) -> v1::Level {
+        match self {
+            Level::Grid { nx, ny } => v1::Level {
+                nx: nx as u32,
+                ny: ny as u32,
+                points: 0,
+            },
+            Level::Points(n) => v1::Level {
+                nx: 0,
+                ny: 0,
+                points: n as u32,
+            },
+        }
+    }
+
+    /// The level a wire message names; an error when it sets both a grid
+    /// and a point count.
+    pub fn from_wire(l: &v1::Level) -> Result<Level, String> {
+        match (l.points, l.nx, l.ny) {
+            (0, nx, ny) => Ok(Level::new(nx as usize, ny as usize)),
+            (n, 0, 0) => Ok(Level::Points(n as usize)),
+            (n, nx, ny) => Err(format!(
+                "level sets both a grid ({nx}x{ny}) and a point count ({n}); set one"
+            )),
         }
     }
 }
 
 impl fmt::Display for Level {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "{}x{}", self.nx, self.ny)
+        match self {
+            Level::Grid { nx, ny } => write!(f, "{nx}x{ny}"),
+            Level::Points(n) => write!(f, "{n}pts"),
+        }
     }
 }
 
@@ -69,11 +100,21 @@ impl FromStr for Level {
     type Err = String;
 
     fn from_str(s: &str) -> Result<Level, String> {
-        let bad = || format!("'{s}' is not a level; write NXxNY, e.g. 32x32");
-        let (a, b) = s.trim().split_once(['x', 'X']).ok_or_else(bad)?;
-        let nx = a.trim().parse::<usize>().map_err(|_| bad())?;
-        let ny = b.trim().parse::<usize>().map_err(|_| bad())?;
-        Ok(Level { nx, ny })
+        let bad = || {
+            format!("'{s}' is not a level; write NXxNY for a cloth (e.g. 32x32) or N for a surface's point count (e.g. 300)")
+        };
+        let t = s.trim();
+        if let Some((a, b)) = t.split_once(['x', 'X']) {
+            let nx = a.trim().parse::<usize>().map_err(|_| bad())?;
+            let ny = b.trim().parse::<usize>().map_err(|_| bad())?;
+            return Ok(Level::new(nx, ny));
+        }
+        let digits = t
+            .strip_suffix("points")
+            .or_else(|| t.strip_suffix("pts"))
+            .unwrap_or(t)
+            .trim();
+        digits.parse::<usize>().map(Level::Points).map_err(|_| bad())
     }
 }
 
@@ -85,8 +126,18 @@ impl serde::Serialize for Level {
 
 impl<'de> serde::Deserialize<'de> for Level {
     fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Level, D::Error> {
-        let s = String::deserialize(d)?;
-        s.parse().map_err(serde::de::Error::custom)
+        #[derive(serde::Deserialize)]
+        #[serde(untagged)]
+        enum Raw {
+            Count(u64),
+            Text(String),
+        }
+        match Raw::deserialize(d)? {
+            Raw::Count(n) => usize::try_from(n)
+                .map(Level::Points)
+                .map_err(|_| serde::de::Error::custom(format!("{n} points is too many"))),
+            Raw::Text(s) => s.parse().map_err(serde::de::Error::custom),
+        }
     }
 }
 
@@ -160,9 +211,41 @@ mod tests {
     fn levels_parse_and_print() {
         assert_eq!("32x24".parse::<Level>(), Ok(Level::new(32, 24)));
         assert_eq!(" 8X8 ".parse::<Level>(), Ok(Level::new(8, 8)));
-        assert!("32".parse::<Level>().is_err());
         assert!("-3x4".parse::<Level>().is_err());
+        assert!("x".parse::<Level>().is_err());
+        assert!("pts".parse::<Level>().is_err());
         assert_eq!(Level::new(40, 40).to_string(), "40x40");
+        assert_eq!("273".parse::<Level>(), Ok(Level::Points(273)));
+        assert_eq!("273pts".parse::<Level>(), Ok(Level::Points(273)));
+        assert_eq!(Level::Points(85).to_string().parse::<Level>(), Ok(Level::Points(85)));
+    }
+
+    #[test]
+    fn levels_cross_the_wire_and_mixed_levels_are_refused() {
+        for l in [Level::new(16, 24), Level::Points(327)] {
+            assert_eq!(Level::from_wire(&l.to_wire()), Ok(l));
+        }
+        let mixed = v1::Level {
+            nx: 16,
+            ny: 16,
+            points: 300,
+        };
+        let e = Level::from_wire(&mixed).unwrap_err();
+        assert!(e.contains("16x16") && e.contains("300"), "{e}");
+    }
+
+    #[test]
+    fn config_levels_accept_counts_and_strings() {
+        #[derive(serde::Deserialize)]
+        struct L {
+            levels: Vec<Level>,
+        }
+        let l: L = toml::from_str(r#"levels = [85, "273", "16x16"]"#).unwrap();
+        assert_eq!(
+            l.levels,
+            vec![Level::Points(85), Level::Points(273), Level::new(16, 16)]
+        );
+        assert!(toml::from_str::<L>("levels = [-3]").is_err());
     }
 
     #[test]

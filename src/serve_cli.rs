@@ -105,7 +105,11 @@ async fn connect(c: &Connect) -> Result<Client> {
 }
 
 fn level(l: &Option<v1::Level>) -> String {
-    l.as_ref().map_or("?".into(), |l| Level::from_wire(l).to_string())
+    match l.as_ref().map(Level::from_wire) {
+        Some(Ok(l)) => l.to_string(),
+        Some(Err(e)) => format!("? ({e})"),
+        None => "?".into(),
+    }
 }
 
 fn pct(e: Option<f64>) -> String {
@@ -313,7 +317,16 @@ pub fn record(c: Connect, instance: String, seconds: f64, out: PathBuf) -> Resul
                 break;
             };
             let s = v1::State::decode(sample.payload().to_bytes().as_ref()).context("undecodable state")?;
-            let lv = s.level.as_ref().map(Level::from_wire).unwrap_or(Level::new(0, 0));
+            let lv = match s.level.as_ref().map(Level::from_wire) {
+                Some(Ok(l)) => l,
+                Some(Err(e)) => bail!("state frame {}: {e}", s.frame),
+                None => Level::new(0, 0),
+            };
+            // A surface publishes its whole cloud at every level.
+            let nodes = match lv {
+                Level::Points(_) => info.cloud_points as usize,
+                Level::Grid { .. } => lv.nodes(),
+            };
             let Some(pos) = unpack_positions(&s.positions) else {
                 bail!(
                     "state frame {} has {} position bytes, not a multiple of 12",
@@ -321,18 +334,18 @@ pub fn record(c: Connect, instance: String, seconds: f64, out: PathBuf) -> Resul
                     s.positions.len()
                 );
             };
-            if pos.len() != 3 * lv.nodes() {
+            if pos.len() != 3 * nodes {
                 bail!("state frame {} carries {} nodes for level {lv}", s.frame, pos.len() / 3);
             }
             if let Some((_, l)) = &writer {
-                if *l != lv {
+                if *l != lv && lv.grid().is_some() {
                     eprintln!("the level changed from {l} to {lv}; stopping (a trajectory has one level)");
                     break;
                 }
             }
             if writer.is_none() {
                 let dt = 1.0 / info.publish_hz.max(1e-9);
-                let w = TrajectoryWriter::create(&out, lv.nodes(), Some((lv.nx, lv.ny)), dt, 1, Precision::F32, false)?;
+                let w = TrajectoryWriter::create(&out, nodes, lv.grid(), dt, 1, Precision::F32, false)?;
                 writer = Some((w, lv));
             }
             let n = pos.len() / 3;

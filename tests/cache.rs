@@ -321,9 +321,10 @@ fn put_refuses_entries_that_get_would_reject() {
             e.material.springs[1].c = f64::NAN;
             e
         }),
-        ("zero stiffness", {
+        ("zero stiffness with damping", {
             let mut e = entry_for(key(), 1.0);
             e.material.springs[2].k = 0.0;
+            e.material.springs[2].c = 0.5;
             e
         }),
         ("infinite note", {
@@ -338,6 +339,12 @@ fn put_refuses_entries_that_get_would_reject() {
         }
     }
     assert!(listing(dir.path()).is_empty(), "nothing written");
+    // An absent spring type (K = C = 0, as a surface's shear) round-trips.
+    let mut surface = entry_for(key(), 1.0);
+    surface.material.springs[1] = lodcloth::sim::SpringCoeffs { k: 0.0, c: 0.0 };
+    cache.put(&surface).expect("an absent type is valid");
+    let back = cache.get(&key()).expect("readable").expect("present");
+    assert_identical(&back, &surface);
 }
 
 // ---------------------------------------------------------------- get_or_compute

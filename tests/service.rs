@@ -173,7 +173,7 @@ fn refused_code(r: Result<v1::SwitchReply, ClientError>) -> (String, String) {
 }
 
 fn level_of(s: &v1::State) -> Level {
-    Level::from_wire(s.level.as_ref().expect("level"))
+    Level::from_wire(s.level.as_ref().expect("level")).expect("a valid level")
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -196,7 +196,7 @@ async fn states_arrive_at_the_configured_rate_and_pinned_nodes_stay_put() {
         let pos = unpack_positions(&s.positions).expect("packed positions");
         assert_eq!(pos.len(), 3 * lv.nodes());
         assert!(pos.iter().all(|v| v.is_finite()));
-        if lv != Level::from_wire(info.level.as_ref().unwrap()) {
+        if lv != Level::from_wire(info.level.as_ref().unwrap()).unwrap() {
             continue; // the estimate went live at another level (not here: same method)
         }
         let n = lv.nodes();
@@ -236,8 +236,11 @@ async fn a_switch_is_answered_and_the_motion_continues_without_a_jump() {
     let reply = within(60, "switch", c.switch("sw", &request, Duration::from_secs(60)))
         .await
         .expect("switch accepted");
-    assert_eq!(Level::from_wire(reply.level.as_ref().unwrap()), Level::new(8, 8));
-    assert_eq!(Level::from_wire(reply.previous.as_ref().unwrap()), Level::new(16, 16));
+    assert_eq!(Level::from_wire(reply.level.as_ref().unwrap()), Ok(Level::new(8, 8)));
+    assert_eq!(
+        Level::from_wire(reply.previous.as_ref().unwrap()),
+        Ok(Level::new(16, 16))
+    );
     let predicted = reply.predicted_error.expect("calibrated");
     assert!(predicted > 0.0 && predicted < 0.5, "predicted error {predicted}");
 
@@ -315,7 +318,7 @@ async fn bad_requests_get_errors_naming_the_problem_and_publishing_goes_on() {
     let c = client(&[d.endpoint()]).await;
     wait_info(&c, "bad").await;
     let level = |nx, ny| v1::SwitchRequest {
-        target: Some(v1::switch_request::Target::Level(v1::Level { nx, ny })),
+        target: Some(v1::switch_request::Target::Level(v1::Level { nx, ny, points: 0 })),
         method: String::new(),
     };
     let max_error = |e| v1::SwitchRequest {
@@ -547,4 +550,326 @@ dt = -1.0
     }
     let unknown = ServiceConfig::from_toml("[engine]\nthreadz = 2\n", "typo.toml").expect_err("rejected");
     assert!(unknown.to_string().contains("threadz"), "{unknown}");
+}
+
+// ---------------------------------------------------------------- surfaces
+
+/// A small surface scene: an 800-point sphere, bottom cap pinned, sagging
+/// under gravity with its top pulled up for 0.75 s.
+const SURFACE_SCENE: &str = r#"
+name = "test-sphere"
+cloud = "sphere"
+count = 800
+size = 0.5
+gravity = [0.0, 0.0, -9.81]
+pin_below = -0.35
+duration = 1.5
+[[pulls]]
+point = "top"
+offset = [0.0, 0.0, 0.2]
+stiffness = 20.0
+release = 0.75
+"#;
+
+/// A daemon with one surface instance at levels 100 and 200 points.
+fn start_surface_daemon(dir: &std::path::Path, method: &str) -> Daemon {
+    let scene = dir.join("sphere.toml");
+    std::fs::write(&scene, SURFACE_SCENE).expect("scene written");
+    let port = free_port();
+    let text = format!(
+        r#"
+prefix = "{PREFIX}"
+cache = "{cache}"
+[zenoh]
+mode = "peer"
+listen = ["tcp/127.0.0.1:{port}"]
+multicast_scouting = false
+[engine]
+threads = 2
+publish_hz = 50.0
+[[instances]]
+name = "sphere"
+kind = "surface"
+scene = "{scene}"
+levels = [100, 200]
+start = 200
+method = "{method}"
+shadow_reference = true
+"#,
+        cache = dir.join("cache").display(),
+        scene = scene.display(),
+    );
+    let config = ServiceConfig::from_toml(&text, "surface test").expect("valid config");
+    let (tx, rx) = oneshot::channel();
+    let task = tokio::spawn(lodcloth::service::run(config, async {
+        let _ = rx.await;
+    }));
+    Daemon {
+        port,
+        stop: Some(tx),
+        task,
+        _dir: tempfile::tempdir().expect("temp dir"),
+    }
+}
+
+fn packed_len(bytes: &[u8]) -> usize {
+    unpack_positions(bytes).expect("packed f32 triples").len() / 3
+}
+
+/// Mean distance between two packed clouds of the same size.
+fn mean_distance(a: &[u8], b: &[u8]) -> f64 {
+    let (a, b) = (unpack_positions(a).unwrap(), unpack_positions(b).unwrap());
+    let n = a.len() / 3;
+    (0..n)
+        .map(|k| {
+            (0..3)
+                .map(|c| (a[c * n + k] - b[c * n + k]).powi(2))
+                .sum::<f64>()
+                .sqrt()
+        })
+        .sum::<f64>()
+        / n as f64
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_surface_publishes_its_whole_cloud_and_switches_size_without_a_jump() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let d = start_surface_daemon(dir.path(), "same");
+    let c = client(&[d.endpoint()]).await;
+    let info = wait_info(&c, "sphere").await;
+    assert_eq!(info.kind, "surface");
+    assert_eq!(info.cloud_points, 800);
+    assert_eq!(
+        Level::from_wire(info.reference.as_ref().unwrap()),
+        Ok(Level::Points(800))
+    );
+    let kept = info.simulation_points.clone();
+    assert_eq!(kept.len(), 200);
+    let mut unique = kept.clone();
+    unique.sort_unstable();
+    unique.dedup();
+    assert_eq!(unique.len(), 200, "simulated points are distinct cloud points");
+    assert!(kept.iter().all(|&i| i < 800));
+    assert!(!info.triangles.is_empty() && info.triangles.iter().all(|&t| t < 200));
+    assert!(!info.pinned.is_empty());
+
+    // The cloud at rest, as the scene generates it.
+    let rest = lodcloth::points::generate::generate(lodcloth::points::generate::Shape::Sphere, 800, 0.5, 0.0, 1);
+    let states = collect_states(&c, "sphere", 1.0).await;
+    assert!(states.len() >= 20, "{} states in 1 s at 50 Hz", states.len());
+    let last = states.last().unwrap();
+    assert_eq!(level_of(last), Level::Points(200));
+    assert_eq!(packed_len(&last.positions), 800, "every cloud point");
+    assert_eq!(packed_len(&last.simulation_positions), 200, "every simulated point");
+    let normals = unpack_positions(&last.normals).unwrap();
+    for k in 0..800 {
+        let len = (0..3).map(|c| normals[c * 800 + k].powi(2)).sum::<f64>().sqrt();
+        assert!((len - 1.0).abs() < 1e-3, "normal {k} has length {len}");
+    }
+    // Deep in the pinned cap every MLS neighbour is pinned: those points
+    // stay exactly at rest; the pulled top moves.
+    let pos = unpack_positions(&last.positions).unwrap();
+    let moved = |k: usize| {
+        (0..3)
+            .map(|c| (pos[c * 800 + k] - rest.positions[k][c]).powi(2))
+            .sum::<f64>()
+            .sqrt()
+    };
+    let cap: Vec<usize> = (0..800).filter(|&k| rest.positions[k][2] < -0.48).collect();
+    assert!(!cap.is_empty());
+    for &k in &cap {
+        assert!(moved(k) < 1e-6, "cap point {k} moved {}", moved(k));
+    }
+    let top = (0..800)
+        .max_by(|&a, &b| rest.positions[a][2].total_cmp(&rest.positions[b][2]))
+        .unwrap();
+    assert!(moved(top) > 0.02, "the pulled top moved only {}", moved(top));
+
+    // Bad requests name the problem.
+    let t = Duration::from_secs(30);
+    let grid = v1::SwitchRequest {
+        target: Some(v1::switch_request::Target::Level(Level::new(16, 16).to_wire())),
+        method: String::new(),
+    };
+    let (code, message) = refused_code(c.switch("sphere", &grid, t).await);
+    assert_eq!(code, "CODE_LEVEL_NOT_ALLOWED", "{message}");
+    assert!(message.contains("100pts") && message.contains("200pts"), "{message}");
+    let gkd = v1::SwitchRequest {
+        target: Some(v1::switch_request::Target::Level(Level::Points(100).to_wire())),
+        method: "gkd".into(),
+    };
+    let (code, message) = refused_code(c.switch("sphere", &gkd, t).await);
+    assert_eq!(code, "CODE_BAD_REQUEST");
+    assert!(message.contains("same or fit"), "{message}");
+    let mixed = v1::SwitchRequest {
+        target: Some(v1::switch_request::Target::Level(v1::Level {
+            nx: 16,
+            ny: 16,
+            points: 100,
+        })),
+        method: String::new(),
+    };
+    let (code, message) = refused_code(c.switch("sphere", &mixed, t).await);
+    assert_eq!(code, "CODE_BAD_REQUEST");
+    assert!(message.contains("both"), "{message}");
+
+    // Switch 200 → 100 points while the surface moves.
+    let sub = c
+        .session
+        .declare_subscriber(keys::state(PREFIX, "sphere"))
+        .await
+        .expect("subscriber");
+    let request = v1::SwitchRequest {
+        target: Some(v1::switch_request::Target::Level(Level::Points(100).to_wire())),
+        method: String::new(),
+    };
+    let reply = within(60, "switch", c.switch("sphere", &request, Duration::from_secs(60)))
+        .await
+        .expect("switch accepted");
+    assert_eq!(Level::from_wire(reply.level.as_ref().unwrap()), Ok(Level::Points(100)));
+    assert_eq!(
+        Level::from_wire(reply.previous.as_ref().unwrap()),
+        Ok(Level::Points(200))
+    );
+    let predicted = reply.predicted_error.expect("calibrated");
+    assert!(predicted > 0.0 && predicted < 0.5, "predicted error {predicted}");
+    let mut transitions: Vec<v1::State> = Vec::new();
+    let mut pair = None;
+    let mut after = 0;
+    within(10, "states after the switch", async {
+        while after < 3 {
+            let s = sub.recv_async().await.expect("state");
+            let s = v1::State::decode(s.payload().to_bytes().as_ref()).expect("State");
+            if s.transition {
+                transitions.push(s);
+                if let [.., a, b] = transitions.as_slice() {
+                    if level_of(a) == Level::Points(200) && level_of(b) == Level::Points(100) {
+                        pair = Some((a.clone(), b.clone()));
+                    }
+                }
+            } else if pair.is_some() {
+                assert_eq!(level_of(&s), Level::Points(100));
+                assert_eq!(packed_len(&s.positions), 800, "the whole cloud at every level");
+                assert_eq!(packed_len(&s.simulation_positions), 100);
+                after += 1;
+            }
+        }
+    })
+    .await;
+    let (old, new) = pair.expect("a transition pair");
+    assert_eq!((old.frame, old.time), (new.frame, new.time));
+    let info = c.info("sphere").await.expect("info");
+    assert_eq!(info.simulation_points.len(), 100);
+    assert!(info.o_max > 0.0);
+    // The visible jump: the same 800 points before and after, relative to
+    // the reference's largest displacement, within the predicted error.
+    let jump = mean_distance(&old.positions, &new.positions) / info.o_max;
+    let moving = mean_distance(&old.positions, &states[0].positions) / info.o_max;
+    eprintln!("surface switch 200 -> 100 points: jump {jump:.5}, predicted {predicted:.5}, motion {moving:.4}");
+    assert!(jump <= predicted, "jump {jump} above the predicted error {predicted}");
+
+    // The shadow reference gives a live error once the new level runs.
+    let metrics = c
+        .session
+        .declare_subscriber(keys::metrics(PREFIX, "sphere"))
+        .await
+        .expect("subscriber");
+    let live = within(10, "a live error", async {
+        loop {
+            let m = metrics.recv_async().await.expect("metrics");
+            let m = v1::Metrics::decode(m.payload().to_bytes().as_ref()).expect("Metrics");
+            if let (Some(e), true) = (m.live_error, m.level == Some(Level::Points(100).to_wire())) {
+                return e;
+            }
+        }
+    })
+    .await;
+    assert!(live.is_finite() && live < 0.5, "live error {live}");
+    drop(metrics);
+    drop(sub);
+    d.shutdown().await.expect("clean exit");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_surface_fit_is_cached_and_reused_by_the_next_daemon() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let request = v1::SwitchRequest {
+        target: Some(v1::switch_request::Target::Level(Level::Points(100).to_wire())),
+        method: String::new(),
+    };
+    let mut replies = Vec::new();
+    for run in 0..2 {
+        let d = start_surface_daemon(dir.path(), "fit");
+        let c = client(&[d.endpoint()]).await;
+        wait_info(&c, "sphere").await;
+        let reply = within(120, "switch", c.switch("sphere", &request, Duration::from_secs(120)))
+            .await
+            .expect("switch accepted");
+        assert_eq!(reply.method, "fit");
+        eprintln!(
+            "run {run}: fit for 100 points in {:.2} s (cached {}), predicted error {:?}",
+            reply.seconds, reply.cached, reply.predicted_error
+        );
+        replies.push(reply);
+        d.shutdown().await.expect("clean exit");
+    }
+    let (first, second) = (&replies[0], &replies[1]);
+    assert!(second.cached, "the second daemon reads the fit from the cache");
+    assert_eq!(first.coefficients, second.coefficients, "the same coefficients");
+    let fitted = first.coefficients.as_ref().unwrap();
+    assert_eq!(
+        (fitted.shear_k, fitted.shear_c),
+        (0.0, 0.0),
+        "surfaces have no shear springs"
+    );
+    assert!(fitted.structural_k > 0.0 && fitted.bend_k > 0.0);
+    assert_eq!(first.predicted_error, second.predicted_error);
+}
+
+#[test]
+fn a_surface_instance_with_cloth_settings_is_refused_by_path() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let scene = dir.path().join("sphere.toml");
+    std::fs::write(&scene, SURFACE_SCENE).expect("scene written");
+    let text = format!(
+        r#"
+[[instances]]
+name = "s"
+kind = "surface"
+scene = "{scene}"
+reference = "24x24"
+levels = ["16x16", 5, 900, 200]
+start = 200
+method = "gkd"
+dt = 1e-3
+[[instances]]
+name = "t"
+kind = "membrane"
+scene = "{scene}"
+levels = [100]
+start = 100
+[[instances]]
+name = "u"
+scene = "{cloth}"
+levels = [100]
+start = 100
+"#,
+        scene = scene.display(),
+        cloth = scene_path("paper-1-top-edge.toml").display(),
+    );
+    let err = ServiceConfig::from_toml(&text, "surface.toml")
+        .expect_err("rejected")
+        .to_string();
+    for needle in [
+        "instances[0].method: 'gkd' needs a grid cloth",
+        "instances[0].reference:",
+        "instances[0].dt:",
+        "instances[0].levels[0]: 16x16 is a grid",
+        "instances[0].levels[1]: 5 points is outside 20..=800",
+        "instances[0].levels[2]: 900 points",
+        "instances[1].kind: 'membrane'",
+        "instances[2].levels[0]: 100pts is a point count",
+    ] {
+        assert!(err.contains(needle), "missing '{needle}' in:\n{err}");
+    }
 }

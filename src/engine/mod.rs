@@ -15,6 +15,7 @@
 //! reach the bus.
 
 pub mod prepare;
+mod shadow;
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{self, Receiver, Sender, TryRecvError};
@@ -26,10 +27,75 @@ use tokio::sync::{oneshot, watch};
 
 use crate::estimate::Method;
 use crate::lod::transfer_state;
+use crate::points::model::PointModel;
+use crate::points::transfer::Transfer;
 use crate::proto::Level;
+use crate::sim::vec3::V3;
 use crate::sim::{Material, Simulation, State, StepReport, Topology};
+use shadow::Shadow;
 
-pub use prepare::{PrepareError, Prepared, Preparer};
+pub use prepare::{Basis, PrepareError, Prepared, Preparer, Start};
+
+/// How a surface level's simulated points move its full cloud: which cloud
+/// points are simulated, the MLS transfer, and the cloud it last produced.
+#[derive(Debug, Clone)]
+pub struct CloudMap {
+    /// Cloud index of each simulated point.
+    pub kept: Arc<Vec<u32>>,
+    transfer: Transfer,
+    /// The deformed cloud after the last [`CloudMap::update`].
+    pub positions: Vec<V3>,
+    pub normals: Vec<V3>,
+    /// Scratch for velocity transfer at a switch.
+    scratch: Vec<V3>,
+}
+
+impl CloudMap {
+    /// The map of `model`'s level (cloud at rest).
+    pub fn of(model: &PointModel) -> CloudMap {
+        CloudMap {
+            kept: Arc::new(model.kept.clone()),
+            transfer: model.transfer.clone(),
+            positions: model.rest.positions.clone(),
+            normals: model.normals.clone(),
+            scratch: vec![[0.0; 3]; model.rest.len()],
+        }
+    }
+
+    /// Points in the full cloud.
+    pub fn cloud_points(&self) -> usize {
+        self.positions.len()
+    }
+
+    /// Move the cloud to simulated positions `pos` (SoA).
+    pub fn update(&mut self, pos: &[f64]) {
+        self.transfer.apply(pos, &mut self.positions, &mut self.normals);
+    }
+
+    /// The state of another level of the same cloud (`to` simulates cloud
+    /// points `to.kept`) from `state` of this one: positions and velocities
+    /// are carried through this level's transfer (linear in both, exact for
+    /// affine motion), then read at the other level's points.
+    pub fn carry(&mut self, state: &State, to: &CloudMap) -> State {
+        self.update(&state.pos);
+        self.transfer.interpolate(&state.vel, &mut self.scratch);
+        let m = to.kept.len();
+        let mut pos = vec![0.0; 3 * m];
+        let mut vel = vec![0.0; 3 * m];
+        for (k, &i) in to.kept.iter().enumerate() {
+            for c in 0..3 {
+                pos[c * m + k] = self.positions[i as usize][c];
+                vel[c * m + k] = self.scratch[i as usize][c];
+            }
+        }
+        State {
+            pos,
+            vel,
+            time: state.time,
+            step: state.step,
+        }
+    }
+}
 
 /// A snapshot of an instance's cloth, as the engine hands it to the bus.
 #[derive(Debug, Clone)]
@@ -39,8 +105,12 @@ pub struct StateFrame {
     pub episode: u64,
     pub level: Level,
     pub coefficient_version: u32,
-    /// Interleaved x, y, z per node.
+    /// Interleaved x, y, z per node (a surface: per point of the full cloud).
     pub positions: Vec<f32>,
+    /// Surfaces: the simulated points and the cloud's normals, interleaved
+    /// (empty for a cloth).
+    pub simulation_positions: Vec<f32>,
+    pub normals: Vec<f32>,
     pub stepped: SystemTime,
     pub transition: bool,
 }
@@ -81,6 +151,9 @@ pub struct Status {
     pub pinned: Vec<u32>,
     pub frame: u64,
     pub o_max: Option<f64>,
+    /// Surfaces: cloud index of each simulated point, and the cloud size.
+    pub simulation_points: Option<Arc<Vec<u32>>>,
+    pub cloud_points: usize,
 }
 
 /// A level switch done.
@@ -110,6 +183,8 @@ pub enum Command {
     Switch {
         prepared: Arc<Prepared>,
         sim: Box<Simulation>,
+        /// Surfaces: the new level's cloud map (built off the stepping thread too).
+        cloud: Option<Box<CloudMap>>,
         reply: oneshot::Sender<Result<SwitchOutcome, String>>,
     },
     Pause {
@@ -124,6 +199,8 @@ pub enum Command {
 pub struct InstanceSetup {
     pub name: String,
     pub sim: Simulation,
+    /// Surfaces: how the simulated points move the cloud.
+    pub cloud: Option<CloudMap>,
     pub level: Level,
     pub method: Method,
     pub publish_hz: f64,
@@ -269,51 +346,11 @@ struct HandleParts {
     status: Arc<Mutex<Status>>,
 }
 
-/// The reference replayed beside a running level.
-struct Shadow {
-    prepared: Arc<Prepared>,
-    /// Metric frame interval of the reference (s).
-    interval: f64,
-    /// The last interval compared.
-    last_slot: i64,
-    mapped: Vec<f64>,
-    mapped_next: Vec<f64>,
-}
-
-impl Shadow {
-    /// Mean relative distance of `pos` (SoA) from the reference at time `t`;
-    /// None outside the recording.
-    fn error_at(&mut self, t: f64, pos: &[f64]) -> Option<f64> {
-        let reference = &self.prepared.problem.reference;
-        let times = &reference.frame_times;
-        let i = times.partition_point(|&ft| ft <= t);
-        if i == 0 || i >= times.len() {
-            return None;
-        }
-        let (a, b) = (i - 1, i);
-        let w = ((t - times[a]) / (times[b] - times[a])).clamp(0.0, 1.0);
-        let correlation = self.prepared.problem.correlation();
-        correlation.map(&reference.frames[a], &mut self.mapped);
-        correlation.map(&reference.frames[b], &mut self.mapped_next);
-        let n = pos.len() / 3;
-        let mut sum = 0.0;
-        for k in 0..n {
-            let d2 = (0..3)
-                .map(|c| {
-                    let r = (1.0 - w) * self.mapped[c * n + k] + w * self.mapped_next[c * n + k];
-                    (r - pos[c * n + k]).powi(2)
-                })
-                .sum::<f64>();
-            sum += d2.sqrt();
-        }
-        Some(sum / n as f64 / reference.o_max)
-    }
-}
-
 /// One instance on its stepping thread.
 struct Runner {
     name: String,
     sim: Simulation,
+    cloud: Option<CloudMap>,
     level: Level,
     method: Method,
     material: Material,
@@ -372,6 +409,8 @@ impl Runner {
             pinned: setup.sim.loads().pins.iter().map(|p| p.node).collect(),
             frame: 0,
             o_max: None,
+            simulation_points: setup.cloud.as_ref().map(|c| c.kept.clone()),
+            cloud_points: setup.cloud.as_ref().map_or(0, |c| c.cloud_points()),
         }));
         let runner = Runner {
             name: setup.name.clone(),
@@ -387,6 +426,7 @@ impl Runner {
             duration: setup.duration,
             looping: setup.looping,
             sim: setup.sim,
+            cloud: setup.cloud,
             commands,
             settings,
             origin: now,
@@ -450,8 +490,13 @@ impl Runner {
 
     fn apply(&mut self, command: Command) {
         match command {
-            Command::Switch { prepared, sim, reply } => {
-                let outcome = self.switch(prepared, *sim);
+            Command::Switch {
+                prepared,
+                sim,
+                cloud,
+                reply,
+            } => {
+                let outcome = self.switch(prepared, *sim, cloud.map(|c| *c));
                 let _ = reply.send(outcome);
             }
             Command::Pause { paused, reply } => {
@@ -474,32 +519,40 @@ impl Runner {
         }
     }
 
-    fn switch(&mut self, prepared: Arc<Prepared>, mut sim: Simulation) -> Result<SwitchOutcome, String> {
+    fn switch(
+        &mut self,
+        prepared: Arc<Prepared>,
+        mut sim: Simulation,
+        cloud: Option<CloudMap>,
+    ) -> Result<SwitchOutcome, String> {
         let previous = self.level;
         let old_topology = self.sim.topology().clone();
         let before = self.snapshot(true);
-        let state = if Arc::ptr_eq(&old_topology, sim.topology()) || old_topology.n_nodes == sim.topology().n_nodes {
-            self.sim.state().clone()
-        } else {
-            transfer_state(&old_topology, self.sim.state(), sim.topology()).map_err(|e| e.to_string())?
+        let state = match (self.cloud.as_mut(), cloud.as_ref()) {
+            (Some(from), Some(to)) => from.carry(self.sim.state(), to),
+            (None, None) => {
+                if Arc::ptr_eq(&old_topology, sim.topology()) || old_topology.n_nodes == sim.topology().n_nodes {
+                    self.sim.state().clone()
+                } else {
+                    transfer_state(&old_topology, self.sim.state(), sim.topology()).map_err(|e| e.to_string())?
+                }
+            }
+            _ => return Err("a switch between a cloth and a surface level".into()),
         };
         sim.set_state(state).map_err(|e| e.to_string())?;
         self.sim = sim;
+        if cloud.is_some() {
+            self.cloud = cloud;
+        }
         self.level = prepared.level;
         self.method = prepared.method;
         self.material = prepared.material;
         self.predicted_error = Some(prepared.predicted_error);
-        self.o_max = Some(prepared.problem.reference.o_max);
+        self.o_max = Some(prepared.o_max);
         self.coefficient_version += 1;
-        let interval = prepared.problem.reference.dt * prepared.problem.reference.spec.metric_stride as f64;
-        let n = self.sim.topology().n_nodes;
-        self.shadow = self.shadow_wanted.then(|| Shadow {
-            interval,
-            last_slot: -1,
-            mapped: vec![0.0; 3 * n],
-            mapped_next: vec![0.0; 3 * n],
-            prepared: prepared.clone(),
-        });
+        self.shadow = self
+            .shadow_wanted
+            .then(|| Shadow::new(prepared.clone(), self.sim.topology().n_nodes));
         self.live_error = None;
         self.reanchor(Instant::now());
         self.update_status();
@@ -543,6 +596,7 @@ impl Runner {
         if !Arc::ptr_eq(&s.topology, self.sim.topology()) {
             s.topology = self.sim.topology().clone();
             s.pinned = self.sim.loads().pins.iter().map(|p| p.node).collect();
+            s.simulation_points = self.cloud.as_ref().map(|c| c.kept.clone());
         }
         s.frame = self.frames;
         s.o_max = self.o_max;
@@ -600,10 +654,8 @@ impl Runner {
             // reference interpolated linearly to this step's time (frame f
             // of the recording is at time (f + 1)·interval).
             let t = report.time;
-            let slot = (t / sh.interval).floor() as i64;
-            if slot != sh.last_slot {
-                sh.last_slot = slot;
-                self.live_error = sh.error_at(t, &self.sim.state().pos);
+            if sh.due(t) {
+                self.live_error = sh.error_at(t, &self.sim.state().pos, self.cloud.as_mut());
             }
         }
         if self.looping && report.time >= self.duration {
@@ -611,13 +663,22 @@ impl Runner {
         }
     }
 
-    fn snapshot(&self, transition: bool) -> StateFrame {
+    fn snapshot(&mut self, transition: bool) -> StateFrame {
         let s = self.sim.state();
         let n = s.n_nodes();
-        let mut positions = Vec::with_capacity(3 * n);
+        let mut nodes = Vec::with_capacity(3 * n);
         for k in 0..n {
-            positions.extend_from_slice(&[s.pos[k] as f32, s.pos[n + k] as f32, s.pos[2 * n + k] as f32]);
+            nodes.extend_from_slice(&[s.pos[k] as f32, s.pos[n + k] as f32, s.pos[2 * n + k] as f32]);
         }
+        let (positions, simulation_positions, normals) = match self.cloud.as_mut() {
+            None => (nodes, Vec::new(), Vec::new()),
+            Some(cloud) => {
+                cloud.update(&s.pos);
+                let flat = |v: &[V3]| v.iter().flat_map(|p| p.map(|c| c as f32)).collect::<Vec<f32>>();
+                (flat(&cloud.positions), nodes, flat(&cloud.normals))
+            }
+        };
+        let s = self.sim.state();
         StateFrame {
             frame: self.frames,
             time: s.time,
@@ -625,6 +686,8 @@ impl Runner {
             level: self.level,
             coefficient_version: self.coefficient_version,
             positions,
+            simulation_positions,
+            normals,
             stepped: SystemTime::now(),
             transition,
         }
@@ -634,7 +697,8 @@ impl Runner {
     fn publish(&mut self, now: Instant) {
         if now >= self.next_publish {
             self.next_publish = advance_deadline(self.next_publish, self.publish_every, now);
-            self.states.send_replace(Some(Arc::new(self.snapshot(false))));
+            let frame = Arc::new(self.snapshot(false));
+            self.states.send_replace(Some(frame));
         }
         if now >= self.next_metrics {
             self.next_metrics = advance_deadline(self.next_metrics, self.metrics_every, now);

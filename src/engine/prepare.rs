@@ -8,13 +8,18 @@ use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
-use crate::cache::CoefficientCache;
+use crate::cache::{CacheEntry, CacheError, CacheKey, CoefficientCache, Provenance};
 use crate::estimate::{no_progress, FitOptions, LodProblem, Method, Reference};
 use crate::experiments::lod::{level_dt, record_reference, stable_problem, Estimator, ExperimentError};
+use crate::points::estimate::{self as surface_fit, SurfaceFitOptions, SurfaceReference};
+use crate::points::model::PointModel;
+use crate::points::scene::SurfaceScene;
 use crate::proto::Level;
-use crate::scene::MassConvention;
-use crate::service::config::{EstimationConfig, InstanceConfig};
-use crate::sim::{Material, Simulation, StabilityCheck, State, Topology};
+use crate::scene::{MassConvention, Scene};
+use crate::service::config::{EstimationConfig, InstanceConfig, InstanceKind};
+use crate::sim::{Material, SimError, Simulation, StabilityCheck, State, Topology};
+
+use super::CloudMap;
 
 /// Why a level could not be prepared.
 #[derive(Debug, Clone, thiserror::Error)]
@@ -47,28 +52,62 @@ pub struct Prepared {
     pub level: Level,
     pub method: Method,
     pub material: Material,
-    /// The level against the reference; its `dt` is the level's time step.
-    pub problem: Arc<LodProblem>,
+    /// The level's time step (s).
+    pub dt: f64,
     /// Predicted stability limit of `material` at this level (s).
     pub dt_limit: f64,
     /// Mean relative error over the recorded reference.
     pub predicted_error: f64,
+    /// The reference's largest displacement (m), the error normaliser.
+    pub o_max: f64,
     /// Wall seconds the estimate took (0 on a cache hit).
     pub estimate_seconds: f64,
     pub cached: bool,
+    pub basis: Basis,
+}
+
+/// What a prepared level was measured against.
+#[derive(Debug)]
+pub enum Basis {
+    /// A cloth level against its reference (the problem's `dt` is the level's).
+    Cloth(Arc<LodProblem>),
+    /// A surface level: its model (the fitted material applied, at rest)
+    /// and the all-points reference.
+    Surface {
+        model: Box<PointModel>,
+        reference: Arc<SurfaceReference>,
+    },
 }
 
 impl Prepared {
     /// A simulation of this level at rest.
     pub fn simulation(&self) -> Result<Simulation, PrepareError> {
-        self.problem
-            .simulation(self.material)
-            .map_err(|e| PrepareError::Failed {
-                level: self.level,
-                method: self.method,
-                message: e.to_string(),
-            })
+        let failed = |message: String| PrepareError::Failed {
+            level: self.level,
+            method: self.method,
+            message,
+        };
+        match &self.basis {
+            Basis::Cloth(problem) => problem.simulation(self.material).map_err(|e| failed(e.to_string())),
+            Basis::Surface { model, .. } => surface_fit::restart(model).map_err(|e| failed(e.to_string())),
+        }
     }
+
+    /// How a surface level moves the full cloud (None for a cloth).
+    pub fn cloud_map(&self) -> Option<CloudMap> {
+        match &self.basis {
+            Basis::Cloth(_) => None,
+            Basis::Surface { model, .. } => Some(CloudMap::of(model)),
+        }
+    }
+}
+
+/// What an instance starts stepping with, before any estimate.
+pub struct Start {
+    pub sim: Simulation,
+    pub dt: f64,
+    /// Surfaces: how the simulated points move the cloud.
+    pub cloud: Option<CloudMap>,
 }
 
 /// Prepares the levels of one instance; remembers what it prepared.
@@ -78,6 +117,7 @@ pub struct Preparer {
     estimation: EstimationConfig,
     estimator: Estimator,
     reference: Mutex<Option<Arc<Reference>>>,
+    surface_reference: Mutex<Option<Arc<SurfaceReference>>>,
     prepared: Mutex<HashMap<(Level, Method), Arc<Prepared>>>,
     /// One preparation at a time per instance: a second request for the same
     /// level waits for the first and then finds it prepared.
@@ -95,6 +135,7 @@ impl Preparer {
             estimation,
             estimator: Estimator { cache, tag },
             reference: Mutex::new(None),
+            surface_reference: Mutex::new(None),
             prepared: Mutex::new(HashMap::new()),
             work: Mutex::new(()),
         }
@@ -121,15 +162,14 @@ impl Preparer {
         out
     }
 
-    /// The reference run, recorded on first use.
-    pub fn reference(&self) -> Result<Arc<Reference>, PrepareError> {
+    /// The cloth reference run, recorded on first use.
+    fn reference(&self, scene: &Scene) -> Result<Arc<Reference>, PrepareError> {
         let mut slot = lock(&self.reference);
         if let Some(r) = slot.as_ref() {
             return Ok(r.clone());
         }
-        let scene = self.scene();
         let name = self.config.name.clone();
-        let (reference, _) = record_reference(&scene, self.estimation.spec, &mut |line| {
+        let (reference, _) = record_reference(scene, self.estimation.spec, &mut |line| {
             tracing::info!(instance = %name, "{line}");
         })
         .map_err(|e| PrepareError::Reference {
@@ -146,14 +186,10 @@ impl Preparer {
         Ok(reference)
     }
 
-    /// The reference if it has been recorded.
-    pub fn reference_if_ready(&self) -> Option<Arc<Reference>> {
-        lock(&self.reference).clone()
-    }
-
-    fn scene(&self) -> crate::scene::Scene {
-        let mut scene = self.config.scene.clone();
-        scene.params.integrator = self.config.integrator;
+    /// The cloth scene with the instance's integrator.
+    fn cloth_scene(scene: &Scene, config: &InstanceConfig) -> Scene {
+        let mut scene = scene.clone();
+        scene.params.integrator = config.integrator;
         scene
     }
 
@@ -172,9 +208,33 @@ impl Preparer {
         if let Some(p) = self.get(level, method) {
             return Ok(p);
         }
+        let prepared = match (&self.config.kind, level) {
+            (InstanceKind::Cloth(scene), Level::Grid { nx, ny }) => {
+                self.prepare_cloth(&Self::cloth_scene(scene, &self.config), level, nx, ny, method)?
+            }
+            (InstanceKind::Surface(scene), Level::Points(n)) => self.prepare_surface(scene, level, n, method)?,
+            _ => {
+                return Err(PrepareError::NotAllowed {
+                    level,
+                    allowed: allowed(&self.config.levels),
+                })
+            }
+        };
+        let prepared = Arc::new(prepared);
+        lock(&self.prepared).insert((level, method), prepared.clone());
+        Ok(prepared)
+    }
+
+    fn prepare_cloth(
+        &self,
+        scene: &Scene,
+        level: Level,
+        nx: usize,
+        ny: usize,
+        method: Method,
+    ) -> Result<Prepared, PrepareError> {
         let started = Instant::now();
-        let reference = self.reference()?;
-        let scene = self.scene();
+        let reference = self.reference(scene)?;
         let failed = |e: ExperimentError| PrepareError::Failed {
             level,
             method,
@@ -185,22 +245,13 @@ impl Preparer {
         let dt = match self.config.dt {
             Some(dt) => dt,
             None => {
-                level_dt(
-                    &scene,
-                    &reference,
-                    level.nx,
-                    level.ny,
-                    mass,
-                    integrator,
-                    reference.material,
-                    0.75,
-                )
-                .map_err(failed)?
-                .0
+                level_dt(scene, &reference, nx, ny, mass, integrator, reference.material, 0.75)
+                    .map_err(failed)?
+                    .0
             }
         };
-        let problem = LodProblem::new(&scene, reference.clone(), level.nx, level.ny, mass, integrator, dt)
-            .map_err(|e| failed(e.into()))?;
+        let problem =
+            LodProblem::new(scene, reference.clone(), nx, ny, mass, integrator, dt).map_err(|e| failed(e.into()))?;
         let frames = problem.frames();
         let fit = FitOptions {
             train: Some(0..frames),
@@ -235,46 +286,265 @@ impl Preparer {
                 limit,
             });
         }
-        let prepared = Arc::new(Prepared {
-            level,
-            method,
-            material,
-            problem: Arc::new(problem),
-            dt_limit: limit,
-            predicted_error: report.mean,
-            estimate_seconds: estimated.seconds,
-            cached: estimated.cached,
-        });
         tracing::info!(
             instance = %self.config.name,
             %level,
             %method,
-            dt = prepared.problem.dt,
+            dt = problem.dt,
             predicted_error = report.mean,
             cached = estimated.cached,
             seconds = started.elapsed().as_secs_f64(),
             "level prepared"
         );
-        lock(&self.prepared).insert((level, method), prepared.clone());
-        Ok(prepared)
+        Ok(Prepared {
+            level,
+            method,
+            material,
+            dt: problem.dt,
+            dt_limit: limit,
+            predicted_error: report.mean,
+            o_max: reference.o_max,
+            estimate_seconds: estimated.seconds,
+            cached: estimated.cached,
+            basis: Basis::Cloth(Arc::new(problem)),
+        })
+    }
+
+    /// The surface reference: every point simulated over the scene,
+    /// recorded on first use.
+    fn surface_reference(&self, scene: &SurfaceScene) -> Result<Arc<SurfaceReference>, PrepareError> {
+        let mut slot = lock(&self.surface_reference);
+        if let Some(r) = slot.as_ref() {
+            return Ok(r.clone());
+        }
+        let fail = |message: String| PrepareError::Reference {
+            scene: scene.name.clone(),
+            message,
+        };
+        let started = Instant::now();
+        let mut model = scene
+            .model(scene.points(), self.config.integrator, &mut |_, _| {})
+            .map_err(|e| fail(e.to_string()))?;
+        let reference =
+            SurfaceReference::record(&mut model, scene.frames(), scene.interval()).map_err(|e| fail(e.to_string()))?;
+        tracing::info!(
+            instance = %self.config.name,
+            points = scene.points(),
+            frames = reference.frames.len(),
+            o_max = reference.o_max,
+            seconds = started.elapsed().as_secs_f64(),
+            "surface reference recorded"
+        );
+        let reference = Arc::new(reference);
+        *slot = Some(reference.clone());
+        Ok(reference)
+    }
+
+    /// A surface level: simplify to `points`, take the scene's coefficients
+    /// (`same`) or fit the stretch and bend stiffness to the all-points
+    /// reference (`fit`, cached on disk), then score it.
+    fn prepare_surface(
+        &self,
+        scene: &SurfaceScene,
+        level: Level,
+        points: usize,
+        method: Method,
+    ) -> Result<Prepared, PrepareError> {
+        let started = Instant::now();
+        let failed = |message: String| PrepareError::Failed { level, method, message };
+        let reference = self.surface_reference(scene)?;
+        let mut model = scene
+            .model(points, self.config.integrator, &mut |_, _| {})
+            .map_err(|e| failed(e.to_string()))?;
+        let frames = reference.frames.len();
+        let dt = model.sim.params().dt;
+        let (material, seconds, cached) = match method {
+            Method::Same => (model.sim.params().material, 0.0, false),
+            Method::Fit => self.surface_fit(scene, &mut model, &reference, points)?,
+            other => {
+                return Err(failed(format!(
+                    "{other} needs a grid cloth; a surface is estimated with same or fit"
+                )))
+            }
+        };
+        surface_fit::apply_material(&mut model, material).map_err(|e| match e {
+            SimError::UnstableTimeStep { dt, limit, .. } => PrepareError::Unstable {
+                level,
+                method,
+                dt,
+                limit,
+            },
+            e => failed(e.to_string()),
+        })?;
+        let limit = model.sim.dt_limit();
+        let fresh = surface_fit::restart(&model).map_err(|e| failed(e.to_string()))?;
+        let score = surface_fit::score(&mut model, fresh, &reference, 0..frames).map_err(|e| failed(e.to_string()))?;
+        if !score.finite {
+            return Err(PrepareError::Unstable {
+                level,
+                method,
+                dt,
+                limit,
+            });
+        }
+        tracing::info!(
+            instance = %self.config.name,
+            %level,
+            %method,
+            dt,
+            predicted_error = score.mean,
+            cached,
+            seconds = started.elapsed().as_secs_f64(),
+            "level prepared"
+        );
+        Ok(Prepared {
+            level,
+            method,
+            material,
+            dt,
+            dt_limit: limit,
+            predicted_error: score.mean,
+            o_max: reference.o_max,
+            estimate_seconds: seconds,
+            cached,
+            basis: Basis::Surface {
+                model: Box::new(model),
+                reference,
+            },
+        })
+    }
+
+    /// The fitted material of a surface level (cached on disk): returns it
+    /// with the seconds the fit took and whether it came from the cache.
+    fn surface_fit(
+        &self,
+        scene: &SurfaceScene,
+        model: &mut PointModel,
+        reference: &SurfaceReference,
+        points: usize,
+    ) -> Result<(Material, f64, bool), PrepareError> {
+        let level = Level::Points(points);
+        let failed = |message: String| PrepareError::Failed {
+            level,
+            method: Method::Fit,
+            message,
+        };
+        let options = SurfaceFitOptions {
+            train: 0..reference.frames.len(),
+            ..SurfaceFitOptions::default()
+        };
+        let integrator = model.sim.params().integrator.name().to_string();
+        let dt = model.sim.params().dt;
+        let mut fit = || -> Result<(Material, f64), PrepareError> {
+            let t = Instant::now();
+            let f = surface_fit::fit(model, reference, &options, &mut |_| {}).map_err(|e| failed(e.to_string()))?;
+            tracing::info!(
+                instance = %self.config.name,
+                %level,
+                stretch_scale = f.stretch_scale,
+                bend_scale = f.bend_scale,
+                before = f.before.mean,
+                after = f.after.mean,
+                evaluations = f.evaluations,
+                "surface stiffness fitted"
+            );
+            Ok((f.material, t.elapsed().as_secs_f64()))
+        };
+        let Some(cache) = self.estimator.cache.as_ref() else {
+            return fit().map(|(m, s)| (m, s, false));
+        };
+        let key = CacheKey {
+            scene: scene.name.clone(),
+            scene_hash: scene.source_hash,
+            reference: (scene.points(), 1),
+            target: (points, 1),
+            method: format!(
+                "fit[surface;frames={};grid={};range={};iter={}]",
+                options.train.end, options.grid, options.log_range, options.iterations
+            ),
+            mass: "point-area".into(),
+            integrator,
+            dt,
+        };
+        // A cache that cannot be read or written costs a recomputation,
+        // never the level.
+        enum Failure {
+            Fit(PrepareError),
+            Cache(CacheError),
+        }
+        impl From<CacheError> for Failure {
+            fn from(e: CacheError) -> Failure {
+                Failure::Cache(e)
+            }
+        }
+        let mut computed = None;
+        let result = cache.get_or_compute(&key, || -> Result<CacheEntry, Failure> {
+            let (material, s) = fit().map_err(Failure::Fit)?;
+            computed = Some((material, s));
+            let mut entry = CacheEntry::new(key.clone(), material);
+            entry.notes.insert("estimate_seconds".into(), s);
+            Ok(entry)
+        });
+        match result {
+            Ok((entry, provenance)) => Ok((
+                entry.material,
+                computed.map_or(0.0, |(_, s)| s),
+                provenance == Provenance::Hit,
+            )),
+            Err(Failure::Fit(e)) => Err(e),
+            Err(Failure::Cache(e)) => {
+                tracing::warn!(instance = %self.config.name, %level, "coefficient cache: {e}; using the fit uncached");
+                match computed {
+                    Some((material, s)) => Ok((material, s, false)),
+                    None => fit().map(|(m, s)| (m, s, false)),
+                }
+            }
+        }
     }
 
     /// The start level with the scene's own coefficients, without a
-    /// reference: lumped masses, dt the largest step ≤ 0.75 × the predicted
-    /// limit that divides the metric frame interval the reference will have
-    /// (so the estimated model later lines up with it). Instant; lets an
-    /// instance step at once while its estimate is prepared.
-    pub fn quick_start(&self) -> Result<(Simulation, f64), PrepareError> {
+    /// reference. Instant (a surface is simplified first: milliseconds to
+    /// seconds); lets an instance step at once while its estimate is
+    /// prepared.
+    pub fn quick_start(&self) -> Result<Start, PrepareError> {
         let level = self.config.start;
-        let scene = self.scene();
         let failed = |message: String| PrepareError::Failed {
             level,
             method: Method::Same,
             message,
         };
-        let topology = Arc::new(Topology::grid(scene.shape(level.nx, level.ny), scene.orientation));
+        match (&self.config.kind, level) {
+            (InstanceKind::Cloth(scene), Level::Grid { nx, ny }) => {
+                let scene = Self::cloth_scene(scene, &self.config);
+                let (sim, dt) = self.quick_cloth(&scene, nx, ny).map_err(failed)?;
+                Ok(Start { sim, dt, cloud: None })
+            }
+            (InstanceKind::Surface(scene), Level::Points(n)) => {
+                let model = scene
+                    .model(n, self.config.integrator, &mut |_, _| {})
+                    .map_err(|e| failed(e.to_string()))?;
+                let cloud = CloudMap::of(&model);
+                let dt = model.sim.params().dt;
+                Ok(Start {
+                    sim: model.sim,
+                    dt,
+                    cloud: Some(cloud),
+                })
+            }
+            _ => Err(PrepareError::NotAllowed {
+                level,
+                allowed: allowed(&self.config.levels),
+            }),
+        }
+    }
+
+    /// A cloth level with lumped masses, dt the largest step ≤ 0.75 × the
+    /// predicted limit that divides the metric frame interval the reference
+    /// will have (so the estimated model later lines up with it).
+    fn quick_cloth(&self, scene: &Scene, nx: usize, ny: usize) -> Result<(Simulation, f64), String> {
+        let topology = Arc::new(Topology::grid(scene.shape(nx, ny), scene.orientation));
         let masses: Vec<f64> = topology.node_areas.iter().map(|a| a * scene.areal_density).collect();
-        let loads = scene.loads(&topology).map_err(|e| failed(e.to_string()))?;
+        let loads = scene.loads(&topology).map_err(|e| e.to_string())?;
         let interval = scene.params.dt * self.estimation.spec.metric_stride as f64;
         let params = scene.params;
         let build = |dt: f64, check| {
@@ -286,7 +556,7 @@ impl Preparer {
                 State::at_rest(&topology),
                 check,
             )
-            .map_err(|e| failed(e.to_string()))
+            .map_err(|e| e.to_string())
         };
         let dt = match self.config.dt {
             Some(dt) => dt,

@@ -23,6 +23,7 @@ pub mod knn;
 pub mod local;
 pub mod model;
 pub mod normals;
+pub mod scene;
 pub mod simplify;
 pub mod surface;
 pub mod transfer;

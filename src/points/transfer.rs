@@ -260,6 +260,31 @@ impl Transfer {
         }
     }
 
+    /// The MLS value at every original point of a field known at the
+    /// simulation points that is zero at rest: a displacement or a velocity
+    /// (`sim_values` SoA, as in [`crate::sim::State`]). Linear in the field
+    /// and exact for affine ones, so velocities follow positions through a
+    /// level switch.
+    ///
+    /// # Panics
+    /// When the slices do not match the sizes the transfer was built for.
+    pub fn interpolate(&self, sim_values: &[f64], out: &mut [V3]) {
+        let m = self.n_sim;
+        assert_eq!(sim_values.len(), 3 * m, "simulation values");
+        assert_eq!(out.len(), self.rest.len(), "output values");
+        for (i, o) in out.iter_mut().enumerate() {
+            let mut u = [0.0; 3];
+            for e in self.offsets[i] as usize..self.offsets[i + 1] as usize {
+                let j = self.nbr[e] as usize;
+                let c0 = self.coef[e][0];
+                for (c, uc) in u.iter_mut().enumerate() {
+                    *uc += c0 * sim_values[c * m + j];
+                }
+            }
+            *o = u;
+        }
+    }
+
     /// The displacement of original point `i` alone (for tests and probes).
     pub fn displacement_of(&self, i: usize, sim_pos: &[f64]) -> V3 {
         let m = self.n_sim;

@@ -6,7 +6,10 @@ use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
 
+use std::sync::Arc;
+
 use crate::estimate::{Method, RecordSpec};
+use crate::points::scene::SurfaceScene;
 use crate::proto::Level;
 use crate::scene::Scene;
 use crate::sim::Integrator;
@@ -177,17 +180,23 @@ fn yes() -> bool {
     true
 }
 
-/// One cloth instance.
+/// One instance: a cloth, or a point-sampled surface.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct RawInstance {
     /// Unique name: letters, digits, `-` and `_` (it is a key-expression chunk).
     pub name: String,
-    /// Scene file (TOML), relative to the working directory.
+    /// `cloth` (default) or `surface`.
+    #[serde(default = "default_kind")]
+    pub kind: String,
+    /// Scene file (TOML), relative to the working directory: a cloth scene,
+    /// or a surface scene (`crate::points::scene`) for `kind = "surface"`.
     pub scene: PathBuf,
-    /// Reference resolution (default: the scene's own).
+    /// Reference resolution (default: the scene's own). Cloth only: a
+    /// surface's reference simulates every point of its cloud.
     pub reference: Option<Level>,
-    /// Levels a client may switch to, e.g. `["16x16", "24x24", "32x32"]`.
+    /// Levels a client may switch to: grids for a cloth, e.g. `["16x16",
+    /// "24x24"]`; simulated point counts for a surface, e.g. `[85, 327]`.
     pub levels: Vec<Level>,
     /// Level at start-up (must be in `levels`).
     pub start: Level,
@@ -213,6 +222,10 @@ pub struct RawInstance {
 
 fn default_method() -> String {
     "gkd".into()
+}
+
+fn default_kind() -> String {
+    "cloth".into()
 }
 
 /// A validated configuration.
@@ -244,12 +257,20 @@ pub struct EstimationConfig {
     pub precompute: bool,
 }
 
+/// What an instance simulates.
+#[derive(Debug, Clone)]
+pub enum InstanceKind {
+    /// A cloth scene at the reference resolution.
+    Cloth(Scene),
+    /// A point-sampled surface; its reference simulates every point.
+    Surface(Arc<SurfaceScene>),
+}
+
 /// A validated instance: its scene loaded, at the reference resolution.
 #[derive(Debug, Clone)]
 pub struct InstanceConfig {
     pub name: String,
-    /// The scene at the reference resolution, with the instance's integrator.
-    pub scene: Scene,
+    pub kind: InstanceKind,
     pub levels: Vec<Level>,
     pub start: Level,
     pub method: Method,
@@ -261,10 +282,47 @@ pub struct InstanceConfig {
 }
 
 impl InstanceConfig {
+    /// The reference level: the cloth scene's grid, or every point of the surface.
     pub fn reference(&self) -> Level {
-        Level::new(self.scene.nx, self.scene.ny)
+        match &self.kind {
+            InstanceKind::Cloth(scene) => Level::new(scene.nx, scene.ny),
+            InstanceKind::Surface(scene) => Level::Points(scene.points()),
+        }
+    }
+
+    /// `cloth` or `surface`.
+    pub fn kind_name(&self) -> &'static str {
+        match self.kind {
+            InstanceKind::Cloth(_) => "cloth",
+            InstanceKind::Surface(_) => "surface",
+        }
+    }
+
+    pub fn scene_name(&self) -> &str {
+        match &self.kind {
+            InstanceKind::Cloth(scene) => &scene.name,
+            InstanceKind::Surface(scene) => &scene.name,
+        }
+    }
+
+    pub fn description(&self) -> &str {
+        match &self.kind {
+            InstanceKind::Cloth(scene) => &scene.description,
+            InstanceKind::Surface(scene) => &scene.description,
+        }
+    }
+
+    /// Scene length (s): the instance starts over here when looping.
+    pub fn duration(&self) -> f64 {
+        match &self.kind {
+            InstanceKind::Cloth(scene) => scene.duration,
+            InstanceKind::Surface(scene) => scene.duration,
+        }
     }
 }
+
+/// Estimation methods a surface instance supports (the others need a grid).
+pub const SURFACE_METHODS: [Method; 2] = [Method::Same, Method::Fit];
 
 /// Smallest grid side of a level.
 pub const MIN_SIDE: usize = 2;
@@ -395,11 +453,6 @@ impl ServiceConfig {
                 p.push(format!("{at}.levels: at least one level is needed"));
             }
             for (j, l) in r.levels.iter().enumerate() {
-                if l.nx < MIN_SIDE || l.ny < MIN_SIDE || l.nx > MAX_SIDE || l.ny > MAX_SIDE {
-                    p.push(format!(
-                        "{at}.levels[{j}]: {l} is outside {MIN_SIDE}..={MAX_SIDE} nodes per side"
-                    ));
-                }
                 if r.levels[..j].contains(l) {
                     p.push(format!("{at}.levels[{j}]: {l} is listed twice"));
                 }
@@ -407,46 +460,24 @@ impl ServiceConfig {
             if !r.levels.contains(&r.start) {
                 p.push(format!("{at}.start: {} is not one of the instance's levels", r.start));
             }
-            let scene = match Scene::load(&r.scene) {
-                Ok(s) => Some(s),
-                Err(err) => {
-                    p.push(format!("{at}.scene: {err}"));
+            let kind = match r.kind.as_str() {
+                "cloth" => cloth_instance(r, &at, &mut p),
+                "surface" => surface_instance(r, &at, method, &mut p),
+                other => {
+                    p.push(format!("{at}.kind: '{other}' is not one of cloth, surface"));
                     None
                 }
             };
-            let (Some(mut scene), Some(method)) = (scene, method) else {
+            let (Some((kind, scene_integrator)), Some(method)) = (kind, method) else {
                 continue;
             };
-            if let Some(reference) = r.reference {
-                if reference.nx < MIN_SIDE
-                    || reference.ny < MIN_SIDE
-                    || reference.nx > MAX_SIDE
-                    || reference.ny > MAX_SIDE
-                {
-                    p.push(format!(
-                        "{at}.reference: {reference} is outside {MIN_SIDE}..={MAX_SIDE} nodes per side"
-                    ));
-                    continue;
-                }
-                scene.nx = reference.nx;
-                scene.ny = reference.ny;
-            }
-            for (j, l) in r.levels.iter().enumerate() {
-                if l.nx > scene.nx || l.ny > scene.ny {
-                    p.push(format!(
-                        "{at}.levels[{j}]: {l} is finer than the reference {}x{}",
-                        scene.nx, scene.ny
-                    ));
-                }
-            }
-            let integrator = integrator.unwrap_or(scene.params.integrator);
             instances.push(InstanceConfig {
                 name: r.name.clone(),
-                scene,
+                kind,
                 levels: r.levels.clone(),
                 start: r.start,
                 method,
-                integrator,
+                integrator: integrator.unwrap_or(scene_integrator),
                 dt: r.dt,
                 publish_hz: r.publish_hz.unwrap_or(e.publish_hz),
                 shadow_reference: r.shadow_reference,
@@ -544,6 +575,103 @@ impl ServiceConfig {
         Ok(config)
     }
 }
+
+/// The cloth side of an instance: grid levels within the reference.
+fn cloth_instance(r: &RawInstance, at: &str, p: &mut Vec<String>) -> Option<(InstanceKind, Integrator)> {
+    let side_ok = |nx: usize, ny: usize| (MIN_SIDE..=MAX_SIDE).contains(&nx) && (MIN_SIDE..=MAX_SIDE).contains(&ny);
+    for (j, l) in r.levels.iter().enumerate() {
+        match l.grid() {
+            Some((nx, ny)) if side_ok(nx, ny) => {}
+            Some(_) => p.push(format!(
+                "{at}.levels[{j}]: {l} is outside {MIN_SIDE}..={MAX_SIDE} nodes per side"
+            )),
+            None => p.push(format!(
+                "{at}.levels[{j}]: {l} is a point count; a cloth's levels are grids NXxNY (or set kind = \"surface\")"
+            )),
+        }
+    }
+    let mut scene = match Scene::load(&r.scene) {
+        Ok(s) => s,
+        Err(err) => {
+            p.push(format!("{at}.scene: {err}"));
+            return None;
+        }
+    };
+    if let Some(reference) = r.reference {
+        match reference.grid() {
+            Some((nx, ny)) if side_ok(nx, ny) => {
+                scene.nx = nx;
+                scene.ny = ny;
+            }
+            _ => {
+                p.push(format!(
+                    "{at}.reference: {reference} must be a grid of {MIN_SIDE}..={MAX_SIDE} nodes per side"
+                ));
+                return None;
+            }
+        }
+    }
+    for (j, l) in r.levels.iter().enumerate() {
+        if let Some((nx, ny)) = l.grid() {
+            if nx > scene.nx || ny > scene.ny {
+                p.push(format!(
+                    "{at}.levels[{j}]: {l} is finer than the reference {}x{}",
+                    scene.nx, scene.ny
+                ));
+            }
+        }
+    }
+    let integrator = scene.params.integrator;
+    Some((InstanceKind::Cloth(scene), integrator))
+}
+
+/// The surface side of an instance: point-count levels within the cloud.
+fn surface_instance(
+    r: &RawInstance,
+    at: &str,
+    method: Option<Method>,
+    p: &mut Vec<String>,
+) -> Option<(InstanceKind, Integrator)> {
+    if let Some(m) = method.filter(|m| !SURFACE_METHODS.contains(m)) {
+        p.push(format!(
+            "{at}.method: '{m}' needs a grid cloth; a surface is estimated with same or fit"
+        ));
+    }
+    if r.reference.is_some() {
+        p.push(format!(
+            "{at}.reference: a surface's reference simulates every point of its cloud; remove this field"
+        ));
+    }
+    if r.dt.is_some() {
+        p.push(format!(
+            "{at}.dt: surface levels choose their own dt (0.8 × the level's stability limit, dividing the frame interval); remove this field"
+        ));
+    }
+    let scene = match SurfaceScene::load(&r.scene) {
+        Ok(s) => s,
+        Err(err) => {
+            p.push(format!("{at}.scene: {err}"));
+            return None;
+        }
+    };
+    let points = scene.points();
+    for (j, l) in r.levels.iter().enumerate() {
+        match *l {
+            Level::Points(n) if (MIN_SURFACE_POINTS..=points).contains(&n) => {}
+            Level::Points(n) => p.push(format!(
+                "{at}.levels[{j}]: {n} points is outside {MIN_SURFACE_POINTS}..={points} (the cloud has {points})"
+            )),
+            Level::Grid { .. } => p.push(format!(
+                "{at}.levels[{j}]: {l} is a grid; a surface's levels are point counts, e.g. 300"
+            )),
+        }
+    }
+    let integrator = scene.params.integrator;
+    Some((InstanceKind::Surface(Arc::new(scene)), integrator))
+}
+
+/// Fewest simulated points of a surface level.
+pub const MIN_SURFACE_POINTS: usize = 20;
 
 /// JSON text of a value for `zenoh::Config::insert_json5`.
 fn json<T: serde::Serialize + ?Sized>(value: &T) -> String {

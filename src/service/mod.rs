@@ -29,8 +29,8 @@ use zenoh::Session;
 
 use crate::cache::CoefficientCache;
 use crate::engine::{
-    Command, Engine, EngineSettings, InstanceHandle, InstanceSetup, MetricsFrame, PrepareError, Prepared, Preparer,
-    StateFrame,
+    CloudMap, Command, Engine, EngineSettings, InstanceHandle, InstanceSetup, MetricsFrame, PrepareError, Prepared,
+    Preparer, StateFrame,
 };
 use crate::estimate::Method;
 use crate::proto::{self, schema, v1, Level};
@@ -110,18 +110,19 @@ pub async fn serve(
     let mut preparers = Vec::new();
     for ic in &config.instances {
         let preparer = Arc::new(Preparer::new(Arc::new(ic.clone()), config.estimation, cache.clone()));
-        let (sim, dt) = preparer.quick_start().map_err(|source| ServiceError::Prepare {
+        let start = preparer.quick_start().map_err(|source| ServiceError::Prepare {
             instance: ic.name.clone(),
             source,
         })?;
-        tracing::info!(instance = %ic.name, level = %ic.start, dt, "starting with the scene's coefficients");
+        tracing::info!(instance = %ic.name, kind = ic.kind_name(), level = %ic.start, dt = start.dt, "starting with the scene's coefficients");
         setups.push(InstanceSetup {
             name: ic.name.clone(),
-            sim,
+            sim: start.sim,
+            cloud: start.cloud,
             level: ic.start,
             method: Method::Same,
             publish_hz: ic.publish_hz,
-            duration: ic.scene.duration,
+            duration: ic.duration(),
             looping: ic.looping,
             shadow: ic.shadow_reference,
         });
@@ -249,21 +250,26 @@ pub fn lower_priority() {
     }
 }
 
-/// Prepare `level` on a background thread; the new level's simulation is
-/// built there too, so the stepping thread only transfers the state.
-async fn prepare(
-    preparer: Arc<Preparer>,
-    level: Level,
-    method: Method,
-) -> Result<(Arc<Prepared>, Simulation), PrepareError> {
+/// A prepared level with what the stepping thread needs to take it over.
+struct Ready {
+    prepared: Arc<Prepared>,
+    sim: Simulation,
+    cloud: Option<CloudMap>,
+}
+
+/// Prepare `level` on a background thread; the new level's simulation (and
+/// a surface's cloud map) is built there too, so the stepping thread only
+/// transfers the state.
+async fn prepare(preparer: Arc<Preparer>, level: Level, method: Method) -> Result<Ready, PrepareError> {
     let (tx, rx) = oneshot::channel();
     let spawned = std::thread::Builder::new()
         .name("lodcloth-prepare".into())
         .spawn(move || {
             lower_priority();
-            let result = preparer.prepare(level, method).and_then(|p| {
-                let sim = p.simulation()?;
-                Ok((p, sim))
+            let result = preparer.prepare(level, method).and_then(|prepared| {
+                let sim = prepared.simulation()?;
+                let cloud = prepared.cloud_map();
+                Ok(Ready { prepared, sim, cloud })
             });
             let _ = tx.send(result);
         });
@@ -287,7 +293,7 @@ async fn precompute(ctx: Arc<Context>, all_levels: bool) {
             continue;
         }
         match prepared {
-            Ok((prepared, sim)) => match switch_to(&inst.handle, prepared, sim).await {
+            Ok(ready) => match switch_to(&inst.handle, ready).await {
                 Ok(o) => tracing::info!(
                     instance = %config.name,
                     %level,
@@ -314,16 +320,13 @@ async fn precompute(ctx: Arc<Context>, all_levels: bool) {
     tracing::info!("every configured level is prepared");
 }
 
-async fn switch_to(
-    handle: &InstanceHandle,
-    prepared: Arc<Prepared>,
-    sim: Simulation,
-) -> Result<crate::engine::SwitchOutcome, String> {
+async fn switch_to(handle: &InstanceHandle, ready: Ready) -> Result<crate::engine::SwitchOutcome, String> {
     let (tx, rx) = oneshot::channel();
     handle
         .send(Command::Switch {
-            prepared,
-            sim: Box::new(sim),
+            prepared: ready.prepared,
+            sim: Box::new(ready.sim),
+            cloud: ready.cloud.map(Box::new),
             reply: tx,
         })
         .map_err(str::to_string)?;
@@ -408,6 +411,8 @@ pub fn state_message(instance: &str, f: &StateFrame) -> v1::State {
         episode: f.episode,
         stepped_unix_nanos: f.stepped.duration_since(UNIX_EPOCH).map_or(0, |d| d.as_nanos() as u64),
         transition: f.transition,
+        simulation_positions: proto::pack_positions(&f.simulation_positions),
+        normals: proto::pack_positions(&f.normals),
     }
 }
 
@@ -500,15 +505,15 @@ fn instance_info(inst: &Instance) -> v1::InstanceInfo {
             v1::LevelInfo {
                 level: Some(l.to_wire()),
                 predicted_error: p.as_ref().map(|p| p.predicted_error),
-                dt: p.as_ref().map_or(0.0, |p| p.problem.dt),
+                dt: p.as_ref().map_or(0.0, |p| p.dt),
                 ready: p.is_some(),
             }
         })
         .collect();
     v1::InstanceInfo {
         instance: c.name.clone(),
-        scene: c.scene.name.clone(),
-        description: c.scene.description.clone(),
+        scene: c.scene_name().to_string(),
+        description: c.description().to_string(),
         level: Some(s.level.to_wire()),
         reference: Some(c.reference().to_wire()),
         levels,
@@ -523,6 +528,9 @@ fn instance_info(inst: &Instance) -> v1::InstanceInfo {
         o_max: s.o_max.unwrap_or(0.0),
         shadow_reference: c.shadow_reference,
         paused: s.paused,
+        kind: c.kind_name().to_string(),
+        simulation_points: s.simulation_points.as_deref().cloned().unwrap_or_default(),
+        cloud_points: s.cloud_points as u32,
     }
 }
 
@@ -537,7 +545,7 @@ async fn answer_list(ctx: &Context, q: Query) {
                 let c = inst.preparer.config();
                 v1::InstanceSummary {
                     instance: c.name.clone(),
-                    scene: c.scene.name.clone(),
+                    scene: c.scene_name().to_string(),
                     level: Some(s.level.to_wire()),
                     method: s.method.to_string(),
                     publish_hz: c.publish_hz,
@@ -620,13 +628,27 @@ async fn answer_switch(ctx: Arc<Context>, q: Query) {
             }
         }
     };
+    if matches!(config.kind, config::InstanceKind::Surface(_)) && !config::SURFACE_METHODS.contains(&method) {
+        return reply_error(
+            &q,
+            Code::BadRequest,
+            format!(
+                "method '{method}' needs a grid cloth; surface '{}' is estimated with same or fit",
+                config.name
+            ),
+        )
+        .await;
+    }
     let allowed = crate::engine::prepare::allowed(&config.levels);
     let level = match req.target {
         None => {
             return reply_error(&q, Code::BadRequest, "no target: set either level or max_error").await;
         }
         Some(v1::switch_request::Target::Level(l)) => {
-            let level = Level::from_wire(&l);
+            let level = match Level::from_wire(&l) {
+                Ok(level) => level,
+                Err(e) => return reply_error(&q, Code::BadRequest, e).await,
+            };
             if !config.levels.contains(&level) {
                 return reply_error(
                     &q,
@@ -654,7 +676,7 @@ async fn answer_switch(ctx: Arc<Context>, q: Query) {
             let mut chosen = None;
             for l in levels {
                 match prepare(inst.preparer.clone(), l, method).await {
-                    Ok((p, _)) => {
+                    Ok(Ready { prepared: p, .. }) => {
                         if p.predicted_error <= e {
                             chosen = Some(l);
                             break;
@@ -691,7 +713,7 @@ async fn answer_switch(ctx: Arc<Context>, q: Query) {
     }
     let was_ready = inst.preparer.get(level, method).is_some();
     let _guard = inst.switching.lock().await;
-    let (prepared, sim) = match prepare(inst.preparer.clone(), level, method).await {
+    let ready = match prepare(inst.preparer.clone(), level, method).await {
         Ok(p) => p,
         Err(e) => {
             let code = match e {
@@ -702,7 +724,8 @@ async fn answer_switch(ctx: Arc<Context>, q: Query) {
             return reply_error(&q, code, e.to_string()).await;
         }
     };
-    match switch_to(&inst.handle, prepared.clone(), sim).await {
+    let cached = was_ready || ready.prepared.cached;
+    match switch_to(&inst.handle, ready).await {
         Ok(o) => {
             tracing::info!(instance = %config.name, from = %o.previous, to = %o.level, %method, "switched");
             let reply = v1::SwitchReply {
@@ -714,7 +737,7 @@ async fn answer_switch(ctx: Arc<Context>, q: Query) {
                 predicted_error: o.predicted_error,
                 dt: o.dt,
                 seconds: arrived.elapsed().as_secs_f64(),
-                cached: was_ready || prepared.cached,
+                cached,
                 coefficient_version: o.coefficient_version,
                 frame: o.frame,
             };
