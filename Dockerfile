@@ -64,6 +64,7 @@ COPY --from=builder /out/lodcloth /usr/local/bin/lodcloth
 # Scene paths in the config are relative to this working directory. Owned by
 # root: the daemon only reads them.
 COPY config/scenes/ config/scenes/
+COPY config/surfaces/ config/surfaces/
 COPY config/docker.toml config/docker.toml
 
 # JSON log lines for log collectors (`false` for text). clap reads this flag

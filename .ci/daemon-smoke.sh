@@ -22,6 +22,10 @@ if "$BIN" switch paper-1 17x17; then echo "a level outside the allowed set was a
 $PY list --timeout 10
 $PY watch hanging --count 3 --timeout 10
 $PY switch hanging --level 24x24 --timeout 300
+# The point-sampled surface: its whole cloud on `state`, a switch to another size.
+"$BIN" watch sphere --count 2
+"$BIN" switch sphere 85 --timeout 300
+$PY watch sphere --count 3 --timeout 10
 if $PY switch nope --level 16x16 --timeout 10; then echo "an unknown instance was accepted" >&2; exit 1; fi
 kill -TERM $DAEMON
 wait $DAEMON

@@ -348,7 +348,8 @@ impl CacheEntry {
             // model does not have (surfaces have no shear springs); it must
             // then have no damping either.
             let absent = s.k == 0.0 && s.c == 0.0;
-            if !(s.k.is_finite() && s.k > 0.0) && !absent {
+            let usable = absent || (s.k.is_finite() && s.k > 0.0);
+            if !usable {
                 p.push(format!(
                     "{kind} stiffness k = {} is not finite and > 0 (nor 0 with c = 0, an absent type)",
                     s.k

@@ -83,17 +83,26 @@ def encoding(message_name: str) -> zenoh.Encoding:
 
 
 def level_str(level) -> str:
-    return f"{level.nx}x{level.ny}"
+    """A grid cloth as NXxNY, a point-sampled surface as Npts."""
+    return f"{level.points}pts" if level.points else f"{level.nx}x{level.ny}"
 
 
-def parse_level(text: str) -> tuple[int, int]:
+def parse_level(text: str) -> tuple[int, int, int]:
+    """(nx, ny, points): NXxNY for a cloth, N or Npts for a surface."""
+    t = text.lower().strip()
     try:
-        nx, ny = (int(v) for v in text.lower().split("x"))
+        if "x" in t:
+            nx, ny = (int(v) for v in t.split("x"))
+            points = 0
+        else:
+            nx, ny, points = 0, 0, int(t.removesuffix("pts"))
     except ValueError:
-        raise argparse.ArgumentTypeError(f"level '{text}' is not NXxNY, e.g. 16x16") from None
-    if nx < 1 or ny < 1:
+        raise argparse.ArgumentTypeError(
+            f"level '{text}' is not NXxNY (a cloth, e.g. 16x16) or N (a surface's points, e.g. 300)"
+        ) from None
+    if min(nx, ny) < 0 or (points == 0 and min(nx, ny) < 1) or points < 0:
         raise argparse.ArgumentTypeError(f"level '{text}' must have positive sizes")
-    return nx, ny
+    return nx, ny, points
 
 
 def pct(msg, field: str) -> str:
@@ -216,7 +225,8 @@ def cmd_watch(args, session, msgs: Messages) -> None:
             if kind == "state":
                 s = msgs.State.FromString(raw)
                 pos = positions(s)
-                expected = s.level.nx * s.level.ny
+                # A surface publishes its whole cloud (and the simulated points apart).
+                expected = s.level.nx * s.level.ny if not s.level.points else len(pos)
                 if len(pos) != expected:
                     raise ClientError(f"state frame {s.frame}: {len(pos)} nodes for level {level_str(s.level)}")
                 # Node k sits at grid column k % nx, row k / nx.
@@ -243,7 +253,7 @@ def cmd_switch(args, session, msgs: Messages) -> None:
     key = f"{args.prefix}/{args.instance}/switch"
     req = msgs.SwitchRequest(method=args.method or "")
     if args.level is not None:
-        req.level.nx, req.level.ny = args.level
+        req.level.nx, req.level.ny, req.level.points = args.level
     else:
         req.max_error = args.max_error
     started = time.monotonic()

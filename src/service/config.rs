@@ -261,7 +261,7 @@ pub struct EstimationConfig {
 #[derive(Debug, Clone)]
 pub enum InstanceKind {
     /// A cloth scene at the reference resolution.
-    Cloth(Scene),
+    Cloth(Box<Scene>),
     /// A point-sampled surface; its reference simulates every point.
     Surface(Arc<SurfaceScene>),
 }
@@ -622,7 +622,7 @@ fn cloth_instance(r: &RawInstance, at: &str, p: &mut Vec<String>) -> Option<(Ins
         }
     }
     let integrator = scene.params.integrator;
-    Some((InstanceKind::Cloth(scene), integrator))
+    Some((InstanceKind::Cloth(Box::new(scene)), integrator))
 }
 
 /// The surface side of an instance: point-count levels within the cloud.
