@@ -63,8 +63,10 @@ pub struct Bary {
 /// coarse)` maps fine states onto coarse nodes.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Correlation {
-    source: GridShape,
-    target: GridShape,
+    /// Grid shapes when both cloths are grids (None for a subset map).
+    grids: Option<(GridShape, GridShape)>,
+    /// Nodes of the source.
+    n_source: usize,
     entries: Vec<Bary>,
 }
 
@@ -95,20 +97,40 @@ impl Correlation {
             }
         }
         Ok(Correlation {
-            source: *source,
-            target: *target,
+            grids: Some((*source, *target)),
+            n_source: source.nx * source.ny,
             entries,
         })
     }
 
-    /// Source grid shape.
-    pub fn source(&self) -> &GridShape {
-        &self.source
+    /// The correlation of a point-sampled surface's simulated points with
+    /// its reference cloud: target node k *is* source node `nodes[k]` (the
+    /// simplified points are points of the cloud), so it lies on a vertex of
+    /// every local triangle around that node: barycentric weight 1 on it.
+    ///
+    /// # Panics
+    /// When a node is not below `n_source`.
+    pub fn subset(n_source: usize, nodes: &[u32]) -> Correlation {
+        assert!(
+            nodes.iter().all(|&k| (k as usize) < n_source),
+            "subset node out of range"
+        );
+        Correlation {
+            grids: None,
+            n_source,
+            entries: nodes
+                .iter()
+                .map(|&k| Bary {
+                    nodes: [k, k, k],
+                    weights: [1.0, 0.0, 0.0],
+                })
+                .collect(),
+        }
     }
 
-    /// Target grid shape.
-    pub fn target(&self) -> &GridShape {
-        &self.target
+    /// Source and target grid shapes (None for a subset map).
+    pub fn grid_shapes(&self) -> Option<&(GridShape, GridShape)> {
+        self.grids.as_ref()
     }
 
     /// One entry per target node, in node order.
@@ -123,7 +145,7 @@ impl Correlation {
     /// # Panics
     /// When the slices do not have the sizes of the correlated grids.
     pub fn map<T: Copy + Into<f64>>(&self, source: &[T], out: &mut [f64]) {
-        let (ns, nt) = (self.source.nx * self.source.ny, self.entries.len());
+        let (ns, nt) = (self.n_source, self.entries.len());
         assert_eq!(source.len(), 3 * ns, "source field size");
         assert_eq!(out.len(), 3 * nt, "target field size");
         for c in 0..3 {

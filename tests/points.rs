@@ -804,3 +804,79 @@ fn surface_fit_recovers_known_stiffness() {
         fitted.after.mean
     );
 }
+
+/// A surface instance of `scene_text` (written to `dir`) at `levels`, as
+/// the daemon's preparer sees it.
+fn surface_preparer(dir: &Path, scene_text: &str, levels: &str, method: &str) -> lodcloth::engine::Preparer {
+    let scene = dir.join("surface.toml");
+    std::fs::write(&scene, scene_text).expect("scene written");
+    let text = format!(
+        "[[instances]]\nname = \"s\"\nkind = \"surface\"\nscene = \"{}\"\nlevels = {levels}\nstart = {}\nmethod = \"{method}\"\n",
+        scene.display(),
+        levels.trim_matches(['[', ']']).split(',').next().unwrap().trim()
+    );
+    let config = lodcloth::service::config::ServiceConfig::from_toml(&text, "test").expect("valid config");
+    let instance = std::sync::Arc::new(config.instances[0].clone());
+    lodcloth::engine::Preparer::new(instance, config.estimation, None)
+}
+
+#[test]
+fn lsq_on_a_surface_recovers_the_reference_springs_and_bcd_gkd_run_on_the_local_rings() {
+    // A pulled, sagging 400-point sphere under symplectic Euler: at the
+    // full size the correlation is the identity and m·a = F holds exactly
+    // for the reference's own springs, so the least-squares inverse fit
+    // must give back the scene's stretch and bend coefficients.
+    let dir = tempfile::tempdir().expect("temp dir");
+    let scene = "name = \"s\"\ncloud = \"sphere\"\ncount = 400\ngravity = [0.0, 0.0, -9.81]\npin_below = -0.35\nduration = 0.5\nstretch = [50.0, 0.05]\nbend = [5.0, 0.005]\n[[pulls]]\npoint = \"top\"\noffset = [0.0, 0.0, 0.2]\n";
+    let preparer = surface_preparer(dir.path(), scene, "[400, 120]", "lsq");
+    let full = preparer
+        .prepare(lodcloth::proto::Level::Points(400), lodcloth::estimate::Method::Lsq)
+        .expect("lsq prepared");
+    let [st, sh, be] = full.material.springs;
+    for (name, got, want) in [
+        ("stretch K", st.k, 50.0),
+        ("stretch C", st.c, 0.05),
+        ("bend K", be.k, 5.0),
+        ("bend C", be.c, 0.005),
+    ] {
+        assert!((got / want - 1.0).abs() < 1e-3, "{name}: {got} vs {want}");
+    }
+    assert_eq!((sh.k, sh.c), (0.0, 0.0), "no shear springs, no shear coefficients");
+    assert!(
+        full.predicted_error < 1e-3,
+        "the full size reproduces the reference: {}",
+        full.predicted_error
+    );
+    // At 120 points the inverse methods give finite positive stretch and
+    // bend stiffness, a stable level and a predicted error.
+    let mut errors = Vec::new();
+    for method in [
+        lodcloth::estimate::Method::Same,
+        lodcloth::estimate::Method::Bcd,
+        lodcloth::estimate::Method::Gkd,
+        lodcloth::estimate::Method::Lsq,
+        lodcloth::estimate::Method::Fit,
+    ] {
+        let p = preparer
+            .prepare(lodcloth::proto::Level::Points(120), method)
+            .unwrap_or_else(|e| panic!("{method}: {e}"));
+        let [st, _, be] = p.material.springs;
+        assert!(
+            st.k > 0.0 && be.k >= 0.0 && p.dt <= p.dt_limit,
+            "{method}: {:?}",
+            p.material
+        );
+        assert!(p.predicted_error.is_finite() && p.predicted_error > 0.0);
+        eprintln!(
+            "{method} at 120 of 400 points: stretch {:.3}/{:.4}, bend {:.3}/{:.4}, predicted {:.2} %",
+            st.k,
+            st.c,
+            be.k,
+            be.c,
+            100.0 * p.predicted_error
+        );
+        errors.push(p.predicted_error);
+    }
+    // The fit starts from the scene's coefficients and keeps only improvements.
+    assert!(errors[4] <= errors[0], "fit {} vs same {}", errors[4], errors[0]);
+}

@@ -9,8 +9,10 @@ use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
 use crate::cache::{CacheEntry, CacheError, CacheKey, CoefficientCache, Provenance};
-use crate::estimate::{no_progress, FitOptions, LodProblem, Method, Reference};
+use crate::estimate::inverse::{self, Distribution};
+use crate::estimate::{no_progress, FitOptions, LodProblem, Method, RecordSpec, Reference};
 use crate::experiments::lod::{level_dt, record_reference, stable_problem, Estimator, ExperimentError};
+use crate::lod::Correlation;
 use crate::points::estimate::{self as surface_fit, SurfaceFitOptions, SurfaceReference};
 use crate::points::model::PointModel;
 use crate::points::scene::SurfaceScene;
@@ -313,31 +315,28 @@ impl Preparer {
     /// The surface reference: every point simulated over the scene,
     /// recorded on first use.
     fn surface_reference(&self, scene: &SurfaceScene) -> Result<Arc<SurfaceReference>, PrepareError> {
-        let mut slot = lock(&self.surface_reference);
-        if let Some(r) = slot.as_ref() {
-            return Ok(r.clone());
-        }
-        let fail = |message: String| PrepareError::Reference {
-            scene: scene.name.clone(),
-            message,
-        };
-        let started = Instant::now();
-        let mut model = scene
-            .model(scene.points(), self.config.integrator, &mut |_, _| {})
-            .map_err(|e| fail(e.to_string()))?;
-        let reference =
-            SurfaceReference::record(&mut model, scene.frames(), scene.interval()).map_err(|e| fail(e.to_string()))?;
-        tracing::info!(
-            instance = %self.config.name,
-            points = scene.points(),
-            frames = reference.frames.len(),
-            o_max = reference.o_max,
-            seconds = started.elapsed().as_secs_f64(),
-            "surface reference recorded"
-        );
-        let reference = Arc::new(reference);
-        *slot = Some(reference.clone());
-        Ok(reference)
+        once(&self.surface_reference, || {
+            let started = Instant::now();
+            let mut model = self.all_points(scene)?;
+            let reference = SurfaceReference::record(&mut model, scene.frames(), scene.interval())
+                .map_err(|e| reference_failed(scene, e.to_string()))?;
+            tracing::info!(
+                instance = %self.config.name,
+                points = scene.points(),
+                frames = reference.frames.len(),
+                o_max = reference.o_max,
+                seconds = started.elapsed().as_secs_f64(),
+                "surface reference recorded"
+            );
+            Ok(reference)
+        })
+    }
+
+    /// The model simulating every point of the cloud.
+    fn all_points(&self, scene: &SurfaceScene) -> Result<PointModel, PrepareError> {
+        scene
+            .model(scene.points(), self.config.integrator, None, &mut |_, _| {})
+            .map_err(|e| reference_failed(scene, e.to_string()))
     }
 
     /// A surface level: simplify to `points`, take the scene's coefficients
@@ -354,19 +353,23 @@ impl Preparer {
         let failed = |message: String| PrepareError::Failed { level, method, message };
         let reference = self.surface_reference(scene)?;
         let mut model = scene
-            .model(points, self.config.integrator, &mut |_, _| {})
+            .model(points, self.config.integrator, None, &mut |_, _| {})
             .map_err(|e| failed(e.to_string()))?;
         let frames = reference.frames.len();
-        let dt = model.sim.params().dt;
         let (material, seconds, cached) = match method {
             Method::Same => (model.sim.params().material, 0.0, false),
             Method::Fit => self.surface_fit(scene, &mut model, &reference, points)?,
-            other => {
-                return Err(failed(format!(
-                    "{other} needs a grid cloth; a surface is estimated with same or fit"
-                )))
+            Method::Bcd | Method::Gkd | Method::Lsq => {
+                let estimated = self.surface_inverse(scene, &model, points, method)?;
+                // The estimated springs may be stiffer than the scene's:
+                // rebuild the level with its own stable dt.
+                model = scene
+                    .model(points, self.config.integrator, Some(&estimated.0), &mut |_, _| {})
+                    .map_err(|e| failed(e.to_string()))?;
+                estimated
             }
         };
+        let dt = model.sim.params().dt;
         surface_fit::apply_material(&mut model, material).map_err(|e| match e {
             SimError::UnstableTimeStep { dt, limit, .. } => PrepareError::Unstable {
                 level,
@@ -450,18 +453,116 @@ impl Preparer {
             );
             Ok((f.material, t.elapsed().as_secs_f64()))
         };
+        let method = format!(
+            "fit[surface;frames={};grid={};range={};iter={}]",
+            options.train.end, options.grid, options.log_range, options.iterations
+        );
+        self.surface_cached(scene, points, method, integrator, dt, &mut fit)
+    }
+
+    /// The paper's BCD or GKD, or our `lsq`, on a surface level: the
+    /// all-points run recorded with estimation samples, mapped onto the
+    /// level's points through [`Correlation::subset`] (simulated points are
+    /// cloud points), then the inverse Hooke fit of the cloth. Cached on disk.
+    fn surface_inverse(
+        &self,
+        scene: &SurfaceScene,
+        model: &PointModel,
+        points: usize,
+        method: Method,
+    ) -> Result<(Material, f64, bool), PrepareError> {
+        let level = Level::Points(points);
+        let failed = |message: String| PrepareError::Failed { level, method, message };
+        let integrator = model.sim.params().integrator.name().to_string();
+        let dt = model.sim.params().dt;
+        let mut estimate = || -> Result<(Material, f64), PrepareError> {
+            let t = Instant::now();
+            let reference = self.surface_samples(scene)?;
+            let correlation = Correlation::subset(reference.topology.n_nodes, &model.kept);
+            let mut coarse = model.sim.clone();
+            let observations = inverse::observe(&reference, &correlation, &mut coarse, &mut no_progress);
+            let material = match method {
+                Method::Lsq => {
+                    inverse::lsq_estimate(&reference.material, coarse.topology(), &observations, &mut no_progress)
+                        .material
+                }
+                _ => {
+                    let distribution = if method == Method::Bcd {
+                        Distribution::Bcd
+                    } else {
+                        Distribution::Gkd
+                    };
+                    inverse::inverse_estimate(
+                        &reference,
+                        &correlation,
+                        coarse.topology(),
+                        &observations,
+                        distribution,
+                        &mut no_progress,
+                    )
+                    .material
+                }
+            };
+            if material
+                .springs
+                .iter()
+                .any(|s| !(s.k.is_finite() && s.k >= 0.0 && s.c.is_finite()))
+            {
+                return Err(failed(format!("the estimate is not usable: {material:?}")));
+            }
+            Ok((material, t.elapsed().as_secs_f64()))
+        };
+        let key_method = format!("{method}[surface;samples-per-frame=1;span=1]");
+        self.surface_cached(scene, points, key_method, integrator, dt, &mut estimate)
+    }
+
+    /// The all-points surface run recorded as a cloth reference: one
+    /// estimation sample (three consecutive steps) per frame interval. It
+    /// takes the cloth reference's slot: an instance is one or the other.
+    fn surface_samples(&self, scene: &SurfaceScene) -> Result<Arc<Reference>, PrepareError> {
+        once(&self.reference, || {
+            let started = Instant::now();
+            let model = self.all_points(scene)?;
+            let per_frame = (scene.interval() / model.sim.params().dt).round() as u64;
+            let spec = RecordSpec {
+                frames: per_frame * scene.frames() as u64,
+                metric_stride: per_frame,
+                estimate_stride: per_frame.max(2),
+                difference_span: 1,
+            };
+            let reference = Reference::record(model.sim, spec, &mut |_, _| {})
+                .map_err(|e| reference_failed(scene, e.to_string()))?;
+            tracing::info!(
+                instance = %self.config.name,
+                samples = reference.samples.len(),
+                seconds = started.elapsed().as_secs_f64(),
+                "surface estimation samples recorded"
+            );
+            Ok(reference)
+        })
+    }
+
+    /// `compute`'s material for a surface level through the on-disk cache:
+    /// returns it with the seconds it took and whether it was a cache hit.
+    fn surface_cached(
+        &self,
+        scene: &SurfaceScene,
+        points: usize,
+        method: String,
+        integrator: String,
+        dt: f64,
+        compute: &mut dyn FnMut() -> Result<(Material, f64), PrepareError>,
+    ) -> Result<(Material, f64, bool), PrepareError> {
+        let level = Level::Points(points);
         let Some(cache) = self.estimator.cache.as_ref() else {
-            return fit().map(|(m, s)| (m, s, false));
+            return compute().map(|(m, s)| (m, s, false));
         };
         let key = CacheKey {
             scene: scene.name.clone(),
             scene_hash: scene.source_hash,
             reference: (scene.points(), 1),
             target: (points, 1),
-            method: format!(
-                "fit[surface;frames={};grid={};range={};iter={}]",
-                options.train.end, options.grid, options.log_range, options.iterations
-            ),
+            method,
             mass: "point-area".into(),
             integrator,
             dt,
@@ -479,7 +580,7 @@ impl Preparer {
         }
         let mut computed = None;
         let result = cache.get_or_compute(&key, || -> Result<CacheEntry, Failure> {
-            let (material, s) = fit().map_err(Failure::Fit)?;
+            let (material, s) = compute().map_err(Failure::Fit)?;
             computed = Some((material, s));
             let mut entry = CacheEntry::new(key.clone(), material);
             entry.notes.insert("estimate_seconds".into(), s);
@@ -496,7 +597,7 @@ impl Preparer {
                 tracing::warn!(instance = %self.config.name, %level, "coefficient cache: {e}; using the fit uncached");
                 match computed {
                     Some((material, s)) => Ok((material, s, false)),
-                    None => fit().map(|(m, s)| (m, s, false)),
+                    None => compute().map(|(m, s)| (m, s, false)),
                 }
             }
         }
@@ -521,7 +622,7 @@ impl Preparer {
             }
             (InstanceKind::Surface(scene), Level::Points(n)) => {
                 let model = scene
-                    .model(n, self.config.integrator, &mut |_, _| {})
+                    .model(n, self.config.integrator, None, &mut |_, _| {})
                     .map_err(|e| failed(e.to_string()))?;
                 let cloud = CloudMap::of(&model);
                 let dt = model.sim.params().dt;
@@ -567,6 +668,28 @@ impl Preparer {
         };
         let sim = build(dt, StabilityCheck::Enforce)?;
         Ok((sim, dt))
+    }
+}
+
+/// The value in `slot`, or `record()`'s, stored there first: an instance's
+/// references are recorded once.
+fn once<T>(
+    slot: &Mutex<Option<Arc<T>>>,
+    record: impl FnOnce() -> Result<T, PrepareError>,
+) -> Result<Arc<T>, PrepareError> {
+    let mut slot = lock(slot);
+    if let Some(r) = slot.as_ref() {
+        return Ok(r.clone());
+    }
+    let r = Arc::new(record()?);
+    *slot = Some(r.clone());
+    Ok(r)
+}
+
+fn reference_failed(scene: &SurfaceScene, message: String) -> PrepareError {
+    PrepareError::Reference {
+        scene: scene.name.clone(),
+        message,
     }
 }
 

@@ -59,7 +59,7 @@ use super::reference::Reference;
 use super::{Progress, ProgressFn};
 use crate::lod::Correlation;
 use crate::sim::vec3::dot;
-use crate::sim::{Integrator, Material, Simulation, SpringCoeffs, Topology};
+use crate::sim::{Integrator, Material, Simulation, SpringCoeffs, SpringKind, Topology};
 
 /// Spring forces per type with unit coefficients, SoA per type.
 #[derive(Debug, Clone)]
@@ -267,8 +267,13 @@ pub struct InverseEstimate {
 
 /// Reference nodes and Gaussian weights around each coarse node (GKD).
 fn gkd_neighbourhoods(reference: &Topology, coarse: &Topology) -> Vec<Vec<(u32, f64)>> {
-    let shape = coarse.grid.expect("coarse cloth is a grid");
-    let radius = 1.25 * shape.hx().hypot(shape.hy());
+    // The coarse shear-spring length: a grid cell's diagonal; on a surface
+    // (no shear springs, irregular rings) √2 × the mean stretch spring.
+    let diagonal = match coarse.grid {
+        Some(shape) => shape.hx().hypot(shape.hy()),
+        None => std::f64::consts::SQRT_2 * mean_rest_lengths(coarse)[SpringKind::Structural.index()],
+    };
+    let radius = 1.25 * diagonal;
     let sigma: f64 = 3.0;
     coarse
         .rest_positions

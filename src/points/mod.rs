@@ -14,7 +14,9 @@
 //! - [`local`] — a point's tangent frame and Delaunay one-ring (spade);
 //! - [`simplify`] — Delaunay-based simplification to a threshold or count;
 //! - [`surface`] — springs (stretch and bend), masses, a ready [`crate::sim::Topology`];
-//! - [`transfer`] — displacement and normals of the full cloud from the simulated points.
+//! - [`transfer`] — displacement and normals of the full cloud from the simulated points;
+//! - [`model`] — the pipeline assembled; [`estimate`] — per-size stiffness fit;
+//!   [`scene`] — surface scene files for the daemon's `surface` instances.
 
 pub mod estimate;
 pub mod generate;

@@ -33,7 +33,7 @@ use super::simplify::SimplifyOptions;
 use super::transfer::{NormalUpdate, TransferOptions};
 use super::{io, normals, PointCloud};
 use crate::cache::fnv1a64;
-use crate::sim::{Integrator, SpringCoeffs};
+use crate::sim::{Integrator, Material, SpringCoeffs, SpringKind};
 
 /// Why a surface scene could not be loaded.
 #[derive(Debug, thiserror::Error)]
@@ -381,12 +381,14 @@ impl SurfaceScene {
     }
 
     /// The model simulating `points` of the cloud (all of them when
-    /// `points` is the cloud size), with `integrator`, its dt dividing the
-    /// frame interval.
+    /// `points` is the cloud size), with `integrator` and the scene's
+    /// springs or `material`'s stretch and bend; its dt is `safety` × the
+    /// limit of those springs, dividing the frame interval.
     pub fn model(
         &self,
         points: usize,
         integrator: Integrator,
+        material: Option<&Material>,
         progress: &mut dyn FnMut(usize, usize),
     ) -> Result<PointModel, ModelError> {
         let simplify = (points < self.cloud.len()).then_some(SimplifyOptions {
@@ -394,8 +396,14 @@ impl SurfaceScene {
             threshold: None,
             target: Some(points),
         });
+        let (stretch, bend) = match material {
+            Some(m) => (m.get(SpringKind::Structural), m.get(SpringKind::Bend)),
+            None => (self.params.stretch, self.params.bend),
+        };
         let params = SurfaceParams {
             integrator,
+            stretch,
+            bend,
             ..self.params
         };
         PointModel::build(
@@ -462,12 +470,16 @@ release = -1.0
             .positions
             .iter()
             .all(|p| p[2] <= scene.cloud.positions[top][2]));
-        let m = scene.model(120, Integrator::SymplecticEuler, &mut |_, _| {}).unwrap();
+        let m = scene
+            .model(120, Integrator::SymplecticEuler, None, &mut |_, _| {})
+            .unwrap();
         assert_eq!(m.sim_points(), 120);
         // dt divides the frame interval.
         let per = scene.interval() / m.sim.params().dt;
         assert!((per - per.round()).abs() < 1e-9, "{per}");
-        let all = scene.model(500, Integrator::SymplecticEuler, &mut |_, _| {}).unwrap();
+        let all = scene
+            .model(500, Integrator::SymplecticEuler, None, &mut |_, _| {})
+            .unwrap();
         assert!(all.simplification.is_none());
     }
 }

@@ -321,9 +321,6 @@ impl InstanceConfig {
     }
 }
 
-/// Estimation methods a surface instance supports (the others need a grid).
-pub const SURFACE_METHODS: [Method; 2] = [Method::Same, Method::Fit];
-
 /// Smallest grid side of a level.
 pub const MIN_SIDE: usize = 2;
 /// Largest grid side of a level (a 512×512 cloth is 262,144 nodes).
@@ -462,7 +459,7 @@ impl ServiceConfig {
             }
             let kind = match r.kind.as_str() {
                 "cloth" => cloth_instance(r, &at, &mut p),
-                "surface" => surface_instance(r, &at, method, &mut p),
+                "surface" => surface_instance(r, &at, &mut p),
                 other => {
                     p.push(format!("{at}.kind: '{other}' is not one of cloth, surface"));
                     None
@@ -626,17 +623,7 @@ fn cloth_instance(r: &RawInstance, at: &str, p: &mut Vec<String>) -> Option<(Ins
 }
 
 /// The surface side of an instance: point-count levels within the cloud.
-fn surface_instance(
-    r: &RawInstance,
-    at: &str,
-    method: Option<Method>,
-    p: &mut Vec<String>,
-) -> Option<(InstanceKind, Integrator)> {
-    if let Some(m) = method.filter(|m| !SURFACE_METHODS.contains(m)) {
-        p.push(format!(
-            "{at}.method: '{m}' needs a grid cloth; a surface is estimated with same or fit"
-        ));
-    }
+fn surface_instance(r: &RawInstance, at: &str, p: &mut Vec<String>) -> Option<(InstanceKind, Integrator)> {
     if r.reference.is_some() {
         p.push(format!(
             "{at}.reference: a surface's reference simulates every point of its cloud; remove this field"

@@ -628,17 +628,6 @@ async fn answer_switch(ctx: Arc<Context>, q: Query) {
             }
         }
     };
-    if matches!(config.kind, config::InstanceKind::Surface(_)) && !config::SURFACE_METHODS.contains(&method) {
-        return reply_error(
-            &q,
-            Code::BadRequest,
-            format!(
-                "method '{method}' needs a grid cloth; surface '{}' is estimated with same or fit",
-                config.name
-            ),
-        )
-        .await;
-    }
     let allowed = crate::engine::prepare::allowed(&config.levels);
     let level = match req.target {
         None => {
