@@ -880,3 +880,51 @@ fn lsq_on_a_surface_recovers_the_reference_springs_and_bcd_gkd_run_on_the_local_
     // The fit starts from the scene's coefficients and keeps only improvements.
     assert!(errors[4] <= errors[0], "fit {} vs same {}", errors[4], errors[0]);
 }
+
+#[test]
+fn a_size_switch_carries_affine_positions_and_velocities_exactly() {
+    // Two sizes of the same 600-point sphere; the 200-point level moves by
+    // an affine map with an affine velocity field. Carried to the 100-point
+    // level through the cloud, both must be that same map at its points.
+    let dir = tempfile::tempdir().expect("temp dir");
+    let scene_file = dir.path().join("s.toml");
+    std::fs::write(&scene_file, "name = \"s\"\ncloud = \"sphere\"\ncount = 600\n").expect("written");
+    let scene = lodcloth::points::scene::SurfaceScene::load(&scene_file).expect("scene");
+    let build = |n| {
+        scene
+            .model(n, Integrator::SymplecticEuler, None, &mut no_progress)
+            .expect("model")
+    };
+    let (from, to) = (build(200), build(100));
+    let (mut from_map, to_map) = (
+        lodcloth::engine::CloudMap::of(&from),
+        lodcloth::engine::CloudMap::of(&to),
+    );
+    let a = [[1.1, 0.2, -0.1], [0.05, 0.9, 0.3], [-0.2, 0.1, 1.2]];
+    let b = [0.3, -0.1, 0.25];
+    let va = [[0.0, -0.4, 0.2], [0.4, 0.0, -0.1], [-0.2, 0.1, 0.5]];
+    let vb = [0.01, 0.02, -0.5];
+    let rest_of = |m: &PointModel| -> Vec<V3> { m.kept.iter().map(|&i| m.rest.positions[i as usize]).collect() };
+    let field = |m: &[[f64; 3]; 3], o: V3, pts: &[V3]| soa(&pts.iter().map(|&p| apply(m, o, p)).collect::<Vec<_>>());
+    let mut state = from.sim.state().clone();
+    let from_rest = rest_of(&from);
+    state.pos = field(&a, b, &from_rest);
+    state.vel = field(&va, vb, &from_rest);
+    state.time = 0.7;
+    let carried = from_map.carry(&state, &to_map);
+    let to_rest = rest_of(&to);
+    let (want_pos, want_vel) = (field(&a, b, &to_rest), field(&va, vb, &to_rest));
+    let worst = |got: &[f64], want: &[f64]| got.iter().zip(want).map(|(g, w)| (g - w).abs()).fold(0.0, f64::max);
+    assert!(
+        worst(&carried.pos, &want_pos) < 1e-9,
+        "positions off by {}",
+        worst(&carried.pos, &want_pos)
+    );
+    assert!(
+        worst(&carried.vel, &want_vel) < 1e-9,
+        "velocities off by {}",
+        worst(&carried.vel, &want_vel)
+    );
+    assert_eq!(carried.time, 0.7);
+    assert_eq!(carried.pos.len(), 300);
+}
