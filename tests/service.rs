@@ -43,10 +43,9 @@ fn scene_path(name: &str) -> PathBuf {
         .join(name)
 }
 
-/// A small daemon: paper scene 1 with a 24×24 reference at levels 8², 12²,
-/// 16² (method `same`: preparation takes well under a second), and a
-/// fixed-dt instance whose finest level is unstable at that dt.
-fn config_text(port: u16, cache: &std::path::Path, names: (&str, &str)) -> String {
+/// What every test daemon shares: a peer on loopback `port`, multicast
+/// off, two stepping threads, 50 states a second.
+fn config_header(port: u16, cache: &std::path::Path) -> String {
     format!(
         r#"
 prefix = "{PREFIX}"
@@ -58,6 +57,18 @@ multicast_scouting = false
 [engine]
 threads = 2
 publish_hz = 50.0
+"#,
+        cache = cache.display()
+    )
+}
+
+/// A small daemon: paper scene 1 with a 24×24 reference at levels 8², 12²,
+/// 16² (method `same`: preparation takes well under a second), and a
+/// fixed-dt instance whose finest level is unstable at that dt.
+fn config_text(port: u16, cache: &std::path::Path, names: (&str, &str)) -> String {
+    config_header(port, cache)
+        + &format!(
+            r#"
 [estimation]
 reference_steps = 5000
 metric_stride = 25
@@ -80,11 +91,10 @@ method = "same"
 dt = 2.5e-3
 publish_hz = 20.0
 "#,
-        cache = cache.display(),
-        a = names.0,
-        b = names.1,
-        scene1 = scene_path("paper-1-top-edge.toml").display(),
-    )
+            a = names.0,
+            b = names.1,
+            scene1 = scene_path("paper-1-top-edge.toml").display(),
+        )
 }
 
 struct Daemon {
@@ -98,7 +108,13 @@ impl Daemon {
     fn start(names: (&str, &str)) -> Daemon {
         let dir = tempfile::tempdir().expect("temp dir");
         let port = free_port();
-        let config = ServiceConfig::from_toml(&config_text(port, dir.path(), names), "test").expect("valid config");
+        let text = config_text(port, dir.path(), names);
+        Daemon::run(port, &text, dir)
+    }
+
+    /// Serve `text` (which listens on `port`); `dir` lives as long as the daemon.
+    fn run(port: u16, text: &str, dir: tempfile::TempDir) -> Daemon {
+        let config = ServiceConfig::from_toml(text, "test").expect("valid config");
         let (tx, rx) = oneshot::channel();
         let task = tokio::spawn(lodcloth::service::run(config, async {
             let _ = rx.await;
@@ -576,17 +592,9 @@ fn start_surface_daemon(dir: &std::path::Path, method: &str) -> Daemon {
     let scene = dir.join("sphere.toml");
     std::fs::write(&scene, SURFACE_SCENE).expect("scene written");
     let port = free_port();
-    let text = format!(
-        r#"
-prefix = "{PREFIX}"
-cache = "{cache}"
-[zenoh]
-mode = "peer"
-listen = ["tcp/127.0.0.1:{port}"]
-multicast_scouting = false
-[engine]
-threads = 2
-publish_hz = 50.0
+    let text = config_header(port, &dir.join("cache"))
+        + &format!(
+            r#"
 [[instances]]
 name = "sphere"
 kind = "surface"
@@ -596,20 +604,10 @@ start = 200
 method = "{method}"
 shadow_reference = true
 "#,
-        cache = dir.join("cache").display(),
-        scene = scene.display(),
-    );
-    let config = ServiceConfig::from_toml(&text, "surface test").expect("valid config");
-    let (tx, rx) = oneshot::channel();
-    let task = tokio::spawn(lodcloth::service::run(config, async {
-        let _ = rx.await;
-    }));
-    Daemon {
-        port,
-        stop: Some(tx),
-        task,
-        _dir: tempfile::tempdir().expect("temp dir"),
-    }
+            scene = scene.display(),
+        );
+    // The cache lives in the caller's `dir`, so a second daemon finds it.
+    Daemon::run(port, &text, tempfile::tempdir().expect("temp dir"))
 }
 
 fn packed_len(bytes: &[u8]) -> usize {
