@@ -73,15 +73,46 @@ enum Command {
         #[command(flatten)]
         connect: serve_cli::Connect,
     },
-    /// Record an instance's published states to a trajectory file (.lct).
+    /// Record an instance's published states to a trajectory file (.lct), or
+    /// its Foxglove channels (coloured mesh, metrics) to an MCAP file.
     Record {
         instance: String,
         /// How long to record (wall seconds).
         #[arg(long, default_value_t = 10.0)]
         seconds: f64,
         /// Output trajectory file.
+        #[arg(long, required_unless_present = "mcap", conflicts_with = "mcap")]
+        out: Option<PathBuf>,
+        /// Output MCAP file: the channels `lodcloth foxglove` serves, for
+        /// Foxglove to open.
         #[arg(long)]
-        out: PathBuf,
+        mcap: Option<PathBuf>,
+        #[command(flatten)]
+        connect: serve_cli::Connect,
+    },
+    /// Serve a live browser view of the daemon's instances (WebGL mesh
+    /// coloured by error or strain, level switches, metrics charts).
+    View {
+        /// HTTP address of the page.
+        #[arg(long, env = "LODCLOTH_VIEW_LISTEN", default_value = "127.0.0.1:8080")]
+        listen: std::net::SocketAddr,
+        #[command(flatten)]
+        connect: serve_cli::Connect,
+    },
+    /// Expose the instances on the Foxglove WebSocket protocol: a coloured
+    /// `foxglove.SceneUpdate` mesh and the metrics per instance.
+    Foxglove {
+        /// Address of the Foxglove WebSocket server.
+        #[arg(long, default_value = "127.0.0.1")]
+        host: String,
+        #[arg(long, default_value_t = 8765)]
+        port: u16,
+        /// Only this instance (default: every instance).
+        #[arg(long)]
+        instance: Option<String>,
+        /// Meshes per second per instance, at most.
+        #[arg(long, default_value_t = 30.0)]
+        max_hz: f64,
         #[command(flatten)]
         connect: serve_cli::Connect,
     },
@@ -197,8 +228,21 @@ fn main() -> Result<()> {
             instance,
             seconds,
             out,
+            mcap,
             connect,
-        } => serve_cli::record(connect, instance, seconds, out),
+        } => match (out, mcap) {
+            (_, Some(mcap)) => serve_cli::record_mcap(connect, instance, seconds, mcap),
+            (Some(out), None) => serve_cli::record(connect, instance, seconds, out),
+            (None, None) => bail!("give --out FILE.lct or --mcap FILE.mcap"),
+        },
+        Command::View { listen, connect } => serve_cli::view(connect, listen),
+        Command::Foxglove {
+            host,
+            port,
+            instance,
+            max_hz,
+            connect,
+        } => serve_cli::foxglove(connect, host, port, instance, max_hz),
         Command::Health { instance, connect } => serve_cli::health(connect, instance),
         Command::Simulate {
             scene,

@@ -1,5 +1,5 @@
 //! `lodcloth serve` and its clients: `list`, `watch`, `switch`, `record`,
-//! `health`.
+//! `health`, and the visualisation front ends `view` and `foxglove`.
 
 use std::io::{IsTerminal, Write};
 use std::path::PathBuf;
@@ -9,12 +9,14 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use prost::Message;
 
+use lodcloth::foxglove_bridge::{relay, RelayOptions};
 use lodcloth::output::{Precision, TrajectoryWriter};
 use lodcloth::proto::{unpack_positions, v1, Level};
 use lodcloth::service::client::Client;
 use lodcloth::service::config::ServiceConfig;
 use lodcloth::service::keys;
 use lodcloth::sim::State;
+use lodcloth::view::ViewOptions;
 
 /// Where a client finds the daemon.
 #[derive(Args, Clone)]
@@ -393,6 +395,125 @@ pub fn health(c: Connect, instance: Option<String>) -> Result<()> {
             println!("{n}: ok, level {}, {}", level(&info.level), info.method);
         }
         let _ = client.session.close().await;
+        Ok(())
+    })
+}
+
+/// The Foxglove relay's options, checked.
+fn relay_options(instance: Option<String>, max_hz: f64) -> Result<RelayOptions> {
+    if !(max_hz > 0.0) {
+        bail!("--max-hz {max_hz} must be positive");
+    }
+    Ok(RelayOptions { instance, max_hz })
+}
+
+pub fn record_mcap(c: Connect, instance: String, seconds: f64, path: PathBuf) -> Result<()> {
+    if !(seconds > 0.0 && seconds.is_finite()) {
+        bail!("--seconds {seconds} must be positive");
+    }
+    runtime()?.block_on(async {
+        let client = connect(&c).await?;
+        // Fail before creating the file when the instance is not there.
+        client.info(&instance).await?;
+        let ctx = foxglove::Context::new();
+        let file = std::fs::File::create(&path).with_context(|| format!("creating {}", path.display()))?;
+        let writer = foxglove::McapWriter::new()
+            .context(&ctx)
+            .create(std::io::BufWriter::new(file))
+            .with_context(|| format!("starting the MCAP file {}", path.display()))?;
+        let options = relay_options(Some(instance.clone()), f64::INFINITY)?;
+        let bar = crate::progress_bar((seconds * 10.0).ceil() as u64, "recording (0.1 s)");
+        let started = Instant::now();
+        let counts = relay(
+            &client,
+            &ctx,
+            &options,
+            tokio::time::sleep(Duration::from_secs_f64(seconds)),
+            |_| bar.set_position((started.elapsed().as_secs_f64() * 10.0) as u64),
+        )
+        .await?;
+        bar.finish_and_clear();
+        writer
+            .close()
+            .with_context(|| format!("closing the MCAP file {}", path.display()))?;
+        let _ = client.session.close().await;
+        if counts.meshes == 0 {
+            bail!(
+                "no state of '{instance}' arrived within {seconds} s; {} is empty",
+                path.display()
+            );
+        }
+        println!(
+            "{}: {} meshes and {} metrics of {instance} ({} states rejected)",
+            path.display(),
+            counts.meshes,
+            counts.metrics,
+            counts.rejected
+        );
+        Ok(())
+    })
+}
+
+pub fn foxglove(c: Connect, host: String, port: u16, instance: Option<String>, max_hz: f64) -> Result<()> {
+    let options = relay_options(instance, max_hz)?;
+    runtime()?.block_on(async {
+        let client = connect(&c).await?;
+        let ctx = foxglove::Context::new();
+        let server = foxglove::WebSocketServer::new()
+            .name("lodcloth")
+            .bind(host.clone(), port)
+            .context(&ctx)
+            .start()
+            .await
+            .with_context(|| format!("starting the Foxglove WebSocket server on {host}:{port}"))?;
+        println!(
+            "foxglove bridge: ws://{host}:{} (open it in Foxglove: Open connection → Foxglove WebSocket)",
+            server.port()
+        );
+        let _ = std::io::stdout().flush();
+        // A periodic line instead of a bar: the bridge runs until stopped.
+        let mut last_log = Instant::now();
+        let counts = relay(&client, &ctx, &options, shutdown_signal(), |n| {
+            if last_log.elapsed() >= Duration::from_secs(30) {
+                last_log = Instant::now();
+                tracing::info!(
+                    states = n.states,
+                    meshes = n.meshes,
+                    metrics = n.metrics,
+                    clients = server.client_count(),
+                    "relaying"
+                );
+            }
+        })
+        .await?;
+        tracing::info!(
+            states = counts.states,
+            meshes = counts.meshes,
+            metrics = counts.metrics,
+            "bridge stopped"
+        );
+        server.stop().wait().await;
+        let _ = client.session.close().await;
+        Ok(())
+    })
+}
+
+pub fn view(c: Connect, listen: std::net::SocketAddr) -> Result<()> {
+    runtime()?.block_on(async {
+        let options = ViewOptions {
+            listen,
+            connect: c.connect,
+            prefix: c.prefix,
+        };
+        lodcloth::view::run(
+            options,
+            |addr| {
+                println!("lodcloth view: http://{addr}/");
+                let _ = std::io::stdout().flush();
+            },
+            shutdown_signal(),
+        )
+        .await?;
         Ok(())
     })
 }

@@ -3,194 +3,22 @@
 //! continuity of the motion across them, refusals of bad requests,
 //! liveliness, two daemons seen by one client, graceful shutdown.
 
+mod daemon;
+
 use std::collections::HashMap;
-use std::future::Future;
-use std::path::PathBuf;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use prost::Message;
 use tokio::sync::oneshot;
-use tokio::task::JoinHandle;
 
+use daemon::*;
 use lodcloth::lod::Correlation;
 use lodcloth::proto::{unpack_positions, v1, Level};
 use lodcloth::scene::Scene;
-use lodcloth::service::client::{Client, ClientError};
+use lodcloth::service::client::ClientError;
 use lodcloth::service::config::ServiceConfig;
-use lodcloth::service::{keys, ServiceError};
+use lodcloth::service::keys;
 use lodcloth::sim::Topology;
-
-const PREFIX: &str = "lodtest";
-
-/// Fail the test instead of hanging.
-async fn within<T>(seconds: u64, what: &str, f: impl Future<Output = T>) -> T {
-    match tokio::time::timeout(Duration::from_secs(seconds), f).await {
-        Ok(v) => v,
-        Err(_) => panic!("{what}: no result within {seconds} s"),
-    }
-}
-
-fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .and_then(|l| l.local_addr())
-        .map(|a| a.port())
-        .expect("a free loopback port")
-}
-
-fn scene_path(name: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("config/scenes")
-        .join(name)
-}
-
-/// What every test daemon shares: a peer on loopback `port`, multicast
-/// off, two stepping threads, 50 states a second.
-fn config_header(port: u16, cache: &std::path::Path) -> String {
-    format!(
-        r#"
-prefix = "{PREFIX}"
-cache = "{cache}"
-[zenoh]
-mode = "peer"
-listen = ["tcp/127.0.0.1:{port}"]
-multicast_scouting = false
-[engine]
-threads = 2
-publish_hz = 50.0
-"#,
-        cache = cache.display()
-    )
-}
-
-/// A small daemon: paper scene 1 with a 24×24 reference at levels 8², 12²,
-/// 16² (method `same`: preparation takes well under a second), and a
-/// fixed-dt instance whose finest level is unstable at that dt.
-fn config_text(port: u16, cache: &std::path::Path, names: (&str, &str)) -> String {
-    config_header(port, cache)
-        + &format!(
-            r#"
-[estimation]
-reference_steps = 5000
-metric_stride = 25
-estimate_stride = 25
-[[instances]]
-name = "{a}"
-scene = "{scene1}"
-reference = "24x24"
-levels = ["8x8", "12x12", "16x16"]
-start = "16x16"
-method = "same"
-shadow_reference = true
-[[instances]]
-name = "{b}"
-scene = "{scene1}"
-reference = "24x24"
-levels = ["8x8", "16x16"]
-start = "8x8"
-method = "same"
-dt = 2.5e-3
-publish_hz = 20.0
-"#,
-            a = names.0,
-            b = names.1,
-            scene1 = scene_path("paper-1-top-edge.toml").display(),
-        )
-}
-
-struct Daemon {
-    port: u16,
-    stop: Option<oneshot::Sender<()>>,
-    task: JoinHandle<Result<(), ServiceError>>,
-    _dir: tempfile::TempDir,
-}
-
-impl Daemon {
-    fn start(names: (&str, &str)) -> Daemon {
-        let dir = tempfile::tempdir().expect("temp dir");
-        let port = free_port();
-        let text = config_text(port, dir.path(), names);
-        Daemon::run(port, &text, dir)
-    }
-
-    /// Serve `text` (which listens on `port`); `dir` lives as long as the daemon.
-    fn run(port: u16, text: &str, dir: tempfile::TempDir) -> Daemon {
-        let config = ServiceConfig::from_toml(text, "test").expect("valid config");
-        let (tx, rx) = oneshot::channel();
-        let task = tokio::spawn(lodcloth::service::run(config, async {
-            let _ = rx.await;
-        }));
-        Daemon {
-            port,
-            stop: Some(tx),
-            task,
-            _dir: dir,
-        }
-    }
-
-    fn endpoint(&self) -> String {
-        format!("tcp/127.0.0.1:{}", self.port)
-    }
-
-    async fn shutdown(mut self) -> Result<(), ServiceError> {
-        if let Some(tx) = self.stop.take() {
-            let _ = tx.send(());
-        }
-        within(20, "graceful shutdown", self.task).await.expect("daemon task")
-    }
-}
-
-async fn client(endpoints: &[String]) -> Client {
-    // The daemon may still be opening its listener.
-    let deadline = Instant::now() + Duration::from_secs(10);
-    loop {
-        match Client::connect(endpoints, PREFIX).await {
-            Ok(mut c) => {
-                c.timeout = Duration::from_secs(5);
-                return c;
-            }
-            Err(e) if Instant::now() > deadline => panic!("cannot connect to {endpoints:?}: {e}"),
-            Err(_) => tokio::time::sleep(Duration::from_millis(100)).await,
-        }
-    }
-}
-
-/// Info once the daemon answers.
-async fn wait_info(c: &Client, instance: &str) -> v1::InstanceInfo {
-    let deadline = Instant::now() + Duration::from_secs(15);
-    loop {
-        match c.info(instance).await {
-            Ok(i) => return i,
-            Err(e) if Instant::now() > deadline => panic!("info of {instance}: {e}"),
-            Err(_) => tokio::time::sleep(Duration::from_millis(100)).await,
-        }
-    }
-}
-
-/// States of `instance` received for `seconds`.
-async fn collect_states(c: &Client, instance: &str, seconds: f64) -> Vec<v1::State> {
-    let sub = c
-        .session
-        .declare_subscriber(keys::state(PREFIX, instance))
-        .await
-        .expect("subscriber");
-    let end = Instant::now() + Duration::from_secs_f64(seconds);
-    let mut out = Vec::new();
-    while let Ok(Ok(s)) = tokio::time::timeout(end.saturating_duration_since(Instant::now()), sub.recv_async()).await {
-        out.push(v1::State::decode(s.payload().to_bytes().as_ref()).expect("a State"));
-    }
-    out
-}
-
-fn refused_code(r: Result<v1::SwitchReply, ClientError>) -> (String, String) {
-    match r {
-        Err(ClientError::Refused { code, message }) => (code, message),
-        other => panic!("expected a refusal, got {other:?}"),
-    }
-}
-
-fn level_of(s: &v1::State) -> Level {
-    Level::from_wire(s.level.as_ref().expect("level")).expect("a valid level")
-}
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn states_arrive_at_the_configured_rate_and_pinned_nodes_stay_put() {

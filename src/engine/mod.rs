@@ -111,6 +111,9 @@ pub struct StateFrame {
     /// (empty for a cloth).
     pub simulation_positions: Vec<f32>,
     pub normals: Vec<f32>,
+    /// The shadow reference at `time`, laid out like `positions` (empty
+    /// without a shadow reference or outside its recording).
+    pub reference_positions: Vec<f32>,
     pub stepped: SystemTime,
     pub transition: bool,
 }
@@ -679,6 +682,10 @@ impl Runner {
             }
         };
         let s = self.sim.state();
+        let mut reference_positions = Vec::new();
+        if let Some(sh) = self.shadow.as_mut() {
+            sh.reference_at(s.time, &mut reference_positions);
+        }
         StateFrame {
             frame: self.frames,
             time: s.time,
@@ -688,6 +695,7 @@ impl Runner {
             positions,
             simulation_positions,
             normals,
+            reference_positions,
             stepped: SystemTime::now(),
             transition,
         }

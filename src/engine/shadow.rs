@@ -4,7 +4,8 @@ use std::sync::Arc;
 
 use super::prepare::{Basis, Prepared};
 use super::CloudMap;
-use crate::sim::vec3::dist;
+use crate::points::estimate::SurfaceReference;
+use crate::sim::vec3::{dist, V3};
 
 /// Compares a running level with its recorded reference once per reference
 /// frame interval (frame f of a recording is at time (f + 1)·interval for
@@ -47,18 +48,32 @@ impl Shadow {
         due
     }
 
+    /// Cloth: map the reference frames around `t` onto the level's nodes
+    /// (`mapped`, `mapped_next`) and return the weight of the later one.
+    fn map_cloth(&mut self, t: f64) -> Option<f64> {
+        let Basis::Cloth(problem) = &self.prepared.basis else {
+            return None;
+        };
+        let reference = &problem.reference;
+        let (a, b, w) = bracket(&reference.frame_times, t)?;
+        let correlation = problem.correlation();
+        correlation.map(&reference.frames[a], &mut self.mapped);
+        correlation.map(&reference.frames[b], &mut self.mapped_next);
+        Some(w)
+    }
+
     /// Mean relative distance of the level at `pos` (SoA; a surface moves
     /// its `cloud` there and is compared on every cloud point) from the
     /// reference at time `t`, interpolated linearly between its frames;
     /// None outside the recording.
     pub(super) fn error_at(&mut self, t: f64, pos: &[f64], cloud: Option<&mut CloudMap>) -> Option<f64> {
-        match (&self.prepared.basis, cloud) {
-            (Basis::Cloth(problem), None) => {
-                let reference = &problem.reference;
-                let (a, b, w) = bracket(&reference.frame_times, t)?;
-                let correlation = problem.correlation();
-                correlation.map(&reference.frames[a], &mut self.mapped);
-                correlation.map(&reference.frames[b], &mut self.mapped_next);
+        match cloud {
+            None => {
+                let w = self.map_cloth(t)?;
+                let o_max = match &self.prepared.basis {
+                    Basis::Cloth(problem) => problem.reference.o_max,
+                    Basis::Surface { .. } => return None,
+                };
                 let n = pos.len() / 3;
                 let mut sum = 0.0;
                 for k in 0..n {
@@ -70,19 +85,14 @@ impl Shadow {
                         .sum::<f64>();
                     sum += d2.sqrt();
                 }
-                Some(sum / n as f64 / reference.o_max)
+                Some(sum / n as f64 / o_max)
             }
-            (Basis::Surface { reference, .. }, Some(cloud)) => {
-                // Frame f is at (f + 1)·interval: search the frame count, not
-                // a time list.
-                let f = t / reference.interval - 1.0;
-                if !(f >= 0.0) || f >= reference.frames.len().saturating_sub(1) as f64 {
+            Some(cloud) => {
+                let Basis::Surface { reference, .. } = &self.prepared.basis else {
                     return None;
-                }
-                let a = f.floor() as usize;
-                let w = f - a as f64;
+                };
+                let (ra, rb, w) = surface_frames(reference, t)?;
                 cloud.update(pos);
-                let (ra, rb) = (&reference.frames[a], &reference.frames[a + 1]);
                 let mut sum = 0.0;
                 for (i, p) in cloud.positions.iter().enumerate() {
                     let r = [0, 1, 2].map(|c| (1.0 - w) * ra[i][c] + w * rb[i][c]);
@@ -90,9 +100,47 @@ impl Shadow {
                 }
                 Some(sum / cloud.positions.len() as f64 / reference.o_max)
             }
-            _ => None,
         }
     }
+
+    /// The reference at time `t` into `out`, interleaved x, y, z like a
+    /// published state (cloth: on the level's nodes; surface: every cloud
+    /// point); left empty outside the recording.
+    pub(super) fn reference_at(&mut self, t: f64, out: &mut Vec<f32>) {
+        out.clear();
+        if matches!(self.prepared.basis, Basis::Cloth(_)) {
+            let Some(w) = self.map_cloth(t) else {
+                return;
+            };
+            let n = self.mapped.len() / 3;
+            out.reserve(3 * n);
+            for k in 0..n {
+                for c in 0..3 {
+                    out.push(((1.0 - w) * self.mapped[c * n + k] + w * self.mapped_next[c * n + k]) as f32);
+                }
+            }
+        } else if let Basis::Surface { reference, .. } = &self.prepared.basis {
+            let Some((ra, rb, w)) = surface_frames(reference, t) else {
+                return;
+            };
+            out.reserve(3 * ra.len());
+            for (a, b) in ra.iter().zip(rb) {
+                out.extend((0..3).map(|c| ((1.0 - w) * a[c] + w * b[c]) as f32));
+            }
+        }
+    }
+}
+
+/// The recorded cloud frames around `t` and the weight of the later one;
+/// frame f is at (f + 1)·interval, so the frame count is searched, not a
+/// time list.
+fn surface_frames(reference: &SurfaceReference, t: f64) -> Option<(&[V3], &[V3], f64)> {
+    let f = t / reference.interval - 1.0;
+    if !(f >= 0.0) || f >= reference.frames.len().saturating_sub(1) as f64 {
+        return None;
+    }
+    let a = f.floor() as usize;
+    Some((&reference.frames[a], &reference.frames[a + 1], f - a as f64))
 }
 
 /// The frames around `t` in `times` and the weight of the later one.

@@ -413,6 +413,7 @@ pub fn state_message(instance: &str, f: &StateFrame) -> v1::State {
         transition: f.transition,
         simulation_positions: proto::pack_positions(&f.simulation_positions),
         normals: proto::pack_positions(&f.normals),
+        reference_positions: proto::pack_positions(&f.reference_positions),
     }
 }
 
@@ -531,6 +532,14 @@ fn instance_info(inst: &Instance) -> v1::InstanceInfo {
         kind: c.kind_name().to_string(),
         simulation_points: s.simulation_points.as_deref().cloned().unwrap_or_default(),
         cloud_points: s.cloud_points as u32,
+        rest_positions: proto::pack_positions(
+            &s.topology
+                .rest_positions
+                .iter()
+                .flatten()
+                .map(|&c| c as f32)
+                .collect::<Vec<f32>>(),
+        ),
     }
 }
 

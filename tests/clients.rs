@@ -1,0 +1,618 @@
+//! The visualisation clients against a real daemon on loopback, through
+//! real clients: the browser page in headless Chromium (driven over the
+//! Chrome DevTools Protocol), the Foxglove bridge through a Foxglove
+//! WebSocket client, and `record --mcap` read back with the `mcap` crate.
+//!
+//! Needs Debian's `chromium` (`.ci/run` installs it; `LODCLOTH_CHROMIUM`
+//! names another binary).
+
+mod daemon;
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use futures_util::{SinkExt, StreamExt};
+use prost::Message as _;
+use serde_json::{json, Value};
+use tokio::net::TcpStream;
+use tokio_tungstenite::tungstenite::client::IntoClientRequest;
+use tokio_tungstenite::tungstenite::Message;
+use tokio_tungstenite::{MaybeTlsStream, WebSocketStream};
+
+use daemon::*;
+use lodcloth::foxglove_bridge::{mesh_topic, metrics_topic};
+use lodcloth::proto::{v1, Level};
+use lodcloth::view::ViewOptions;
+
+type Ws = WebSocketStream<MaybeTlsStream<TcpStream>>;
+
+/// Two instances of paper scene 1 (24×24 reference, method `same`); the
+/// first runs a shadow reference recorded over the scene's whole 6 s loop,
+/// so every state carries it.
+fn start_daemon(names: (&str, &str)) -> Daemon {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let port = free_port();
+    let text = config_header(port, dir.path())
+        + &format!(
+            r#"
+[estimation]
+reference_steps = 30000
+metric_stride = 25
+estimate_stride = 25
+[[instances]]
+name = "{a}"
+scene = "{scene}"
+reference = "24x24"
+levels = ["8x8", "12x12", "16x16"]
+start = "16x16"
+method = "same"
+shadow_reference = true
+[[instances]]
+name = "{b}"
+scene = "{scene}"
+reference = "24x24"
+levels = ["8x8"]
+start = "8x8"
+method = "same"
+"#,
+            a = names.0,
+            b = names.1,
+            scene = scene_path("paper-1-top-edge.toml").display(),
+        );
+    Daemon::run(port, &text, dir)
+}
+
+/// Wait until the instance's states carry its shadow reference (the
+/// recording is made after the daemon starts stepping).
+async fn wait_reference(c: &lodcloth::service::client::Client, instance: &str) {
+    let sub = c
+        .session
+        .declare_subscriber(lodcloth::service::keys::state(PREFIX, instance))
+        .await
+        .expect("subscriber");
+    within(120, "a state with the shadow reference", async {
+        loop {
+            let s = sub.recv_async().await.expect("a state");
+            let s = v1::State::decode(s.payload().to_bytes().as_ref()).expect("a State");
+            if !s.reference_positions.is_empty() {
+                return;
+            }
+        }
+    })
+    .await;
+}
+
+/// A child process killed when dropped (a failing test leaves none behind).
+struct Guard(Option<Child>);
+
+impl Drop for Guard {
+    fn drop(&mut self) {
+        if let Some(mut c) = self.0.take() {
+            let _ = c.kill();
+            let _ = c.wait();
+        }
+    }
+}
+
+/// Where test artefacts (the screenshot) go.
+fn artefact(name: &str) -> PathBuf {
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("artefacts");
+    std::fs::create_dir_all(&dir).expect("artefact dir");
+    dir.join(name)
+}
+
+/// A headless Chromium with one page, driven over CDP.
+struct Browser {
+    child: Child,
+    ws: Ws,
+    next_id: u64,
+    session: String,
+    _profile: tempfile::TempDir,
+}
+
+impl Browser {
+    async fn open(url: &str) -> Browser {
+        let exe = std::env::var("LODCLOTH_CHROMIUM").unwrap_or_else(|_| "chromium".into());
+        let profile = tempfile::tempdir().expect("profile dir");
+        // SwiftShader gives WebGL without a GPU; the network flags keep
+        // Chromium off everything but loopback.
+        let child = Command::new(&exe)
+            .args([
+                "--headless",
+                "--no-sandbox",
+                "--use-angle=swiftshader",
+                "--enable-unsafe-swiftshader",
+                "--window-size=1400,900",
+                "--remote-debugging-port=0",
+                "--no-first-run",
+                "--disable-background-networking",
+                "--disable-component-update",
+                "--disable-sync",
+                "--disable-quic",
+            ])
+            .arg(format!("--user-data-dir={}", profile.path().display()))
+            .arg("about:blank")
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap_or_else(|e| panic!("starting {exe}: {e} (install Debian's chromium, as .ci/run does)"));
+        // Chromium writes its DevTools port and browser path here.
+        let active = profile.path().join("DevToolsActivePort");
+        let deadline = Instant::now() + Duration::from_secs(30);
+        let endpoint = loop {
+            if let Ok(text) = std::fs::read_to_string(&active) {
+                let mut lines = text.lines();
+                if let (Some(port), Some(path)) = (lines.next(), lines.next()) {
+                    break format!("ws://127.0.0.1:{port}{path}");
+                }
+            }
+            assert!(Instant::now() < deadline, "Chromium wrote no DevToolsActivePort");
+            tokio::time::sleep(Duration::from_millis(100)).await;
+        };
+        let (ws, _) = within(10, "CDP connect", tokio_tungstenite::connect_async(&endpoint))
+            .await
+            .expect("CDP WebSocket");
+        let mut b = Browser {
+            child,
+            ws,
+            next_id: 0,
+            session: String::new(),
+            _profile: profile,
+        };
+        let target = b.call("Target.createTarget", json!({ "url": url })).await;
+        let attached = b
+            .call(
+                "Target.attachToTarget",
+                json!({ "targetId": target["targetId"], "flatten": true }),
+            )
+            .await;
+        b.session = attached["sessionId"].as_str().expect("a session id").to_string();
+        b
+    }
+
+    /// A CDP command on the page's session (the browser's before attaching).
+    async fn call(&mut self, method: &str, params: Value) -> Value {
+        self.next_id += 1;
+        let id = self.next_id;
+        let mut msg = json!({ "id": id, "method": method, "params": params });
+        if !self.session.is_empty() {
+            msg["sessionId"] = json!(self.session);
+        }
+        self.ws
+            .send(Message::Text(msg.to_string().into()))
+            .await
+            .expect("CDP send");
+        loop {
+            let m = within(30, method, self.ws.next())
+                .await
+                .expect("CDP open")
+                .expect("CDP message");
+            let Message::Text(t) = m else { continue };
+            let v: Value = serde_json::from_str(t.as_str()).expect("CDP JSON");
+            if v["id"] == json!(id) {
+                assert!(v.get("error").is_none(), "{method}: {}", v["error"]);
+                return v["result"].clone();
+            }
+        }
+    }
+
+    /// The value of a page expression (promises awaited).
+    async fn eval(&mut self, expression: &str) -> Value {
+        let r = self
+            .call(
+                "Runtime.evaluate",
+                json!({ "expression": expression, "returnByValue": true, "awaitPromise": true }),
+            )
+            .await;
+        assert!(
+            r.get("exceptionDetails").is_none(),
+            "{expression}: {}",
+            r["exceptionDetails"]
+        );
+        r["result"]["value"].clone()
+    }
+
+    /// Poll `expression` until it is true.
+    async fn wait_for(&mut self, seconds: u64, what: &str, expression: &str) {
+        let deadline = Instant::now() + Duration::from_secs(seconds);
+        while self.eval(expression).await != json!(true) {
+            if Instant::now() > deadline {
+                let stats = self.eval("JSON.stringify(window.lodclothStats ?? null)").await;
+                panic!("{what}: not within {seconds} s; page stats: {stats}");
+            }
+            tokio::time::sleep(Duration::from_millis(200)).await;
+        }
+    }
+
+    /// A real mouse click at the centre of the element `selector`.
+    async fn click(&mut self, selector: &str) {
+        let at = self
+            .eval(&format!(
+                "(() => {{ const r = document.querySelector({selector:?}).getBoundingClientRect(); \
+                 return [r.x + r.width / 2, r.y + r.height / 2]; }})()"
+            ))
+            .await;
+        for kind in ["mousePressed", "mouseReleased"] {
+            self.call(
+                "Input.dispatchMouseEvent",
+                json!({ "type": kind, "x": at[0], "y": at[1], "button": "left", "clickCount": 1 }),
+            )
+            .await;
+        }
+    }
+
+    async fn screenshot(&mut self, path: &Path) -> Vec<u8> {
+        use base64::Engine;
+        let r = self.call("Page.captureScreenshot", json!({ "format": "png" })).await;
+        let png = base64::engine::general_purpose::STANDARD
+            .decode(r["data"].as_str().expect("screenshot data"))
+            .expect("base64 PNG");
+        std::fs::write(path, &png).expect("writing the screenshot");
+        png
+    }
+}
+
+impl Drop for Browser {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// The viewer served in this process on a free port.
+async fn start_view(endpoint: String) -> (String, tokio::sync::oneshot::Sender<()>) {
+    let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
+    let (addr_tx, addr_rx) = tokio::sync::oneshot::channel();
+    let options = ViewOptions {
+        listen: "127.0.0.1:0".parse().expect("an address"),
+        connect: vec![endpoint],
+        prefix: PREFIX.into(),
+    };
+    tokio::spawn(async move {
+        lodcloth::view::run(
+            options,
+            move |addr| {
+                let _ = addr_tx.send(addr);
+            },
+            async {
+                let _ = stop_rx.await;
+            },
+        )
+        .await
+        .expect("the viewer runs");
+    });
+    let addr = within(20, "viewer listening", addr_rx).await.expect("an address");
+    (format!("http://{addr}"), stop_tx)
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_page_draws_the_cloth_coloured_by_error_and_switches_level_from_a_click() {
+    let d = start_daemon(("view-a", "view-b"));
+    let c = client(&[d.endpoint()]).await;
+    let info = wait_info(&c, "view-a").await;
+    wait_reference(&c, "view-a").await;
+    assert!(info.shadow_reference);
+    assert_eq!(
+        packed_count(&info.rest_positions),
+        16 * 16,
+        "rest positions of the 16x16 level"
+    );
+    let (base, stop_view) = start_view(d.endpoint()).await;
+    // The page itself is served from the binary.
+    let mut browser = Browser::open(&format!("{base}/?instance=view-a")).await;
+
+    browser
+        .wait_for(
+            30,
+            "states drawn",
+            "(window.lodclothStats?.statesDrawn ?? 0) > 10 && window.lodclothStats.level === '16x16'",
+        )
+        .await;
+    let stats = browser.eval("window.lodclothStats").await;
+    assert_eq!(stats["connected"], json!(true));
+    assert_eq!(
+        stats["hasReference"],
+        json!(true),
+        "the shadow reference rides on the states"
+    );
+    assert_eq!(stats["colourMode"], json!("error"));
+    let names: Vec<&str> = stats["instances"]
+        .as_array()
+        .expect("instances")
+        .iter()
+        .filter_map(|i| i["name"].as_str())
+        .collect();
+    assert!(names.contains(&"view-a") && names.contains(&"view-b"), "{names:?}");
+
+    // The canvas shows something, and it moves.
+    let first = browser.eval("window.lodclothCanvasDigest()").await;
+    let lit = first["lit"].as_f64().expect("lit");
+    assert!(lit > 0.02 && lit < 0.95, "fraction of the canvas drawn: {lit}");
+    tokio::time::sleep(Duration::from_millis(1500)).await;
+    let second = browser.eval("window.lodclothCanvasDigest()").await;
+    assert_ne!(first["hash"], second["hash"], "the picture changes as the cloth moves");
+    let png = browser.screenshot(&artefact("view.png")).await;
+    assert!(
+        png.starts_with(b"\x89PNG") && png.len() > 20_000,
+        "a real screenshot ({} bytes)",
+        png.len()
+    );
+
+    // A click on a level button switches the daemon; states of that level
+    // arrive on the bus and on the page.
+    browser.click("button[data-level=\"8x8\"]").await;
+    browser
+        .wait_for(
+            30,
+            "the switch reply",
+            "window.lodclothStats.lastSwitch?.ok === true && window.lodclothStats.level === '8x8'",
+        )
+        .await;
+    let bus = collect_states(&c, "view-a", 0.5).await;
+    assert!(!bus.is_empty() && bus.iter().all(|s| level_of(s) == Level::new(8, 8)));
+    let status = browser
+        .eval("document.querySelector('#switch-status').textContent")
+        .await;
+    assert!(status.as_str().is_some_and(|s| s.contains("8x8")), "{status}");
+    browser
+        .wait_for(
+            10,
+            "the 8x8 mesh drawn",
+            "window.lodclothStats.statesDrawn > 0 && window.lodclothCanvasDigest().lit > 0.01",
+        )
+        .await;
+
+    // A refused switch shows the daemon's reason.
+    browser
+        .eval("(() => { document.querySelector('#max-error').value = '0.0001'; return true; })()")
+        .await;
+    browser.click("#apply-max-error").await;
+    browser
+        .wait_for(60, "the refusal", "window.lodclothStats.lastSwitch?.ok === false")
+        .await;
+    let status = browser
+        .eval("document.querySelector('#switch-status').textContent")
+        .await;
+    let class = browser.eval("document.querySelector('#switch-status').className").await;
+    assert!(
+        status.as_str().is_some_and(|s| s.contains("no allowed level")),
+        "the reason is shown: {status}"
+    );
+    assert!(class.as_str().is_some_and(|c| c.contains("error")), "{class}");
+
+    // The daemon goes away: its instances grey out.
+    drop(c);
+    d.shutdown().await.expect("clean shutdown");
+    browser
+        .wait_for(
+            20,
+            "instances greyed out",
+            "document.querySelector('li[data-instance=\"view-a\"]').classList.contains('gone')",
+        )
+        .await;
+    let _ = stop_view.send(());
+}
+
+fn packed_count(bytes: &[u8]) -> usize {
+    bytes.len() / 12
+}
+
+/// `lodcloth` with `args`, its stdout piped.
+fn spawn_cli(args: &[&str]) -> Child {
+    Command::new(env!("CARGO_BIN_EXE_lodcloth"))
+        .args(args)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .expect("starting lodcloth")
+}
+
+/// SIGTERM, then wait (the CLI shuts down gracefully on it).
+fn terminate(mut child: Child) {
+    // SAFETY: kill(2) on a child we own.
+    unsafe {
+        libc::kill(child.id() as i32, libc::SIGTERM);
+    }
+    let deadline = Instant::now() + Duration::from_secs(15);
+    while child.try_wait().expect("wait").is_none() {
+        if Instant::now() > deadline {
+            let _ = child.kill();
+            panic!("lodcloth did not stop on SIGTERM within 15 s");
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+/// The next Foxglove text message, parsed.
+async fn next_json(ws: &mut Ws) -> Option<Value> {
+    loop {
+        match within(30, "a Foxglove message", ws.next()).await? {
+            Ok(Message::Text(t)) => return Some(serde_json::from_str(t.as_str()).expect("JSON")),
+            Ok(Message::Binary(_)) | Ok(Message::Ping(_)) | Ok(Message::Pong(_)) | Ok(Message::Frame(_)) => {}
+            Ok(Message::Close(_)) | Err(_) => return None,
+        }
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_foxglove_client_gets_the_coloured_mesh_and_the_metrics() {
+    let d = start_daemon(("fox-a", "fox-b"));
+    let c = client(&[d.endpoint()]).await;
+    let info = wait_info(&c, "fox-a").await;
+    wait_reference(&c, "fox-a").await;
+    let port = free_port();
+    let mut bridge = Guard(Some(spawn_cli(&[
+        "foxglove",
+        "--connect",
+        &d.endpoint(),
+        "--prefix",
+        PREFIX,
+        "--port",
+        &port.to_string(),
+        "--instance",
+        "fox-a",
+    ])));
+
+    // The Foxglove WebSocket protocol: subprotocol, JSON advertisements,
+    // a subscribe op, binary message data.
+    let mut request = format!("ws://127.0.0.1:{port}").into_client_request().expect("request");
+    request
+        .headers_mut()
+        .insert("Sec-WebSocket-Protocol", "foxglove.sdk.v1".parse().expect("header"));
+    let deadline = Instant::now() + Duration::from_secs(20);
+    let mut ws = loop {
+        match tokio_tungstenite::connect_async(request.clone()).await {
+            Ok((ws, _)) => break ws,
+            Err(e) if Instant::now() > deadline => panic!("bridge on port {port}: {e}"),
+            Err(_) => tokio::time::sleep(Duration::from_millis(100)).await,
+        }
+    };
+    let (mut mesh, mut metrics) = (None, None);
+    while mesh.is_none() || metrics.is_none() {
+        let m = next_json(&mut ws).await.expect("the bridge advertises its channels");
+        if m["op"] != "advertise" {
+            continue;
+        }
+        for ch in m["channels"].as_array().expect("channels") {
+            if ch["topic"] == json!(mesh_topic("fox-a")) {
+                assert_eq!(ch["schemaName"], "foxglove.SceneUpdate");
+                assert_eq!(ch["encoding"], "protobuf");
+                mesh = ch["id"].as_u64();
+            } else if ch["topic"] == json!(metrics_topic("fox-a")) {
+                assert_eq!(ch["schemaName"], "lodcloth.v1.Metrics");
+                metrics = ch["id"].as_u64();
+            }
+        }
+    }
+    let subscribe = json!({ "op": "subscribe", "subscriptions": [
+        { "id": 1, "channelId": mesh }, { "id": 2, "channelId": metrics } ] });
+    ws.send(Message::Text(subscribe.to_string().into()))
+        .await
+        .expect("subscribe");
+
+    let (mut updates, mut metric_msgs) = (Vec::new(), Vec::new());
+    while updates.len() < 3 || metric_msgs.is_empty() {
+        let m = within(30, "message data", ws.next())
+            .await
+            .expect("open")
+            .expect("a message");
+        let Message::Binary(b) = m else { continue };
+        // op 1: u32 subscription id, u64 log time, payload.
+        assert_eq!(b[0], 1, "message data opcode");
+        let sub = u32::from_le_bytes(b[1..5].try_into().expect("4 bytes"));
+        let payload = &b[13..];
+        match sub {
+            1 => updates.push(foxglove::messages::SceneUpdate::decode(payload).expect("a SceneUpdate")),
+            2 => metric_msgs.push(v1::Metrics::decode(payload).expect("lodcloth Metrics")),
+            other => panic!("data for subscription {other}"),
+        }
+    }
+    let nodes = 16 * 16;
+    for u in &updates {
+        let cloth = u.entities.iter().find(|e| e.id == "fox-a").expect("the cloth entity");
+        let t = &cloth.triangles[0];
+        assert_eq!(t.points.len(), nodes);
+        assert_eq!(t.colors.len(), nodes, "a colour per vertex");
+        assert_eq!(t.indices, info.triangles, "the level's triangles");
+        assert!(
+            cloth
+                .metadata
+                .iter()
+                .any(|kv| kv.key == "colour" && kv.value.starts_with("error")),
+            "coloured by error against the shadow reference"
+        );
+        // Pinned nodes sit on the reference: the bluest vertices.
+        let blue = |k: usize| t.colors[k].b - t.colors[k].r;
+        for &p in &info.pinned {
+            assert!(blue(p as usize) > 0.0, "pinned node {p} is not blue");
+        }
+        assert!(t.colors.iter().any(|c| c.r > c.b), "some vertex is off the reference");
+        assert!(u.entities.iter().any(|e| e.id == "fox-a/reference"));
+    }
+    assert!(metric_msgs.iter().all(|m| m.instance == "fox-a"));
+    drop(ws);
+    terminate(bridge.0.take().expect("the bridge"));
+    drop(c);
+    d.shutdown().await.expect("clean shutdown");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn record_writes_an_mcap_file_that_reads_back_with_the_mcap_crate() {
+    let d = start_daemon(("mcap-a", "mcap-b"));
+    let c = client(&[d.endpoint()]).await;
+    let info = wait_info(&c, "mcap-a").await;
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join("a.mcap");
+    let endpoint = d.endpoint();
+    let p = path.to_str().expect("utf-8 path").to_string();
+    let out = tokio::task::spawn_blocking(move || {
+        Command::new(env!("CARGO_BIN_EXE_lodcloth"))
+            .args([
+                "record",
+                "mcap-a",
+                "--seconds",
+                "2",
+                "--mcap",
+                &p,
+                "--connect",
+                &endpoint,
+            ])
+            .args(["--prefix", PREFIX])
+            .output()
+            .expect("running record")
+    })
+    .await
+    .expect("join");
+    assert!(
+        out.status.success(),
+        "record failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+
+    let bytes = std::fs::read(&path).expect("the MCAP file");
+    let mut meshes = Vec::new();
+    let mut metrics = 0;
+    for m in mcap::MessageStream::new(&bytes).expect("an MCAP file") {
+        let m = m.expect("a readable message");
+        let schema = m.channel.schema.as_ref().expect("a schema");
+        if m.channel.topic == mesh_topic("mcap-a") {
+            assert_eq!(schema.name, "foxglove.SceneUpdate");
+            assert_eq!(m.channel.message_encoding, "protobuf");
+            let u = foxglove::messages::SceneUpdate::decode(m.data.as_ref()).expect("a SceneUpdate");
+            meshes.push((m.log_time, u));
+        } else if m.channel.topic == metrics_topic("mcap-a") {
+            assert_eq!(schema.name, "lodcloth.v1.Metrics");
+            // The schema is the wire contract itself.
+            let fds = foxglove::prost_types::FileDescriptorSet::decode(schema.data.as_ref()).expect("descriptors");
+            assert!(fds.file.iter().any(|f| f.package() == "lodcloth.v1"));
+            assert_eq!(
+                v1::Metrics::decode(m.data.as_ref()).expect("Metrics").instance,
+                "mcap-a"
+            );
+            metrics += 1;
+        }
+    }
+    // 50 states a second for 2 s, every one recorded (allowing for start-up).
+    assert!(meshes.len() >= 50, "{} meshes", meshes.len());
+    assert!(metrics >= 2, "{metrics} metrics");
+    for w in meshes.windows(2) {
+        assert!(w[1].0 >= w[0].0, "log times in order");
+    }
+    for (log_time, u) in &meshes {
+        let e = &u.entities[0];
+        let stamp = e.timestamp.expect("a timestamp");
+        assert_eq!(stamp.sec() as u64 * 1_000_000_000 + stamp.nsec() as u64, *log_time);
+        assert_eq!(e.triangles[0].points.len(), 16 * 16);
+        assert_eq!(e.triangles[0].indices, info.triangles);
+    }
+    let summary = mcap::Summary::read(&bytes)
+        .expect("summary")
+        .expect("a summary section");
+    assert_eq!(
+        summary.stats.expect("statistics").message_count as usize,
+        meshes.len() + metrics
+    );
+    drop(c);
+    d.shutdown().await.expect("clean shutdown");
+}

@@ -1,0 +1,189 @@
+//! A daemon on loopback for the integration tests that talk to it over
+//! zenoh (`tests/service.rs`, `tests/clients.rs`), and the client helpers
+//! they share. Every await has a timeout.
+#![allow(dead_code)]
+
+use std::future::Future;
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use prost::Message;
+use tokio::sync::oneshot;
+use tokio::task::JoinHandle;
+
+use lodcloth::proto::{v1, Level};
+use lodcloth::service::client::{Client, ClientError};
+use lodcloth::service::config::ServiceConfig;
+use lodcloth::service::{keys, ServiceError};
+
+pub const PREFIX: &str = "lodtest";
+
+/// Fail the test instead of hanging.
+pub async fn within<T>(seconds: u64, what: &str, f: impl Future<Output = T>) -> T {
+    match tokio::time::timeout(Duration::from_secs(seconds), f).await {
+        Ok(v) => v,
+        Err(_) => panic!("{what}: no result within {seconds} s"),
+    }
+}
+
+pub fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .map(|a| a.port())
+        .expect("a free loopback port")
+}
+
+pub fn scene_path(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("config/scenes")
+        .join(name)
+}
+
+/// What every test daemon shares: a peer on loopback `port`, multicast
+/// off, two stepping threads, 50 states a second.
+pub fn config_header(port: u16, cache: &std::path::Path) -> String {
+    format!(
+        r#"
+prefix = "{PREFIX}"
+cache = "{cache}"
+[zenoh]
+mode = "peer"
+listen = ["tcp/127.0.0.1:{port}"]
+multicast_scouting = false
+[engine]
+threads = 2
+publish_hz = 50.0
+"#,
+        cache = cache.display()
+    )
+}
+
+/// A small daemon: paper scene 1 with a 24×24 reference at levels 8², 12²,
+/// 16² (method `same`: preparation takes well under a second), and a
+/// fixed-dt instance whose finest level is unstable at that dt.
+pub fn config_text(port: u16, cache: &std::path::Path, names: (&str, &str)) -> String {
+    config_header(port, cache)
+        + &format!(
+            r#"
+[estimation]
+reference_steps = 5000
+metric_stride = 25
+estimate_stride = 25
+[[instances]]
+name = "{a}"
+scene = "{scene1}"
+reference = "24x24"
+levels = ["8x8", "12x12", "16x16"]
+start = "16x16"
+method = "same"
+shadow_reference = true
+[[instances]]
+name = "{b}"
+scene = "{scene1}"
+reference = "24x24"
+levels = ["8x8", "16x16"]
+start = "8x8"
+method = "same"
+dt = 2.5e-3
+publish_hz = 20.0
+"#,
+            a = names.0,
+            b = names.1,
+            scene1 = scene_path("paper-1-top-edge.toml").display(),
+        )
+}
+
+pub struct Daemon {
+    pub port: u16,
+    stop: Option<oneshot::Sender<()>>,
+    task: JoinHandle<Result<(), ServiceError>>,
+    _dir: tempfile::TempDir,
+}
+
+impl Daemon {
+    pub fn start(names: (&str, &str)) -> Daemon {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let port = free_port();
+        let text = config_text(port, dir.path(), names);
+        Daemon::run(port, &text, dir)
+    }
+
+    /// Serve `text` (which listens on `port`); `dir` lives as long as the daemon.
+    pub fn run(port: u16, text: &str, dir: tempfile::TempDir) -> Daemon {
+        let config = ServiceConfig::from_toml(text, "test").expect("valid config");
+        let (tx, rx) = oneshot::channel();
+        let task = tokio::spawn(lodcloth::service::run(config, async {
+            let _ = rx.await;
+        }));
+        Daemon {
+            port,
+            stop: Some(tx),
+            task,
+            _dir: dir,
+        }
+    }
+
+    pub fn endpoint(&self) -> String {
+        format!("tcp/127.0.0.1:{}", self.port)
+    }
+
+    pub async fn shutdown(mut self) -> Result<(), ServiceError> {
+        if let Some(tx) = self.stop.take() {
+            let _ = tx.send(());
+        }
+        within(20, "graceful shutdown", self.task).await.expect("daemon task")
+    }
+}
+
+pub async fn client(endpoints: &[String]) -> Client {
+    // The daemon may still be opening its listener.
+    let deadline = Instant::now() + Duration::from_secs(10);
+    loop {
+        match Client::connect(endpoints, PREFIX).await {
+            Ok(mut c) => {
+                c.timeout = Duration::from_secs(5);
+                return c;
+            }
+            Err(e) if Instant::now() > deadline => panic!("cannot connect to {endpoints:?}: {e}"),
+            Err(_) => tokio::time::sleep(Duration::from_millis(100)).await,
+        }
+    }
+}
+
+/// Info once the daemon answers.
+pub async fn wait_info(c: &Client, instance: &str) -> v1::InstanceInfo {
+    let deadline = Instant::now() + Duration::from_secs(15);
+    loop {
+        match c.info(instance).await {
+            Ok(i) => return i,
+            Err(e) if Instant::now() > deadline => panic!("info of {instance}: {e}"),
+            Err(_) => tokio::time::sleep(Duration::from_millis(100)).await,
+        }
+    }
+}
+
+/// States of `instance` received for `seconds`.
+pub async fn collect_states(c: &Client, instance: &str, seconds: f64) -> Vec<v1::State> {
+    let sub = c
+        .session
+        .declare_subscriber(keys::state(PREFIX, instance))
+        .await
+        .expect("subscriber");
+    let end = Instant::now() + Duration::from_secs_f64(seconds);
+    let mut out = Vec::new();
+    while let Ok(Ok(s)) = tokio::time::timeout(end.saturating_duration_since(Instant::now()), sub.recv_async()).await {
+        out.push(v1::State::decode(s.payload().to_bytes().as_ref()).expect("a State"));
+    }
+    out
+}
+
+pub fn refused_code(r: Result<v1::SwitchReply, ClientError>) -> (String, String) {
+    match r {
+        Err(ClientError::Refused { code, message }) => (code, message),
+        other => panic!("expected a refusal, got {other:?}"),
+    }
+}
+
+pub fn level_of(s: &v1::State) -> Level {
+    Level::from_wire(s.level.as_ref().expect("level")).expect("a valid level")
+}
