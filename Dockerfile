@@ -72,7 +72,9 @@ COPY config/docker.toml config/docker.toml
 ENV LODCLOTH_LOG_JSON=true
 
 VOLUME ["/var/lib/lodcloth"]
-EXPOSE 7450/tcp
+# 7450: zenoh. 8080 and 8765 when the same image runs `view --listen
+# 0.0.0.0:8080` or `foxglove --host 0.0.0.0` beside the daemon (README).
+EXPOSE 7450/tcp 8080/tcp 8765/tcp
 USER 10001:10001
 
 # A client session to the daemon's own endpoint; exits 0 when every instance

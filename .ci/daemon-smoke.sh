@@ -10,7 +10,8 @@ LOG=out/ci-serve.log
 mkdir -p out
 "$BIN" serve > "$LOG" 2>&1 &
 DAEMON=$!
-trap 'kill $DAEMON 2>/dev/null || true' EXIT
+VIEW=
+trap 'kill $DAEMON $VIEW 2>/dev/null || true' EXIT
 for _ in $(seq 50); do "$BIN" health > /dev/null 2>&1 && break; sleep 0.2; done
 "$BIN" health
 "$BIN" list
@@ -19,6 +20,18 @@ for _ in $(seq 50); do "$BIN" health > /dev/null 2>&1 && break; sleep 0.2; done
 if "$BIN" switch paper-1 17x17; then echo "a level outside the allowed set was accepted" >&2; exit 1; fi
 "$BIN" record paper-1 --seconds 1 --out out/ci-record.lct
 "$BIN" inspect out/ci-record.lct
+# The Foxglove channels to an MCAP file, and the browser view's server (the
+# page itself is driven by tests/clients.rs in headless Chromium).
+"$BIN" record paper-1 --seconds 1 --mcap out/ci-record.mcap
+test -s out/ci-record.mcap
+"$BIN" view --listen 127.0.0.1:8090 > out/ci-view.log 2>&1 &
+VIEW=$!
+for _ in $(seq 50); do curl -fsS http://127.0.0.1:8090/api/instances 2>/dev/null | grep -q sphere && break; sleep 0.2; done
+curl -fsS http://127.0.0.1:8090/api/instances | grep -q '"name":"paper-1","alive":true'
+curl -fsS http://127.0.0.1:8090/ | grep -q '<canvas id="view"'
+kill -TERM $VIEW
+wait $VIEW
+VIEW=
 $PY list --timeout 10
 $PY watch hanging --count 3 --timeout 10
 $PY switch hanging --level 24x24 --timeout 300

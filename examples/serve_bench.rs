@@ -221,6 +221,7 @@ method = "gkd"
             positions: vec![0.5; 3 * n * n],
             simulation_positions: Vec::new(),
             normals: Vec::new(),
+            reference_positions: Vec::new(),
             stepped: std::time::SystemTime::now(),
             transition: false,
         };
