@@ -461,3 +461,108 @@ async fn record_writes_an_mcap_file_that_reads_back_with_the_mcap_crate() {
     drop(c);
     d.shutdown().await.expect("clean shutdown");
 }
+
+/// A page-like WebSocket client of the viewer: selects `instance`, reads
+/// for `seconds`, and acknowledges each state after `think` (its
+/// processing time). Returns the age of every state at receipt (ms: the
+/// receipt clock minus the daemon's step time).
+async fn page_client(base: &str, instance: &str, seconds: f64, think: Duration) -> Vec<f64> {
+    let url = format!("{}/ws", base.replace("http://", "ws://"));
+    let (mut ws, _) = within(10, "viewer WebSocket", tokio_tungstenite::connect_async(&url))
+        .await
+        .expect("viewer WebSocket");
+    let select = json!({ "op": "select", "instance": instance }).to_string();
+    ws.send(Message::Text(select.into())).await.expect("select");
+    let end = Instant::now() + Duration::from_secs_f64(seconds);
+    let mut ages = Vec::new();
+    // (A timeout alone would not end the loop: with flow control the next
+    // state is always ready after an ack.)
+    while Instant::now() < end {
+        let Ok(Some(Ok(m))) = tokio::time::timeout(end.saturating_duration_since(Instant::now()), ws.next()).await
+        else {
+            break;
+        };
+        let Message::Binary(b) = m else { continue };
+        if b[0] != lodcloth::view::tag::STATE {
+            continue;
+        }
+        let s = v1::State::decode(&b[1..]).expect("a State");
+        let now = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .expect("clock")
+            .as_nanos() as f64;
+        ages.push((now - s.stepped_unix_nanos as f64) / 1e6);
+        tokio::time::sleep(think).await;
+        if ws.send(Message::Text(r#"{"op":"ack"}"#.into())).await.is_err() {
+            break;
+        }
+    }
+    ages
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_slow_page_gets_fresh_states_and_a_fast_one_gets_them_all() {
+    let d = start_daemon(("flow-a", "flow-b"));
+    let c = client(&[d.endpoint()]).await;
+    wait_info(&c, "flow-a").await;
+    wait_reference(&c, "flow-a").await;
+    let (base, stop_view) = start_view(d.endpoint()).await;
+    // A page that never reads at all, beside the two measured ones.
+    let url = format!("{}/ws", base.replace("http://", "ws://"));
+    let (mut stalled, _) = tokio_tungstenite::connect_async(&url).await.expect("WebSocket");
+    let select = json!({ "op": "select", "instance": "flow-a" }).to_string();
+    stalled.send(Message::Text(select.into())).await.expect("select");
+
+    let seconds = 5.0;
+    let (fast, slow) = tokio::join!(
+        page_client(&base, "flow-a", seconds, Duration::ZERO),
+        page_client(&base, "flow-a", seconds, Duration::from_millis(400)),
+    );
+    let median = |v: &[f64]| {
+        let mut v = v.to_vec();
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    // 50 states a second are published: the fast page gets nearly all.
+    assert!(
+        fast.len() as f64 >= 0.8 * 50.0 * seconds,
+        "fast page: {} states",
+        fast.len()
+    );
+    assert!(median(&fast) < 50.0, "fast page: median age {:.1} ms", median(&fast));
+    // The slow page handles ~2.5 states a second; with flow control they are
+    // the newest at each ack, so no state is older than about one
+    // processing time (400 ms) plus the one in flight; a backlog in socket
+    // buffers would age them by the whole run (~5 s) by the end.
+    assert!(slow.len() >= 8, "slow page: {} states", slow.len());
+    let worst = slow.iter().copied().fold(0.0, f64::max);
+    assert!(worst < 1200.0, "slow page: a state {worst:.0} ms old (ages {slow:?})");
+    eprintln!(
+        "fast page: {} states, median age {:.1} ms; slow page: {} states, worst age {worst:.0} ms",
+        fast.len(),
+        median(&fast),
+        slow.len()
+    );
+    let stats: Value = serde_json::from_str(
+        &within(10, "stats", async {
+            let mut s = TcpStream::connect(base.trim_start_matches("http://"))
+                .await
+                .expect("connect");
+            use tokio::io::{AsyncReadExt, AsyncWriteExt};
+            s.write_all(b"GET /api/stats HTTP/1.0\r\n\r\n").await.expect("request");
+            let mut body = String::new();
+            s.read_to_string(&mut body).await.expect("response");
+            body.split("\r\n\r\n").nth(1).unwrap_or_default().to_string()
+        })
+        .await,
+    )
+    .expect("stats JSON");
+    assert!(
+        stats["skipped"].as_u64().unwrap_or(0) > 0,
+        "frames were skipped for slow pages: {stats}"
+    );
+    drop(stalled);
+    let _ = stop_view.send(());
+    drop(c);
+    d.shutdown().await.expect("clean shutdown");
+}

@@ -13,7 +13,13 @@
 //!   instance stays listed with `alive: false`), `switch` replies, `error`;
 //! - page → server, text JSON: `{"op":"select","instance":…}`,
 //!   `{"op":"info"}`, `{"op":"switch","id":…,"level":"16x16"}` or
-//!   `{…,"max_error":0.05}` (optional `"method"`).
+//!   `{…,"max_error":0.05}` (optional `"method"`), and `{"op":"ack"}` for
+//!   every state received.
+//!
+//! Flow control: at most [`MAX_IN_FLIGHT`] states are sent and not yet
+//! acknowledged; the next one is the latest when an ack comes back. Socket
+//! buffers therefore never hold a backlog of old states: a slow page (or a
+//! slow network) sees fewer, fresh states, never a growing delay.
 
 use std::collections::{BTreeMap, HashMap};
 use std::future::Future;
@@ -46,6 +52,9 @@ pub mod tag {
     pub const METRICS: u8 = 2;
     pub const INFO: u8 = 3;
 }
+
+/// States sent to a page and not yet acknowledged, at most.
+pub const MAX_IN_FLIGHT: u32 = 2;
 
 /// How long a switch from the page may take (an unprepared level is
 /// estimated first).
@@ -270,6 +279,8 @@ enum Command {
         instance: String,
     },
     Info,
+    /// A state arrived at the page.
+    Ack,
     Switch {
         #[serde(default)]
         id: u64,
@@ -369,6 +380,7 @@ async fn connection(mut socket: WebSocket, hub: Arc<Hub>) -> Result<(), axum::Er
     let mut shutdown = hub.shutdown.clone();
     let (out_tx, mut out_rx) = mpsc::channel::<Message>(16);
     let mut selected = Selected::default();
+    let mut in_flight = 0u32;
     socket
         .send(json(serde_json::json!({
             "type": "hello", "prefix": hub.client.prefix, "connect": hub.connect,
@@ -380,7 +392,13 @@ async fn connection(mut socket: WebSocket, hub: Arc<Hub>) -> Result<(), axum::Er
             msg = socket.recv() => match msg {
                 Some(Ok(Message::Text(text))) => {
                     match serde_json::from_str::<Command>(text.as_str()) {
-                        Ok(cmd) => command(cmd, &hub, &mut selected, &out_tx),
+                        Ok(Command::Ack) => in_flight = in_flight.saturating_sub(1),
+                        Ok(cmd) => {
+                            if matches!(cmd, Command::Select { .. }) {
+                                in_flight = 0;
+                            }
+                            command(cmd, &hub, &mut selected, &out_tx);
+                        }
                         Err(e) => socket.send(json(serde_json::json!({
                             "type": "error", "message": format!("unreadable command {:?}: {e}", text.as_str()),
                         }))).await?,
@@ -395,13 +413,14 @@ async fn connection(mut socket: WebSocket, hub: Arc<Hub>) -> Result<(), axum::Er
                     .map(|(name, &alive)| Entry { name: name.clone(), alive }).collect();
                 socket.send(json(serde_json::json!({"type": "instances", "instances": entries}))).await?;
             }
-            () = changed(selected.state.as_mut()) => {
+            () = changed(selected.state.as_mut()), if in_flight < MAX_IN_FLIGHT => {
                 let latest = selected.state.as_mut().and_then(|rx| rx.borrow_and_update().clone());
                 if let Some((seq, bytes)) = latest {
                     if let Some(last) = selected.last_state {
                         hub.skipped.fetch_add(seq.saturating_sub(last + 1), Ordering::Relaxed);
                     }
                     selected.last_state = Some(seq);
+                    in_flight += 1;
                     send_frame(&mut socket, &hub, bytes).await?;
                 }
             }
@@ -440,6 +459,7 @@ fn command(cmd: Command, hub: &Arc<Hub>, selected: &mut Selected, out: &mpsc::Se
             };
             send_info(hub, instance, out);
         }
+        Command::Ack => {}
         Command::Info => match &selected.name {
             Some(name) => send_info(hub, name.clone(), out),
             None => {
