@@ -29,40 +29,11 @@ use lodcloth::view::ViewOptions;
 
 type Ws = WebSocketStream<MaybeTlsStream<TcpStream>>;
 
-/// Two instances of paper scene 1 (24×24 reference, method `same`); the
-/// first runs a shadow reference recorded over the scene's whole 6 s loop,
-/// so every state carries it.
+/// The test daemon ([`Daemon::start`]) with the reference recorded over the
+/// scene's whole 6 s loop (30000 steps of 0.2 ms), so every state of the
+/// first instance carries its shadow reference.
 fn start_daemon(names: (&str, &str)) -> Daemon {
-    let dir = tempfile::tempdir().expect("temp dir");
-    let port = free_port();
-    let text = config_header(port, dir.path())
-        + &format!(
-            r#"
-[estimation]
-reference_steps = 30000
-metric_stride = 25
-estimate_stride = 25
-[[instances]]
-name = "{a}"
-scene = "{scene}"
-reference = "24x24"
-levels = ["8x8", "12x12", "16x16"]
-start = "16x16"
-method = "same"
-shadow_reference = true
-[[instances]]
-name = "{b}"
-scene = "{scene}"
-reference = "24x24"
-levels = ["8x8"]
-start = "8x8"
-method = "same"
-"#,
-            a = names.0,
-            b = names.1,
-            scene = scene_path("paper-1-top-edge.toml").display(),
-        );
-    Daemon::run(port, &text, dir)
+    Daemon::start_recording(names, 30_000)
 }
 
 /// Wait until the instance's states carry its shadow reference (the

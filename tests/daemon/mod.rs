@@ -60,13 +60,20 @@ publish_hz = 50.0
 
 /// A small daemon: paper scene 1 with a 24×24 reference at levels 8², 12²,
 /// 16² (method `same`: preparation takes well under a second), and a
-/// fixed-dt instance whose finest level is unstable at that dt.
+/// fixed-dt instance whose finest level is unstable at that dt. The
+/// reference covers the first second of the scene's 6 s loop.
 pub fn config_text(port: u16, cache: &std::path::Path, names: (&str, &str)) -> String {
+    config_text_recording(port, cache, names, 5000)
+}
+
+/// [`config_text`] with `reference_steps` recorded (30000: the whole loop,
+/// so every state carries the shadow reference).
+pub fn config_text_recording(port: u16, cache: &std::path::Path, names: (&str, &str), reference_steps: u64) -> String {
     config_header(port, cache)
         + &format!(
             r#"
 [estimation]
-reference_steps = 5000
+reference_steps = {reference_steps}
 metric_stride = 25
 estimate_stride = 25
 [[instances]]
@@ -102,9 +109,14 @@ pub struct Daemon {
 
 impl Daemon {
     pub fn start(names: (&str, &str)) -> Daemon {
+        Daemon::start_recording(names, 5000)
+    }
+
+    /// [`Daemon::start`] with `reference_steps` of reference recorded.
+    pub fn start_recording(names: (&str, &str), reference_steps: u64) -> Daemon {
         let dir = tempfile::tempdir().expect("temp dir");
         let port = free_port();
-        let text = config_text(port, dir.path(), names);
+        let text = config_text_recording(port, dir.path(), names, reference_steps);
         Daemon::run(port, &text, dir)
     }
 
@@ -171,7 +183,13 @@ pub async fn collect_states(c: &Client, instance: &str, seconds: f64) -> Vec<v1:
         .expect("subscriber");
     let end = Instant::now() + Duration::from_secs_f64(seconds);
     let mut out = Vec::new();
-    while let Ok(Ok(s)) = tokio::time::timeout(end.saturating_duration_since(Instant::now()), sub.recv_async()).await {
+    // The deadline is checked apart from the timeout: a subscriber with a
+    // backlog is always ready, and a timeout polls its future first.
+    while Instant::now() < end {
+        let Ok(Ok(s)) = tokio::time::timeout(end.saturating_duration_since(Instant::now()), sub.recv_async()).await
+        else {
+            break;
+        };
         out.push(v1::State::decode(s.payload().to_bytes().as_ref()).expect("a State"));
     }
     out
