@@ -23,6 +23,7 @@ use serde_json::Value;
 use browser::Browser;
 use daemon::*;
 use lodcloth::proto::v1;
+use lodcloth::service::client::ClientOptions;
 use lodcloth::view::ViewOptions;
 
 /// p-quantile of sorted values.
@@ -79,7 +80,7 @@ method = "same"
     let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
     let options = ViewOptions {
         listen: "127.0.0.1:0".parse().expect("address"),
-        connect: vec![d.endpoint()],
+        zenoh: ClientOptions::new(&[d.endpoint()]),
         prefix: PREFIX.into(),
     };
     let view = tokio::spawn(lodcloth::view::run(

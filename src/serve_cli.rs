@@ -12,7 +12,7 @@ use prost::Message;
 use lodcloth::foxglove_bridge::{relay, RelayOptions};
 use lodcloth::output::{Precision, TrajectoryWriter};
 use lodcloth::proto::{unpack_positions, v1, Level};
-use lodcloth::service::client::Client;
+use lodcloth::service::client::{Client, ClientOptions, ClientSecurity};
 use lodcloth::service::config::ServiceConfig;
 use lodcloth::service::keys;
 use lodcloth::sim::State;
@@ -33,6 +33,42 @@ pub struct Connect {
     /// Key prefix of the daemon.
     #[arg(long, default_value = "lodcloth")]
     pub prefix: String,
+    /// zenoh client mode: one connection, through a router (re-established
+    /// when the router restarts), instead of a peer.
+    #[arg(long, env = "LODCLOTH_CLIENT_MODE")]
+    pub client_mode: bool,
+    /// User name for a daemon that authenticates (with --password).
+    #[arg(long, env = "LODCLOTH_USER")]
+    pub user: Option<String>,
+    /// Password of --user; prefer the environment variable to the command line.
+    #[arg(long, env = "LODCLOTH_PASSWORD", hide_env_values = true)]
+    pub password: Option<String>,
+    /// PEM of the CA that signed the daemon's certificate (tls/ endpoints).
+    #[arg(long, env = "LODCLOTH_TLS_CA")]
+    pub tls_ca: Option<PathBuf>,
+    /// This client's PEM certificate, for a daemon that requires mTLS.
+    #[arg(long, env = "LODCLOTH_TLS_CERT")]
+    pub tls_cert: Option<PathBuf>,
+    /// The private key of --tls-cert.
+    #[arg(long, env = "LODCLOTH_TLS_KEY")]
+    pub tls_key: Option<PathBuf>,
+}
+
+impl Connect {
+    /// The zenoh side of these options.
+    pub fn options(&self) -> ClientOptions {
+        ClientOptions {
+            connect: self.connect.clone(),
+            client_mode: self.client_mode,
+            security: ClientSecurity {
+                user: self.user.clone(),
+                password: self.password.clone(),
+                tls_root_ca: self.tls_ca.clone(),
+                tls_certificate: self.tls_cert.clone(),
+                tls_private_key: self.tls_key.clone(),
+            },
+        }
+    }
 }
 
 /// `serve` options.
@@ -101,7 +137,7 @@ pub fn serve(args: ServeArgs) -> Result<()> {
 }
 
 async fn connect(c: &Connect) -> Result<Client> {
-    Client::connect(&c.connect, &c.prefix)
+    Client::open(&c.options(), &c.prefix)
         .await
         .with_context(|| format!("connecting to {}", c.connect.join(", ")))
 }
@@ -502,7 +538,7 @@ pub fn view(c: Connect, listen: std::net::SocketAddr) -> Result<()> {
     runtime()?.block_on(async {
         let options = ViewOptions {
             listen,
-            connect: c.connect,
+            zenoh: c.options(),
             prefix: c.prefix,
         };
         lodcloth::view::run(

@@ -25,6 +25,7 @@ use browser::Browser;
 use daemon::*;
 use lodcloth::foxglove_bridge::{mesh_topic, metrics_topic};
 use lodcloth::proto::{v1, Level};
+use lodcloth::service::client::ClientOptions;
 use lodcloth::view::ViewOptions;
 
 type Ws = WebSocketStream<MaybeTlsStream<TcpStream>>;
@@ -81,7 +82,7 @@ async fn start_view(endpoint: String) -> (String, tokio::sync::oneshot::Sender<(
     let (addr_tx, addr_rx) = tokio::sync::oneshot::channel();
     let options = ViewOptions {
         listen: "127.0.0.1:0".parse().expect("an address"),
-        connect: vec![endpoint],
+        zenoh: ClientOptions::new(&[endpoint]),
         prefix: PREFIX.into(),
     };
     tokio::spawn(async move {

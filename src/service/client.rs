@@ -7,6 +7,7 @@ use prost::Message;
 use zenoh::query::{ConsolidationMode, QueryTarget};
 use zenoh::Session;
 
+pub use super::security::ClientSecurity;
 use super::{encoding, keys};
 use crate::proto::{schema, v1};
 
@@ -42,24 +43,57 @@ fn refused(bytes: &[u8]) -> ClientError {
     }
 }
 
-/// A zenoh session config for a client: a peer connected to every endpoint
-/// in `connect` with multicast scouting off (several daemons on different
-/// endpoints are all reached; zenoh's `client` mode would keep only one
-/// connection), or a peer discovering others by multicast when empty.
-pub fn client_config(connect: &[String]) -> Result<zenoh::Config, ClientError> {
+/// How a client joins zenoh.
+#[derive(Debug, Clone, Default)]
+pub struct ClientOptions {
+    /// Endpoints of daemons or routers; empty: discover peers by multicast.
+    pub connect: Vec<String>,
+    /// zenoh `client` mode: one connection, to a router, re-established
+    /// when the router comes back. Otherwise a peer connected to every
+    /// endpoint (several daemons on different endpoints are all reached).
+    pub client_mode: bool,
+    /// Credentials and certificates for a secured daemon.
+    pub security: ClientSecurity,
+}
+
+impl ClientOptions {
+    /// A peer connected to `connect`, no credentials.
+    pub fn new(connect: &[String]) -> ClientOptions {
+        ClientOptions {
+            connect: connect.to_vec(),
+            ..ClientOptions::default()
+        }
+    }
+}
+
+/// A zenoh session config for a client (see [`ClientOptions`]); multicast
+/// scouting is off when endpoints are given.
+pub fn client_config(options: &ClientOptions) -> Result<zenoh::Config, ClientError> {
+    let problems = options.security.problems();
+    if !problems.is_empty() {
+        return Err(ClientError::Zenoh(problems.join("; ")));
+    }
+    if options.client_mode && options.connect.is_empty() {
+        return Err(ClientError::Zenoh("client mode needs an endpoint to connect to".into()));
+    }
     let mut c = zenoh::Config::default();
     let set = |c: &mut zenoh::Config, k: &str, v: &str| {
         c.insert_json5(k, v)
             .map_err(|e| ClientError::Zenoh(format!("{k}: {e}")))
     };
-    set(&mut c, "mode", "\"peer\"")?;
+    set(
+        &mut c,
+        "mode",
+        if options.client_mode { "\"client\"" } else { "\"peer\"" },
+    )?;
     // A client listens on nothing.
     set(&mut c, "listen/endpoints", "[]")?;
-    if !connect.is_empty() {
-        let endpoints = serde_json::to_string(connect).map_err(|e| ClientError::Zenoh(e.to_string()))?;
+    if !options.connect.is_empty() {
+        let endpoints = serde_json::to_string(&options.connect).map_err(|e| ClientError::Zenoh(e.to_string()))?;
         set(&mut c, "connect/endpoints", &endpoints)?;
         set(&mut c, "scouting/multicast/enabled", "false")?;
     }
+    options.security.apply(&mut c).map_err(ClientError::Zenoh)?;
     Ok(c)
 }
 
@@ -71,9 +105,14 @@ pub struct Client {
 }
 
 impl Client {
-    /// Open a session (see [`client_config`]).
+    /// Open a peer session connected to `connect`, without credentials.
     pub async fn connect(connect: &[String], prefix: &str) -> Result<Client, ClientError> {
-        let session = zenoh::open(client_config(connect)?).await.map_err(zerr)?;
+        Client::open(&ClientOptions::new(connect), prefix).await
+    }
+
+    /// Open a session (see [`client_config`]).
+    pub async fn open(options: &ClientOptions, prefix: &str) -> Result<Client, ClientError> {
+        let session = zenoh::open(client_config(options)?).await.map_err(zerr)?;
         Ok(Client {
             session,
             prefix: prefix.to_string(),

@@ -8,6 +8,7 @@ use serde::Deserialize;
 
 use std::sync::Arc;
 
+use super::security;
 use crate::estimate::{Method, RecordSpec};
 use crate::points::scene::SurfaceScene;
 use crate::proto::Level;
@@ -70,6 +71,12 @@ pub struct RawZenoh {
     /// Multicast scouting (discovering peers on the LAN); off in containers
     /// and tests, where endpoints are explicit.
     pub multicast_scouting: Option<bool>,
+    /// TLS on `tls/` endpoints, optionally mutual (see [`security`]).
+    pub tls: Option<security::RawTls>,
+    /// User/password authentication of every session.
+    pub auth: Option<security::RawAuth>,
+    /// Observe for all, switch and control for the operators named here.
+    pub access: Option<security::RawAccess>,
 }
 
 /// The stepping engine.
@@ -384,11 +391,13 @@ impl ServiceConfig {
             }
         }
         let s = &raw.estimation;
-        if s.reference_steps < 3 * s.metric_stride.max(1) {
+        // In u128: three frames of a huge stride overflow u64 (and wrapped,
+        // would pass).
+        let three_frames = 3 * u128::from(s.metric_stride.max(1));
+        if u128::from(s.reference_steps) < three_frames {
             p.push(format!(
-                "estimation.reference_steps: {} must cover at least 3 metric frames ({} steps)",
+                "estimation.reference_steps: {} must cover at least 3 metric frames ({three_frames} steps)",
                 s.reference_steps,
-                3 * s.metric_stride.max(1)
             ));
         }
         if s.metric_stride == 0 {
@@ -569,6 +578,14 @@ impl ServiceConfig {
                 .insert_json5("scouting/multicast/enabled", &json(&on))
                 .map_err(|e| fail(format!("multicast_scouting: {e}")))?;
         }
+        security::apply_daemon(
+            &mut config,
+            &self.prefix,
+            z.tls.as_ref(),
+            z.auth.as_ref(),
+            z.access.as_ref(),
+        )
+        .map_err(fail)?;
         Ok(config)
     }
 }
@@ -686,6 +703,23 @@ fn zenoh_problems(z: &RawZenoh) -> Vec<String> {
         if !f.exists() {
             p.push(format!("zenoh.config_file: {} does not exist", f.display()));
         }
+    }
+    p.extend(security::problems(z.tls.as_ref(), z.auth.as_ref(), z.access.as_ref()));
+    let tls_endpoint = z
+        .listen
+        .iter()
+        .chain(&z.connect)
+        .flatten()
+        .any(|e| e.starts_with("tls/"));
+    if tls_endpoint
+        && z.tls
+            .as_ref()
+            .is_none_or(|t| t.certificate.is_none() && t.root_ca.is_none())
+    {
+        p.push(
+            "zenoh: a tls/ endpoint needs [zenoh.tls] (certificate and private_key to listen, root_ca to connect)"
+                .into(),
+        );
     }
     p
 }

@@ -14,9 +14,12 @@
 pub mod client;
 pub mod config;
 pub mod keys;
+pub mod request;
+pub mod security;
 
 use std::collections::BTreeMap;
 use std::future::Future;
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant, UNIX_EPOCH};
 
@@ -36,6 +39,7 @@ use crate::estimate::Method;
 use crate::proto::{self, schema, v1, Level};
 use crate::sim::Simulation;
 use config::{ConfigError, ServiceConfig};
+use request::{Refusal, SwitchTarget};
 use v1::error::Code;
 
 /// Why the daemon could not start or stopped with an error.
@@ -66,7 +70,19 @@ struct Instance {
     preparer: Arc<Preparer>,
     /// One switch at a time per instance; later requests queue here.
     switching: tokio::sync::Mutex<()>,
+    /// Switches in progress or queued (at most [`MAX_PENDING_SWITCHES`]).
+    pending_switches: AtomicUsize,
 }
+
+/// Switch requests per instance in progress or queued; more are refused
+/// with `BUSY` at once. Four covers a user clicking through levels while
+/// one is estimated; a flood (100/s) gets prompt refusals instead of an
+/// ever-growing queue, and the last accepted switch wins.
+pub const MAX_PENDING_SWITCHES: usize = 4;
+
+/// Switch and control requests being handled at once, over all instances;
+/// more are refused with `BUSY` without being decoded.
+pub const MAX_REQUESTS_IN_FLIGHT: usize = 64;
 
 struct Context {
     prefix: String,
@@ -147,6 +163,7 @@ pub async fn serve(
                 handle: handle.clone(),
                 preparer: preparer.clone(),
                 switching: tokio::sync::Mutex::new(()),
+                pending_switches: AtomicUsize::new(0),
             }),
         );
     }
@@ -216,10 +233,18 @@ pub async fn serve(
             Ok(q) = info_q.recv_async() => answer_info(&ctx, q).await,
             Ok(q) = list_q.recv_async() => answer_list(&ctx, q).await,
             Ok(q) = switch_q.recv_async() => {
-                requests.spawn(answer_switch(ctx.clone(), q));
+                if requests.len() >= MAX_REQUESTS_IN_FLIGHT {
+                    busy(q).await;
+                } else {
+                    requests.spawn(answer_switch(ctx.clone(), q));
+                }
             }
             Ok(q) = control_q.recv_async() => {
-                requests.spawn(answer_control(ctx.clone(), q));
+                if requests.len() >= MAX_REQUESTS_IN_FLIGHT {
+                    busy(q).await;
+                } else {
+                    requests.spawn(answer_control(ctx.clone(), q));
+                }
             }
             Some(_) = requests.join_next(), if !requests.is_empty() => {}
         }
@@ -571,101 +596,85 @@ async fn answer_list(ctx: &Context, q: Query) {
     .await;
 }
 
-/// Decode a request payload, or say exactly what is wrong with it.
-fn decode<M: Message + Default>(q: &Query, schema: &str) -> Result<M, String> {
-    let Some(payload) = q.payload() else {
-        return Err(format!("empty request; send a {schema} payload"));
-    };
-    if let Some(enc) = q.encoding() {
-        let text = enc.to_string();
-        let base = text.split(';').next().unwrap_or_default();
-        if base != "application/protobuf" && base != "zenoh/bytes" {
-            return Err(format!(
-                "payload encoding is {enc}; expected application/protobuf ({schema})"
-            ));
-        }
-    }
-    M::decode(payload.to_bytes().as_ref()).map_err(|e| format!("malformed {schema}: {e}"))
+/// Decode a request's payload (see [`request::decode`]).
+fn decode<M: Message + Default>(q: &Query, schema: &str) -> Result<M, Refusal> {
+    let encoding = q.encoding().map(|e| e.to_string());
+    let payload = q.payload().map(|p| p.to_bytes());
+    request::decode(schema, encoding.as_deref(), payload.as_deref())
 }
 
 /// The instance a request for `<prefix>/<instance>/<leaf>` addresses.
-async fn target<'a>(ctx: &'a Context, q: &Query, leaf: &str) -> Option<&'a Arc<Instance>> {
-    let key = q.key_expr().as_str();
-    let Some(name) = keys::instance_of(&ctx.prefix, leaf, key) else {
-        reply_error(
-            q,
-            Code::BadRequest,
-            format!(
-                "'{key}' names no single instance; send to {}/<instance>/{leaf}",
-                ctx.prefix
-            ),
-        )
-        .await;
-        return None;
-    };
-    match ctx.instances.get(name) {
-        Some(i) => Some(i),
-        None => {
-            reply_error(q, Code::UnknownInstance, unknown_instance(ctx, name)).await;
-            None
-        }
+fn target<'a>(ctx: &'a Context, q: &Query, leaf: &str) -> Result<&'a Arc<Instance>, Refusal> {
+    let name = request::instance_name(
+        &ctx.prefix,
+        leaf,
+        q.key_expr().as_str(),
+        |n| ctx.instances.contains_key(n),
+        || ctx.instances.keys().cloned().collect::<Vec<_>>().join(", "),
+    )?;
+    Ok(&ctx.instances[name])
+}
+
+/// Refuse a request because too many are being handled.
+async fn busy(q: Query) {
+    let message = format!("the daemon is handling {MAX_REQUESTS_IN_FLIGHT} requests; retry shortly");
+    reply_error(&q, Code::Busy, message).await
+}
+
+/// Answer a refusal.
+async fn refuse(q: &Query, r: Refusal) {
+    reply_error(q, r.code, r.message).await
+}
+
+/// Holds one of an instance's bounded switch slots (see
+/// [`MAX_PENDING_SWITCHES`]); frees it when dropped.
+struct SwitchSlot<'a>(&'a AtomicUsize);
+
+impl<'a> SwitchSlot<'a> {
+    fn take(pending: &'a AtomicUsize) -> Option<SwitchSlot<'a>> {
+        pending
+            .fetch_update(Ordering::AcqRel, Ordering::Acquire, |n| {
+                (n < MAX_PENDING_SWITCHES).then_some(n + 1)
+            })
+            .ok()
+            .map(|_| SwitchSlot(pending))
+    }
+}
+
+impl Drop for SwitchSlot<'_> {
+    fn drop(&mut self) {
+        self.0.fetch_sub(1, Ordering::AcqRel);
     }
 }
 
 async fn answer_switch(ctx: Arc<Context>, q: Query) {
     let arrived = Instant::now();
-    let Some(inst) = target(&ctx, &q, "switch").await else {
-        return;
+    let checked = target(&ctx, &q, "switch").and_then(|inst| {
+        let req: v1::SwitchRequest = decode(&q, schema::SWITCH_REQUEST)?;
+        Ok((inst, request::switch_plan(inst.preparer.config(), &req)?))
+    });
+    let (inst, plan) = match checked {
+        Ok(c) => c,
+        Err(r) => return refuse(&q, r).await,
     };
-    let req: v1::SwitchRequest = match decode(&q, schema::SWITCH_REQUEST) {
-        Ok(r) => r,
-        Err(e) => return reply_error(&q, Code::BadRequest, e).await,
+    // A bounded queue per instance: a flood of switches is refused here,
+    // cheaply, instead of piling up behind the one being applied.
+    let Some(_slot) = SwitchSlot::take(&inst.pending_switches) else {
+        return reply_error(
+            &q,
+            Code::Busy,
+            format!(
+                "{MAX_PENDING_SWITCHES} switches of '{}' are already in progress or waiting; retry when one completes",
+                inst.handle.name
+            ),
+        )
+        .await;
     };
     let config = inst.preparer.config().clone();
-    let method = if req.method.is_empty() {
-        config.method
-    } else {
-        match Method::from_name(&req.method) {
-            Some(m) => m,
-            None => {
-                return reply_error(
-                    &q,
-                    Code::BadRequest,
-                    format!("method '{}' is not one of same, bcd, gkd, lsq, fit", req.method),
-                )
-                .await
-            }
-        }
-    };
-    let allowed = crate::engine::prepare::allowed(&config.levels);
-    let level = match req.target {
-        None => {
-            return reply_error(&q, Code::BadRequest, "no target: set either level or max_error").await;
-        }
-        Some(v1::switch_request::Target::Level(l)) => {
-            let level = match Level::from_wire(&l) {
-                Ok(level) => level,
-                Err(e) => return reply_error(&q, Code::BadRequest, e).await,
-            };
-            if !config.levels.contains(&level) {
-                return reply_error(
-                    &q,
-                    Code::LevelNotAllowed,
-                    format!("level {level} is not allowed for '{}'; allowed: {allowed}", config.name),
-                )
-                .await;
-            }
-            level
-        }
-        Some(v1::switch_request::Target::MaxError(e)) => {
-            if !(e > 0.0 && e.is_finite()) {
-                return reply_error(
-                    &q,
-                    Code::BadRequest,
-                    format!("max_error {e} must be a positive finite fraction (0.05 = 5 %)"),
-                )
-                .await;
-            }
+    let method = plan.method;
+    let level = match plan.target {
+        SwitchTarget::Level(level) => level,
+        SwitchTarget::MaxError(e) => {
             // Every level's predicted error is needed: prepare them all
             // (cheapest first), then take the cheapest that meets the bound.
             let mut levels = config.levels.clone();
@@ -752,33 +761,26 @@ async fn answer_switch(ctx: Arc<Context>, q: Query) {
 }
 
 async fn answer_control(ctx: Arc<Context>, q: Query) {
-    let Some(inst) = target(&ctx, &q, "control").await else {
-        return;
-    };
-    let req: v1::ControlRequest = match decode(&q, schema::CONTROL_REQUEST) {
-        Ok(r) => r,
-        Err(e) => return reply_error(&q, Code::BadRequest, e).await,
+    let checked = target(&ctx, &q, "control").and_then(|inst| {
+        let req: v1::ControlRequest = decode(&q, schema::CONTROL_REQUEST)?;
+        Ok((inst, request::control_action(&req)?))
+    });
+    let (inst, action) = match checked {
+        Ok(c) => c,
+        Err(r) => return refuse(&q, r).await,
     };
     use v1::control_request::Action;
     let (tx, rx) = oneshot::channel();
-    let command = match Action::try_from(req.action) {
-        Ok(Action::Pause) => Command::Pause {
+    let command = match action {
+        Action::Pause => Command::Pause {
             paused: true,
             reply: tx,
         },
-        Ok(Action::Resume) => Command::Pause {
+        Action::Resume => Command::Pause {
             paused: false,
             reply: tx,
         },
-        Ok(Action::Reset) => Command::Reset { reply: tx },
-        _ => {
-            return reply_error(
-                &q,
-                Code::BadRequest,
-                format!("action {} is not one of PAUSE, RESUME, RESET", req.action),
-            )
-            .await
-        }
+        Action::Reset | Action::Unspecified => Command::Reset { reply: tx },
     };
     if let Err(e) = inst.handle.send(command) {
         return reply_error(&q, Code::Unavailable, e).await;

@@ -40,7 +40,7 @@ use tokio::sync::{mpsc, watch};
 use zenoh::sample::SampleKind;
 
 use crate::proto::{v1, Level};
-use crate::service::client::{Client, ClientError};
+use crate::service::client::{Client, ClientError, ClientOptions};
 use crate::service::keys;
 
 /// The page, served at `/`.
@@ -147,8 +147,9 @@ impl Hub {
 pub struct ViewOptions {
     /// HTTP address of the page.
     pub listen: SocketAddr,
-    /// zenoh endpoints (empty: discover by multicast).
-    pub connect: Vec<String>,
+    /// How to join zenoh: endpoints (empty: discover by multicast), mode,
+    /// credentials.
+    pub zenoh: ClientOptions,
     /// Key prefix of the daemon(s).
     pub prefix: String,
 }
@@ -160,12 +161,12 @@ pub async fn run(
     ready: impl FnOnce(SocketAddr),
     shutdown: impl Future<Output = ()> + Send + 'static,
 ) -> Result<(), ViewError> {
-    let client = Client::connect(&options.connect, &options.prefix).await?;
+    let client = Client::open(&options.zenoh, &options.prefix).await?;
     let prefix = options.prefix.clone();
     let (stop_tx, stop_rx) = watch::channel(false);
     let hub = Arc::new(Hub {
         client,
-        connect: options.connect.clone(),
+        connect: options.zenoh.connect.clone(),
         instances: watch::channel(BTreeMap::new()).0,
         feeds: Mutex::new(HashMap::new()),
         skipped: AtomicU64::new(0),
@@ -227,7 +228,7 @@ pub async fn run(
         addr: options.listen,
         source,
     })?;
-    tracing::info!(%addr, connect = ?options.connect, prefix = %prefix, "serving the viewer on http://{addr}/");
+    tracing::info!(%addr, connect = ?options.zenoh.connect, prefix = %prefix, "serving the viewer on http://{addr}/");
     ready(addr);
     let served = axum::serve(listener, app)
         .with_graceful_shutdown(async move {
