@@ -503,10 +503,16 @@ fn addressed<'a>(ctx: &'a Context, q: &Query, key_of: fn(&str, &str) -> String) 
 async fn answer_info(ctx: &Context, q: Query) {
     let matched = addressed(ctx, &q, keys::info);
     if matched.is_empty() {
-        if let Some(name) = keys::instance_of(&ctx.prefix, "info", q.key_expr().as_str()) {
-            reply_error(&q, Code::UnknownInstance, unknown_instance(ctx, name)).await;
-        }
-        return;
+        // Every query gets an answer, a wildcard matching nothing too.
+        let key = q.key_expr().as_str();
+        let message = match keys::instance_of(&ctx.prefix, "info", key) {
+            Some(name) => unknown_instance(ctx, name),
+            None => format!(
+                "key '{key}' matches none of {}",
+                ctx.instances.keys().cloned().collect::<Vec<_>>().join(", ")
+            ),
+        };
+        return reply_error(&q, Code::UnknownInstance, message).await;
     }
     for inst in matched {
         let info = instance_info(inst);

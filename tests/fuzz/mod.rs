@@ -1,0 +1,228 @@
+//! Generated requests for the daemon's queryables: valid ones, ones with
+//! every field out of range, mutated and random bytes, wrong encodings,
+//! oversized payloads, unknown and wildcard instances. Deterministic from a
+//! seed (SplitMix64), shared by `tests/robustness.rs` (in process and over
+//! the bus) and `examples/soak.rs` (a million over the bus).
+#![allow(dead_code)]
+
+use prost::Message;
+
+use lodcloth::proto::v1;
+
+/// SplitMix64: small, fast, and every seed gives a good stream.
+pub struct Rng(u64);
+
+impl Rng {
+    pub fn new(seed: u64) -> Rng {
+        Rng(seed)
+    }
+
+    pub fn next(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        z ^ (z >> 31)
+    }
+
+    /// Uniform in `0..n` (n > 0).
+    pub fn below(&mut self, n: usize) -> usize {
+        (self.next() % n as u64) as usize
+    }
+
+    pub fn pick<'a, T>(&mut self, items: &'a [T]) -> &'a T {
+        &items[self.below(items.len())]
+    }
+
+    pub fn chance(&mut self, one_in: usize) -> bool {
+        self.below(one_in) == 0
+    }
+
+    pub fn bytes(&mut self, len: usize) -> Vec<u8> {
+        (0..len).map(|_| self.next() as u8).collect()
+    }
+
+    /// `base + below(spread)` random bytes.
+    pub fn some_bytes(&mut self, base: usize, spread: usize) -> Vec<u8> {
+        let len = base + self.below(spread);
+        self.bytes(len)
+    }
+}
+
+/// Which queryable a request goes to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Leaf {
+    Switch,
+    Control,
+    Info,
+}
+
+impl Leaf {
+    pub fn name(self) -> &'static str {
+        match self {
+            Leaf::Switch => "switch",
+            Leaf::Control => "control",
+            Leaf::Info => "info",
+        }
+    }
+}
+
+/// One generated request.
+#[derive(Debug, Clone)]
+pub struct Request {
+    pub leaf: Leaf,
+    /// The instance segment of the key.
+    pub instance: String,
+    pub encoding: Option<String>,
+    pub payload: Option<Vec<u8>>,
+}
+
+impl Request {
+    pub fn key(&self, prefix: &str) -> String {
+        format!("{prefix}/{}/{}", self.instance, self.leaf.name())
+    }
+}
+
+const NUMBERS: [u32; 9] = [0, 1, 7, 8, 12, 16, 24, 100_000, u32::MAX];
+const ERRORS: [f64; 12] = [
+    f64::NAN,
+    f64::INFINITY,
+    f64::NEG_INFINITY,
+    -1.0,
+    0.0,
+    -0.0,
+    f64::MIN_POSITIVE,
+    1e-300,
+    0.05,
+    0.5,
+    1e300,
+    f64::MAX,
+];
+
+fn method(rng: &mut Rng) -> String {
+    match rng.below(10) {
+        0..=3 => String::new(),
+        4 => rng.pick(&["same", "bcd", "gkd", "lsq", "fit"]).to_string(),
+        5 => rng.pick(&["SAME", "Fit", "bcd ", "gkd\0", "lsq;drop"]).to_string(),
+        6 => "é∑😀".repeat(rng.below(50)),
+        7 => "x".repeat(rng.below(5000)),
+        _ => String::from_utf8_lossy(&rng.some_bytes(0, 16)).into_owned(),
+    }
+}
+
+fn number(rng: &mut Rng) -> u32 {
+    if rng.chance(3) {
+        rng.next() as u32
+    } else {
+        *rng.pick(&NUMBERS)
+    }
+}
+
+/// A `SwitchRequest` whose fields are anything their types allow.
+pub fn switch_request(rng: &mut Rng) -> v1::SwitchRequest {
+    use v1::switch_request::Target;
+    let target = match rng.below(4) {
+        0 => None,
+        1 => Some(Target::MaxError(if rng.chance(3) {
+            f64::from_bits(rng.next())
+        } else {
+            *rng.pick(&ERRORS)
+        })),
+        _ => Some(Target::Level(v1::Level {
+            nx: number(rng),
+            ny: number(rng),
+            points: if rng.chance(3) { number(rng) } else { 0 },
+        })),
+    };
+    v1::SwitchRequest {
+        target,
+        method: method(rng),
+    }
+}
+
+/// Damage an encoding: truncate, flip bits, splice in random bytes.
+fn mutate(rng: &mut Rng, mut bytes: Vec<u8>) -> Vec<u8> {
+    for _ in 0..1 + rng.below(3) {
+        match rng.below(3) {
+            0 if !bytes.is_empty() => {
+                let n = rng.below(bytes.len());
+                bytes.truncate(n)
+            }
+            1 if !bytes.is_empty() => {
+                let i = rng.below(bytes.len());
+                bytes[i] ^= 1 << rng.below(8);
+            }
+            _ => {
+                let at = rng.below(bytes.len() + 1);
+                let extra = rng.some_bytes(1, 8);
+                bytes.splice(at..at, extra);
+            }
+        }
+    }
+    bytes
+}
+
+fn payload(rng: &mut Rng, leaf: Leaf) -> Option<Vec<u8>> {
+    let valid = || -> fn(&mut Rng) -> Vec<u8> {
+        match leaf {
+            Leaf::Switch => |rng| switch_request(rng).encode_to_vec(),
+            Leaf::Control => |rng| {
+                v1::ControlRequest {
+                    action: if rng.chance(2) {
+                        rng.below(5) as i32 - 1
+                    } else {
+                        rng.next() as i32
+                    },
+                }
+                .encode_to_vec()
+            },
+            Leaf::Info => |rng| rng.some_bytes(0, 4),
+        }
+    };
+    match rng.below(20) {
+        0 => None,
+        1 => Some(Vec::new()),
+        2 if rng.chance(50) => Some(rng.some_bytes(lodcloth::service::request::MAX_REQUEST_BYTES + 1, 40_000)),
+        3..=5 => Some(rng.some_bytes(0, 64)),
+        6..=9 => {
+            let bytes = valid()(rng);
+            Some(mutate(rng, bytes))
+        }
+        _ => Some(valid()(rng)),
+    }
+}
+
+fn encoding(rng: &mut Rng) -> Option<String> {
+    match rng.below(12) {
+        0 => None,
+        1..=5 => Some("application/protobuf;lodcloth.v1.SwitchRequest".into()),
+        6 => Some("application/protobuf".into()),
+        7 => Some("zenoh/bytes".into()),
+        8 => Some("text/plain;charset=utf-8".into()),
+        9 => Some("application/json".into()),
+        10 => Some("application/protobuf;lodcloth.v1.State".into()),
+        _ => Some("zenoh/string".into()),
+    }
+}
+
+/// One request for a daemon running `instances` (several of which it
+/// knows); the key is always a valid key expression.
+pub fn request(rng: &mut Rng, instances: &[&str]) -> Request {
+    let leaf = match rng.below(10) {
+        0..=6 => Leaf::Switch,
+        7..=8 => Leaf::Control,
+        _ => Leaf::Info,
+    };
+    let instance = match rng.below(10) {
+        0..=6 => rng.pick(instances).to_string(),
+        7 => "ghost".into(),
+        8 => rng.pick(&["*", "a$*", "$*b", "x-y_z", "é", "0"]).to_string(),
+        _ => format!("unknown{}", rng.next() % 1000),
+    };
+    Request {
+        leaf,
+        instance,
+        encoding: encoding(rng),
+        payload: payload(rng, leaf),
+    }
+}
