@@ -79,7 +79,11 @@ pub fn instance_name<'k>(
 
 /// Decode a `schema` payload, or say exactly what is wrong with it:
 /// missing, too large, another encoding, or malformed.
-pub fn decode<M: Message + Default>(schema: &str, encoding: Option<&str>, payload: Option<&[u8]>) -> Result<M, Refusal> {
+pub fn decode<M: Message + Default>(
+    schema: &str,
+    encoding: Option<&str>,
+    payload: Option<&[u8]>,
+) -> Result<M, Refusal> {
     let Some(payload) = payload else {
         return Err(Refusal::bad(format!("empty request: no payload; send a {schema}")));
     };
