@@ -528,3 +528,121 @@ async fn publishing_resumes_by_itself_after_the_router_restarts() {
     counter.abort();
     d.shutdown().await.expect("clean shutdown");
 }
+
+/// The latest metrics of `instance` once `pred` holds, within `seconds`.
+async fn metrics_until(c: &Client, instance: &str, seconds: f64, pred: impl Fn(&v1::Metrics) -> bool) -> v1::Metrics {
+    let sub = c
+        .session
+        .declare_subscriber(keys::metrics(PREFIX, instance))
+        .await
+        .expect("metrics subscriber");
+    let end = Instant::now() + Duration::from_secs_f64(seconds);
+    let mut last = None;
+    while Instant::now() < end {
+        let Ok(Ok(s)) = tokio::time::timeout(end.saturating_duration_since(Instant::now()), sub.recv_async()).await
+        else {
+            break;
+        };
+        let m = v1::Metrics::decode(s.payload().to_bytes().as_ref()).expect("Metrics");
+        if pred(&m) {
+            return m;
+        }
+        last = Some(m);
+    }
+    panic!("metrics of {instance} never satisfied the condition within {seconds} s; last: {last:?}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_diverging_instance_is_rolled_back_then_halted_and_reported_while_others_step_on() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    // Explicit Euler at 25× its predicted limit, forced past the check.
+    let scene = std::fs::read_to_string(daemon::scene_path("paper-1-top-edge.toml"))
+        .expect("scene")
+        .replace(
+            "integrator = \"rk4\"",
+            "integrator = \"explicit_euler\"\nforce_unstable = true",
+        )
+        .replace("dt = 2e-4", "dt = 5e-3");
+    let scene_file = dir.path().join("unstable.toml");
+    std::fs::write(&scene_file, scene).expect("write scene");
+    let port = daemon::free_port();
+    let text = config_text(port, dir.path(), ("a", "b"))
+        + &format!(
+            r#"
+[[instances]]
+name = "bad"
+scene = "{}"
+reference = "16x16"
+levels = ["8x8"]
+start = "8x8"
+method = "same"
+dt = 5e-3
+"#,
+            scene_file.display()
+        );
+    let d = Daemon::run(port, &text, dir);
+    let c = client(&[d.endpoint()]).await;
+    within(20, "info a", wait_info(&c, "a")).await;
+    let (arrivals, counter) = count_states(&c, "a");
+    let bad_states = Arc::new(Mutex::new(Vec::new()));
+    let bad_counter = {
+        let sub = c
+            .session
+            .declare_subscriber(keys::state(PREFIX, "bad"))
+            .await
+            .expect("subscriber");
+        let sink = bad_states.clone();
+        tokio::spawn(async move {
+            while let Ok(s) = sub.recv_async().await {
+                let state = v1::State::decode(s.payload().to_bytes().as_ref()).expect("State");
+                sink.lock().expect("states").push(state);
+            }
+        })
+    };
+    let halted = within(30, "halt", metrics_until(&c, "bad", 25.0, |m| !m.halted.is_empty())).await;
+    println!(
+        "bad: {} divergences, {} rollbacks, halted: {}",
+        halted.divergences, halted.rollbacks, halted.halted
+    );
+    assert!(halted.paused, "a halted instance no longer steps");
+    assert_eq!(halted.divergences, 3);
+    assert_eq!(halted.rollbacks, 2, "two rollbacks, then the third divergence halts");
+    assert!(halted.halted.contains("diverged 3 times"), "{}", halted.halted);
+    let info = c.info("bad").await.expect("info of the halted instance");
+    assert_eq!(info.halted, halted.halted, "info reports the halt too");
+    assert!(info.paused);
+
+    // The others step on at their rate, untouched.
+    let t0 = Instant::now();
+    tokio::time::sleep(Duration::from_secs(2)).await;
+    let rate = rate_between(&arrivals, t0, Instant::now());
+    assert!(rate >= 45.0, "a publishes {rate:.1}/s beside the diverging instance");
+    let a = metrics_until(&c, "a", 5.0, |_| true).await;
+    assert_eq!((a.divergences, a.halted.as_str()), (0, ""));
+    // Reset restarts the halted instance (which here diverges again).
+    c.control("bad", v1::control_request::Action::Reset)
+        .await
+        .expect("reset");
+    let resumed = c
+        .control("bad", v1::control_request::Action::Resume)
+        .await
+        .expect("resume");
+    assert!(!resumed.paused);
+    let again = within(30, "halt again", metrics_until(&c, "bad", 25.0, |m| m.divergences >= 6)).await;
+    assert!(!again.halted.is_empty());
+
+    // No non-finite position was ever published.
+    bad_counter.abort();
+    let states = bad_states.lock().expect("states");
+    assert!(!states.is_empty(), "the diverging instance published states");
+    for s in states.iter() {
+        let pos = lodcloth::proto::unpack_positions(&s.positions).expect("positions");
+        assert!(
+            pos.iter().all(|x| x.is_finite()),
+            "a published state of 'bad' has non-finite positions"
+        );
+    }
+    drop(states);
+    counter.abort();
+    d.shutdown().await.expect("clean shutdown");
+}

@@ -132,6 +132,11 @@ pub struct MetricsFrame {
     pub overruns: u64,
     pub lag_resets: u64,
     pub divergences: u64,
+    /// Divergences answered by rolling back to the last checkpoint.
+    pub rollbacks: u64,
+    /// Why the instance stopped stepping (it kept diverging); `None` while
+    /// it steps.
+    pub halted: Option<Arc<str>>,
     pub kinetic_energy: f64,
     pub potential_energy: f64,
     pub max_strain: f64,
@@ -150,6 +155,8 @@ pub struct Status {
     pub coefficient_version: u32,
     pub predicted_error: Option<f64>,
     pub paused: bool,
+    /// See [`MetricsFrame::halted`].
+    pub halted: Option<Arc<str>>,
     pub topology: Arc<Topology>,
     pub pinned: Vec<u32>,
     pub frame: u64,
@@ -377,6 +384,14 @@ struct Runner {
     overruns: u64,
     lag_resets: u64,
     divergences: u64,
+    // Divergence recovery: a finite state at most CHECKPOINT_INTERVAL of
+    // simulated time old, rolled back to when a step diverges.
+    checkpoint: State,
+    rollbacks: u64,
+    /// Divergences since the last CLEAN_INTERVAL of clean stepping.
+    consecutive_divergences: u32,
+    last_divergence_time: f64,
+    halted: Option<Arc<str>>,
     last: Option<StepReport>,
     // Metrics window.
     window_start: Instant,
@@ -408,6 +423,7 @@ impl Runner {
             coefficient_version: 1,
             predicted_error: None,
             paused: false,
+            halted: None,
             topology: setup.sim.topology().clone(),
             pinned: setup.sim.loads().pins.iter().map(|p| p.node).collect(),
             frame: 0,
@@ -415,6 +431,7 @@ impl Runner {
             simulation_points: setup.cloud.as_ref().map(|c| c.kept.clone()),
             cloud_points: setup.cloud.as_ref().map_or(0, |c| c.cloud_points()),
         }));
+        let checkpoint = setup.sim.state().clone();
         let runner = Runner {
             name: setup.name.clone(),
             level: setup.level,
@@ -440,6 +457,11 @@ impl Runner {
             overruns: 0,
             lag_resets: 0,
             divergences: 0,
+            checkpoint,
+            rollbacks: 0,
+            consecutive_divergences: 0,
+            last_divergence_time: f64::NEG_INFINITY,
+            halted: None,
             last: None,
             window_start: now,
             window_sim: 0.0,
@@ -503,6 +525,12 @@ impl Runner {
                 let _ = reply.send(outcome);
             }
             Command::Pause { paused, reply } => {
+                if !paused && self.halted.is_some() {
+                    // Resuming a halted instance starts its scene over.
+                    self.halted = None;
+                    self.consecutive_divergences = 0;
+                    self.restart();
+                }
                 self.paused = paused;
                 self.reanchor(Instant::now());
                 self.update_status();
@@ -512,6 +540,8 @@ impl Runner {
                 });
             }
             Command::Reset { reply } => {
+                self.halted = None;
+                self.consecutive_divergences = 0;
                 self.restart();
                 self.reanchor(Instant::now());
                 let _ = reply.send(ControlOutcome {
@@ -544,6 +574,8 @@ impl Runner {
         };
         sim.set_state(state).map_err(|e| e.to_string())?;
         self.sim = sim;
+        self.checkpoint = self.sim.state().clone();
+        self.consecutive_divergences = 0;
         if cloud.is_some() {
             self.cloud = cloud;
         }
@@ -584,6 +616,44 @@ impl Runner {
         }
         self.episode += 1;
         self.live_error = None;
+        self.checkpoint.clone_from(self.sim.state());
+        self.update_status();
+    }
+
+    /// A step came out non-finite: roll back to the checkpoint, or after
+    /// [`MAX_CONSECUTIVE_DIVERGENCES`] without a clean stretch between
+    /// them, stop stepping (paused, with the reason in metrics and info).
+    fn diverged(&mut self, time: f64) {
+        self.divergences += 1;
+        self.consecutive_divergences += 1;
+        self.last_divergence_time = self.checkpoint.time;
+        if let Err(e) = self.sim.set_state(self.checkpoint.clone()) {
+            tracing::error!(instance = %self.name, "rolling back failed: {e}; starting the scene over");
+            self.restart();
+        }
+        self.live_error = None;
+        if self.consecutive_divergences >= MAX_CONSECUTIVE_DIVERGENCES {
+            let reason = format!(
+                "diverged {} times in a row (last at t = {time:.3} s, level {}, dt {:.3e} s, {} integrator): \
+                 stopped; resume or reset to start the scene over, or switch to another level",
+                self.consecutive_divergences,
+                self.level,
+                self.dt(),
+                self.sim.params().integrator.name()
+            );
+            tracing::error!(instance = %self.name, divergences = self.divergences, "{reason}");
+            self.halted = Some(reason.into());
+            self.paused = true;
+        } else {
+            self.rollbacks += 1;
+            tracing::error!(
+                instance = %self.name,
+                level = %self.level,
+                time,
+                rolled_back_to = self.checkpoint.time,
+                "the simulation diverged; rolled back to the last checkpoint"
+            );
+        }
         self.update_status();
     }
 
@@ -596,6 +666,7 @@ impl Runner {
         s.coefficient_version = self.coefficient_version;
         s.predicted_error = self.predicted_error;
         s.paused = self.paused;
+        s.halted = self.halted.clone();
         if !Arc::ptr_eq(&s.topology, self.sim.topology()) {
             s.topology = self.sim.topology().clone();
             s.pinned = self.sim.loads().pins.iter().map(|p| p.node).collect();
@@ -630,6 +701,9 @@ impl Runner {
         let t0 = Instant::now();
         for _ in 0..n {
             self.step_once();
+            if self.paused {
+                break;
+            }
         }
         self.window_busy += t0.elapsed();
         self.window_steps += n;
@@ -640,18 +714,20 @@ impl Runner {
     fn step_once(&mut self) {
         let report = self.sim.step();
         self.frames += 1;
-        if !report.finite {
-            self.divergences += 1;
-            tracing::error!(
-                instance = %self.name,
-                level = %self.level,
-                time = report.time,
-                "the simulation diverged; starting the scene over"
-            );
-            self.restart();
+        // Non-finite, or finite but absurd (springs at 11× their rest
+        // length: positions soon overflow f32 on the wire).
+        if !report.finite || report.max_strain_overall() > DIVERGED_STRAIN {
+            self.diverged(report.time);
             return;
         }
         self.last = Some(report);
+        if report.time >= self.checkpoint.time + CHECKPOINT_INTERVAL {
+            // In place: no allocation once the buffers have their size.
+            self.checkpoint.clone_from(self.sim.state());
+            if report.time >= self.last_divergence_time + CLEAN_INTERVAL {
+                self.consecutive_divergences = 0;
+            }
+        }
         if let Some(sh) = self.shadow.as_mut() {
             // Once per reference metric frame interval, compare with the
             // reference interpolated linearly to this step's time (frame f
@@ -728,6 +804,8 @@ impl Runner {
                 overruns: self.overruns,
                 lag_resets: self.lag_resets,
                 divergences: self.divergences,
+                rollbacks: self.rollbacks,
+                halted: self.halted.clone(),
                 kinetic_energy: report.map_or(0.0, |r| r.kinetic_energy),
                 potential_energy: report.map_or(0.0, |r| r.elastic_energy + r.gravity_energy),
                 max_strain: report.map_or(0.0, |r| r.max_strain_overall()),
@@ -757,6 +835,16 @@ fn advance_deadline(last: Instant, every: Duration, now: Instant) -> Instant {
 }
 
 /// Longest a stepping thread sleeps before looking at its commands again.
+/// Simulated time between divergence checkpoints (s).
+const CHECKPOINT_INTERVAL: f64 = 0.5;
+/// Simulated time without a divergence after which divergences count from
+/// zero again (s).
+const CLEAN_INTERVAL: f64 = 5.0;
+/// A strain (L/L0 − 1) beyond which a step counts as diverged.
+const DIVERGED_STRAIN: f64 = 10.0;
+/// Divergences within a clean interval before the instance is halted.
+pub const MAX_CONSECUTIVE_DIVERGENCES: u32 = 3;
+
 const MAX_IDLE: Duration = Duration::from_millis(5);
 
 fn worker(mut runners: Vec<Runner>, stop: Arc<AtomicBool>, _settings: EngineSettings) {

@@ -666,7 +666,9 @@ impl Preparer {
                 interval / (interval / (0.75 * limit)).ceil().max(1.0)
             }
         };
-        let sim = build(dt, StabilityCheck::Enforce)?;
+        // A scene that says `force_unstable` gets its configured dt even
+        // beyond the limit (the engine then rolls back and halts it).
+        let sim = build(dt, scene.stability)?;
         Ok((sim, dt))
     }
 }

@@ -464,6 +464,8 @@ pub fn metrics_message(instance: &str, m: &MetricsFrame) -> v1::Metrics {
         steps: m.frame,
         lag_resets: m.lag_resets,
         divergences: m.divergences,
+        rollbacks: m.rollbacks,
+        halted: m.halted.as_deref().unwrap_or_default().to_string(),
     }
 }
 
@@ -563,6 +565,7 @@ fn instance_info(inst: &Instance) -> v1::InstanceInfo {
         kind: c.kind_name().to_string(),
         simulation_points: s.simulation_points.as_deref().cloned().unwrap_or_default(),
         cloud_points: s.cloud_points as u32,
+        halted: s.halted.as_deref().unwrap_or_default().to_string(),
         rest_positions: proto::pack_positions(
             &s.topology
                 .rest_positions
