@@ -633,16 +633,15 @@ dt = 5e-3
 
     // No non-finite position was ever published.
     bad_counter.abort();
-    let states = bad_states.lock().expect("states");
+    let states = std::mem::take(&mut *bad_states.lock().expect("states"));
     assert!(!states.is_empty(), "the diverging instance published states");
-    for s in states.iter() {
+    for s in &states {
         let pos = lodcloth::proto::unpack_positions(&s.positions).expect("positions");
         assert!(
             pos.iter().all(|x| x.is_finite()),
             "a published state of 'bad' has non-finite positions"
         );
     }
-    drop(states);
     counter.abort();
     d.shutdown().await.expect("clean shutdown");
 }
