@@ -66,15 +66,18 @@ COPY --from=builder /out/lodcloth /usr/local/bin/lodcloth
 COPY config/scenes/ config/scenes/
 COPY config/surfaces/ config/surfaces/
 COPY config/docker.toml config/docker.toml
+# The secure deployment (README "Reliability and security"): certificates are
+# mounted at /run/secrets, never baked in.
+COPY config/docker-secure.toml config/docker-secure.toml
 
 # JSON log lines for log collectors (`false` for text). clap reads this flag
 # as a boolean literal: `true` or `false`, not 1/0.
 ENV LODCLOTH_LOG_JSON=true
 
 VOLUME ["/var/lib/lodcloth"]
-# 7450: zenoh. 8080 and 8765 when the same image runs `view --listen
+# 7450: zenoh; 7451: zenoh over mutual TLS (config/docker-secure.toml). 8080 and 8765 when the same image runs `view --listen
 # 0.0.0.0:8080` or `foxglove --host 0.0.0.0` beside the daemon (README).
-EXPOSE 7450/tcp 8080/tcp 8765/tcp
+EXPOSE 7450/tcp 7451/tcp 8080/tcp 8765/tcp
 USER 10001:10001
 
 # A client session to the daemon's own endpoint; exits 0 when every instance

@@ -52,6 +52,9 @@ enum Command {
     /// Run the daemon: cloth instances stepping in real time, published on
     /// zenoh, switching levels on request (config/default.toml by default).
     Serve(serve_cli::ServeArgs),
+    /// Run a zenoh router, for daemons and clients in client mode (across
+    /// networks, or where peers cannot reach each other directly).
+    Router(serve_cli::RouterArgs),
     /// List the instances of every reachable daemon.
     List {
         #[command(flatten)]
@@ -217,6 +220,7 @@ fn main() -> Result<()> {
     }
     match cli.command {
         Command::Serve(args) => serve_cli::serve(args),
+        Command::Router(args) => serve_cli::router(args),
         Command::List { connect } => serve_cli::list(connect),
         Command::Watch {
             instance,

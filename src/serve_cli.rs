@@ -88,6 +88,43 @@ pub struct ServeArgs {
     pub mode: Option<String>,
 }
 
+/// `router` options.
+#[derive(Args)]
+pub struct RouterArgs {
+    /// Endpoints to listen on (comma separated).
+    #[arg(long, env = "LODCLOTH_ROUTER_LISTEN", value_delimiter = ',', default_value = "tcp/0.0.0.0:7447")]
+    pub listen: Vec<String>,
+    /// A zenoh JSON5 config to start from (TLS, users, access control,
+    /// other routers to connect to); --listen overrides its endpoints.
+    #[arg(long)]
+    pub zenoh_config: Option<PathBuf>,
+}
+
+pub fn router(args: RouterArgs) -> Result<()> {
+    let mut config = match &args.zenoh_config {
+        Some(f) => zenoh::Config::from_file(f).map_err(|e| anyhow::anyhow!("{}: {e}", f.display()))?,
+        None => zenoh::Config::default(),
+    };
+    for e in &args.listen {
+        e.parse::<zenoh::config::EndPoint>()
+            .map_err(|err| anyhow::anyhow!("--listen: '{e}' is not a zenoh endpoint: {err}"))?;
+    }
+    let listen = serde_json::to_string(&args.listen)?;
+    for (key, value) in [("mode", "\"router\""), ("listen/endpoints", listen.as_str())] {
+        config
+            .insert_json5(key, value)
+            .map_err(|e| anyhow::anyhow!("{key}: {e}"))?;
+    }
+    runtime()?.block_on(async {
+        let session = zenoh::open(config).await.map_err(|e| anyhow::anyhow!("zenoh: {e}"))?;
+        tracing::info!(zid = %session.zid(), listen = ?args.listen, "zenoh router running");
+        shutdown_signal().await;
+        session.close().await.map_err(|e| anyhow::anyhow!("closing: {e}"))?;
+        tracing::info!("router stopped");
+        Ok(())
+    })
+}
+
 fn runtime() -> Result<tokio::runtime::Runtime> {
     tokio::runtime::Builder::new_multi_thread()
         .enable_all()
