@@ -39,12 +39,18 @@ fn arg(name: &str, default: f64) -> f64 {
 /// Resident set size of process `pid` (MiB), from /proc.
 fn rss_mib(pid: u32) -> f64 {
     let statm = std::fs::read_to_string(format!("/proc/{pid}/statm")).unwrap_or_default();
-    let pages: f64 = statm.split_whitespace().nth(1).and_then(|v| v.parse().ok()).unwrap_or(0.0);
+    let pages: f64 = statm
+        .split_whitespace()
+        .nth(1)
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(0.0);
     pages * 4096.0 / (1024.0 * 1024.0)
 }
 
 fn now_nanos() -> u64 {
-    SystemTime::now().duration_since(UNIX_EPOCH).map_or(0, |d| d.as_nanos() as u64)
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map_or(0, |d| d.as_nanos() as u64)
 }
 
 /// One subscriber session's tally: states received and their latencies (ms).
@@ -166,7 +172,7 @@ async fn main() {
     );
     let pid = daemon.0.id();
     let endpoint = format!("tcp/127.0.0.1:{port}");
-    let c = client(&[endpoint.clone()]).await;
+    let c = client(std::slice::from_ref(&endpoint)).await;
     let info = wait_info(&c, "a").await;
     println!(
         "daemon: instance a ({}, {} states/s); machine: {} cores",
@@ -224,7 +230,7 @@ async fn main() {
     let counts: Vec<u64> = output.lines().filter_map(|l| l.trim().parse().ok()).collect();
     let per_phase = counts.len().saturating_sub(phase as usize + 1);
     let slow_total = counts.last().copied().unwrap_or(0) - counts.get(per_phase).copied().unwrap_or(0);
-    let slow_received = vec![slow_total / n_slow.max(1) as u64];
+    let slow_mean = slow_total / n_slow.max(1) as u64;
     let (p50_n, p99_n) = percentiles(fast);
     let published = info.publish_hz * phase;
     println!("\n| subscribers | real-time factor | fast: states received / published | fast latency p50 / p99 | slow: states received |");
@@ -233,7 +239,7 @@ async fn main() {
     println!(
         "| {subscribers} ({n_slow} slow) | {rtf_n:.3} (overruns {overruns}) | min {:.0} % | {p50_n:.2} / {p99_n:.2} ms | {} each (mean) of {published:.0} |",
         100.0 * fast_received.iter().copied().min().unwrap_or(0) as f64 / published,
-        slow_received[0],
+        slow_mean,
     );
     println!(
         "fast-subscriber latency under load / single: p50 ×{:.2}, p99 ×{:.2}",

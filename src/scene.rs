@@ -26,20 +26,56 @@ pub enum SceneError {
     /// The file could not be read.
     #[error("cannot read scene file {path}: {source}")]
     Io { path: String, source: std::io::Error },
-    /// The TOML is malformed or has unknown/mistyped fields (the message names line and key).
+    /// The file is not UTF-8, or the TOML is malformed or has unknown/mistyped
+    /// fields (the message names the line and column, and the key).
     #[error("scene {origin}: {message}")]
     Parse { origin: String, message: String },
     /// The values parsed but are invalid; every problem is listed with its path.
     #[error("scene {origin} is invalid:\n  - {}", problems.join("\n  - "))]
     Invalid { origin: String, problems: Vec<String> },
-    /// The simulation refused the built scene (e.g. an unstable dt).
-    #[error("scene {origin} at {nx}×{ny}: {source}")]
+    /// The simulation refused the built scene (e.g. an unstable dt); the
+    /// message names the scene field behind the refused value.
+    #[error("scene {origin} at {nx}×{ny}: {}{source}{}", sim_field(source), sim_hint(source))]
     Sim {
         origin: String,
         nx: usize,
         ny: usize,
         source: SimError,
     },
+}
+
+/// The scene field behind a value the simulation refused, as a message prefix.
+/// Validation has already checked every field the simulation checks, except
+/// what only the resolution decides: node masses (areal density × a node's
+/// area, which can underflow or overflow) and the stability limit of dt.
+fn sim_field(e: &SimError) -> &'static str {
+    match e {
+        SimError::UnstableTimeStep { .. } => "simulation.dt: ",
+        SimError::InvalidParameter { name, .. } if name.starts_with("masses") => "cloth.areal_density: ",
+        _ => "",
+    }
+}
+
+/// How a scene forces an unstable dt (the simulation's message says "force it").
+fn sim_hint(e: &SimError) -> &'static str {
+    match e {
+        SimError::UnstableTimeStep { .. } => " (simulation.force_unstable = true)",
+        _ => "",
+    }
+}
+
+/// Where the first invalid UTF-8 byte of `bytes` is, for a message:
+/// `line L, column C: not valid UTF-8 (byte 0xXX)`.
+fn utf8_problem(bytes: &[u8], e: std::str::Utf8Error) -> String {
+    let good = &bytes[..e.valid_up_to()];
+    let line = good.iter().filter(|&&b| b == b'\n').count() + 1;
+    let line_start = good.iter().rposition(|&b| b == b'\n').map_or(0, |k| k + 1);
+    // Valid up to here, so the line so far is text.
+    let column = String::from_utf8_lossy(&good[line_start..]).chars().count() + 1;
+    format!(
+        "line {line}, column {column}: not valid UTF-8 (byte 0x{:02x})",
+        bytes[e.valid_up_to()]
+    )
 }
 
 // ---------------------------------------------------------------- raw form
@@ -370,11 +406,16 @@ pub struct Scene {
 impl Scene {
     /// Read and validate a scene file.
     pub fn load(path: &Path) -> Result<Scene, SceneError> {
-        let text = std::fs::read_to_string(path).map_err(|source| SceneError::Io {
+        let bytes = std::fs::read(path).map_err(|source| SceneError::Io {
             path: path.display().to_string(),
             source,
         })?;
-        Scene::from_toml(&text, &path.display().to_string())
+        let origin = path.display().to_string();
+        let text = std::str::from_utf8(&bytes).map_err(|e| SceneError::Parse {
+            origin: origin.clone(),
+            message: utf8_problem(&bytes, e),
+        })?;
+        Scene::from_toml(text, &origin)
     }
 
     /// Parse and validate scene text; `origin` names it in messages.
@@ -450,9 +491,15 @@ impl Scene {
                 out.tolerance = t;
             }
             if let Some(m) = l.max_iterations {
+                if m == 0 {
+                    p.push("strain.limit.max_iterations: must be at least 1 (0 sweeps never limit)".into());
+                }
                 out.max_iterations = m;
             }
             if let Some(kinds) = &l.kinds {
+                if kinds.is_empty() {
+                    p.push("strain.limit.kinds: an empty list limits no spring; remove [strain.limit] instead".into());
+                }
                 out.kinds = [false; 3];
                 for (i, k) in kinds.iter().enumerate() {
                     match SpringKind::ALL.iter().find(|s| s.name() == k) {
@@ -751,7 +798,10 @@ impl Problems {
             RawProfile::Constant => Profile::Constant,
             RawProfile::Ramp { start, end } => {
                 self.finite(&format!("{path}.start"), start);
-                if !(end > start) {
+                // An infinite end would hold the profile at 0 for ever.
+                if !end.is_finite() {
+                    self.finite(&format!("{path}.end"), end);
+                } else if !(end > start) {
                     self.push(format!("{path}.end: must be after start ({start}), got {end}"));
                 }
                 Profile::Ramp { start, end }

@@ -133,15 +133,37 @@ impl PropertyAccess for Vertex {
     }
 }
 
+/// The unit vector along a finite file normal; None when it is zero. Scaled
+/// by its largest component first, so that neither a huge normal (whose
+/// length overflows) nor a subnormal one (whose length underflows) is taken
+/// for zero.
+fn unit_normal(n: V3) -> Option<V3> {
+    let largest = n.iter().fold(0.0, |m: f64, x| m.max(x.abs()));
+    if !(largest > 0.0 && largest.is_finite()) {
+        return None;
+    }
+    normalize(n.map(|x| x / largest))
+}
+
 /// Read a PLY file's `vertex` element: `x y z` required, `nx ny nz` optional
 /// (all three or none).
 pub fn read_ply(path: &Path) -> Result<PointCloud, PointsIoError> {
     let file = std::fs::File::open(path).map_err(io_err(path))?;
     let mut reader = Reader::new(BufReader::new(file));
     let parser = Parser::<Vertex>::new();
-    let header = parser
-        .read_header(&mut reader)
-        .map_err(|e| invalid(path, format!("PLY header: {e}")))?;
+    let header = parser.read_header(&mut reader).map_err(|e| {
+        let at = reader.line();
+        let message = match (e.line(), e.kind()) {
+            (Some(_), _) => format!("PLY header: {e}"),
+            // No format line, or no version in it: the whole header is at fault.
+            (None, std::io::ErrorKind::InvalidInput) => {
+                format!("PLY header, lines 1 to {}: {e}", at.saturating_sub(1).max(1))
+            }
+            // Invalid UTF-8 or an empty file: the line being read.
+            (None, _) => format!("PLY header: Line {at}: {e}"),
+        };
+        invalid(path, message)
+    })?;
     let Some(vertex_def) = header.elements.get("vertex") else {
         return Err(invalid(path, "PLY file has no `vertex` element"));
     };
@@ -163,7 +185,10 @@ pub fn read_ply(path: &Path) -> Result<PointCloud, PointsIoError> {
         return Err(invalid(path, "PLY vertex has some but not all of nx, ny, nz"));
     }
     if vertex_def.count == 0 {
-        return Err(invalid(path, "PLY file has no vertices"));
+        return Err(invalid(
+            path,
+            "PLY vertex element is empty (`element vertex 0`): no points",
+        ));
     }
     let mut vertices = Vec::new();
     for (name, def) in &header.elements {
@@ -187,7 +212,7 @@ pub fn read_ply(path: &Path) -> Result<PointCloud, PointsIoError> {
         }
         positions.push([v.v[0], v.v[1], v.v[2]]);
         if with_normals {
-            let n = normalize([v.v[3], v.v[4], v.v[5]])
+            let n = unit_normal([v.v[3], v.v[4], v.v[5]])
                 .ok_or_else(|| invalid(path, format!("PLY vertex {i}: normal (nx, ny, nz) is zero")))?;
             normals.push(n);
         }
@@ -237,9 +262,20 @@ pub fn read_xyz(path: &Path) -> Result<PointCloud, PointsIoError> {
     let mut positions = Vec::new();
     let mut normals = Vec::new();
     let mut width = None;
-    for (l, line) in BufReader::new(file).lines().enumerate() {
+    for (l, line) in BufReader::new(file).split(b'\n').enumerate() {
         let line = line.map_err(io_err(path))?;
         let lineno = l + 1;
+        let line = std::str::from_utf8(&line).map_err(|e| {
+            let good = e.valid_up_to();
+            let column = std::str::from_utf8(&line[..good]).map_or(0, |t| t.chars().count()) + 1;
+            invalid(
+                path,
+                format!(
+                    "line {lineno}, column {column}: not valid UTF-8 (byte 0x{:02x})",
+                    line[good]
+                ),
+            )
+        })?;
         let text = line.split('#').next().unwrap_or("").trim();
         if text.is_empty() {
             continue;
@@ -278,7 +314,7 @@ pub fn read_xyz(path: &Path) -> Result<PointCloud, PointsIoError> {
         }
         positions.push([v[0], v[1], v[2]]);
         if k == 6 {
-            let n: V3 = normalize([v[3], v[4], v[5]])
+            let n = unit_normal([v[3], v[4], v[5]])
                 .ok_or_else(|| invalid(path, format!("line {lineno}: normal (nx, ny, nz) is zero")))?;
             normals.push(n);
         }
