@@ -92,7 +92,12 @@ pub struct ServeArgs {
 #[derive(Args)]
 pub struct RouterArgs {
     /// Endpoints to listen on (comma separated).
-    #[arg(long, env = "LODCLOTH_ROUTER_LISTEN", value_delimiter = ',', default_value = "tcp/0.0.0.0:7447")]
+    #[arg(
+        long,
+        env = "LODCLOTH_ROUTER_LISTEN",
+        value_delimiter = ',',
+        default_value = "tcp/0.0.0.0:7447"
+    )]
     pub listen: Vec<String>,
     /// A zenoh JSON5 config to start from (TLS, users, access control,
     /// other routers to connect to); --listen overrides its endpoints.

@@ -620,7 +620,8 @@ impl Runner {
         self.update_status();
     }
 
-    /// A step came out non-finite: roll back to the checkpoint, or after
+    /// A step came out non-finite or absurdly stretched: roll back to the
+    /// checkpoint, or after
     /// [`MAX_CONSECUTIVE_DIVERGENCES`] without a clean stretch between
     /// them, stop stepping (paused, with the reason in metrics and info).
     fn diverged(&mut self, time: f64) {
@@ -635,7 +636,7 @@ impl Runner {
         if self.consecutive_divergences >= MAX_CONSECUTIVE_DIVERGENCES {
             let reason = format!(
                 "diverged {} times in a row (last at t = {time:.3} s, level {}, dt {:.3e} s, {} integrator): \
-                 stopped; resume or reset to start the scene over, or switch to another level",
+                 stopped; resume or reset starts the scene over (switch first to restart at another level)",
                 self.consecutive_divergences,
                 self.level,
                 self.dt(),
