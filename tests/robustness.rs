@@ -3,6 +3,7 @@
 //! publishes, a switch flood, a client that vanishes mid-request, and a
 //! router that stops and comes back.
 
+mod common;
 mod daemon;
 mod fuzz;
 
@@ -13,8 +14,9 @@ use std::time::{Duration, Instant};
 use futures_util::stream::{FuturesUnordered, StreamExt};
 use prost::Message;
 
+use common::Rng;
 use daemon::{client, collect_states, config_text, level_of, wait_info, within, Daemon, PREFIX};
-use fuzz::{Leaf, Rng};
+use fuzz::Leaf;
 use lodcloth::estimate::Method;
 use lodcloth::proto::{v1, Level};
 use lodcloth::service::client::{Client, ClientError, ClientOptions};

@@ -34,6 +34,26 @@ impl Rng {
         let u = (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64;
         lo + (hi - lo) * u
     }
+
+    /// Uniform in `0..n` (n > 0).
+    pub fn below(&mut self, n: usize) -> usize {
+        (self.next_u64() % n as u64) as usize
+    }
+
+    pub fn pick<'a, T>(&mut self, items: &'a [T]) -> &'a T {
+        &items[self.below(items.len())]
+    }
+
+    /// True once in `one_in` draws on average.
+    pub fn chance(&mut self, one_in: usize) -> bool {
+        self.below(one_in) == 0
+    }
+
+    /// `base + below(spread)` random bytes.
+    pub fn bytes(&mut self, base: usize, spread: usize) -> Vec<u8> {
+        let len = base + self.below(spread);
+        (0..len).map(|_| self.next_u64() as u8).collect()
+    }
 }
 
 /// The same coefficients for every spring kind.

@@ -1,53 +1,14 @@
 //! Generated requests for the daemon's queryables: valid ones, ones with
 //! every field out of range, mutated and random bytes, wrong encodings,
 //! oversized payloads, unknown and wildcard instances. Deterministic from a
-//! seed (SplitMix64), shared by `tests/robustness.rs` (in process and over
-//! the bus) and `examples/soak.rs` (a million over the bus).
+//! seed (the tests' SplitMix64 [`Rng`]), for `tests/robustness.rs` (in
+//! process and over the bus).
 #![allow(dead_code)]
 
 use prost::Message;
 
+use crate::common::Rng;
 use lodcloth::proto::v1;
-
-/// SplitMix64: small, fast, and every seed gives a good stream.
-pub struct Rng(u64);
-
-impl Rng {
-    pub fn new(seed: u64) -> Rng {
-        Rng(seed)
-    }
-
-    pub fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in `0..n` (n > 0).
-    pub fn below(&mut self, n: usize) -> usize {
-        (self.next() % n as u64) as usize
-    }
-
-    pub fn pick<'a, T>(&mut self, items: &'a [T]) -> &'a T {
-        &items[self.below(items.len())]
-    }
-
-    pub fn chance(&mut self, one_in: usize) -> bool {
-        self.below(one_in) == 0
-    }
-
-    pub fn bytes(&mut self, len: usize) -> Vec<u8> {
-        (0..len).map(|_| self.next() as u8).collect()
-    }
-
-    /// `base + below(spread)` random bytes.
-    pub fn some_bytes(&mut self, base: usize, spread: usize) -> Vec<u8> {
-        let len = base + self.below(spread);
-        self.bytes(len)
-    }
-}
 
 /// Which queryable a request goes to.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -106,13 +67,13 @@ fn method(rng: &mut Rng) -> String {
         5 => rng.pick(&["SAME", "Fit", "bcd ", "gkd\0", "lsq;drop"]).to_string(),
         6 => "é∑😀".repeat(rng.below(50)),
         7 => "x".repeat(rng.below(5000)),
-        _ => String::from_utf8_lossy(&rng.some_bytes(0, 16)).into_owned(),
+        _ => String::from_utf8_lossy(&rng.bytes(0, 16)).into_owned(),
     }
 }
 
 fn number(rng: &mut Rng) -> u32 {
     if rng.chance(3) {
-        rng.next() as u32
+        rng.next_u64() as u32
     } else {
         *rng.pick(&NUMBERS)
     }
@@ -124,7 +85,7 @@ pub fn switch_request(rng: &mut Rng) -> v1::SwitchRequest {
     let target = match rng.below(4) {
         0 => None,
         1 => Some(Target::MaxError(if rng.chance(3) {
-            f64::from_bits(rng.next())
+            f64::from_bits(rng.next_u64())
         } else {
             *rng.pick(&ERRORS)
         })),
@@ -154,7 +115,7 @@ fn mutate(rng: &mut Rng, mut bytes: Vec<u8>) -> Vec<u8> {
             }
             _ => {
                 let at = rng.below(bytes.len() + 1);
-                let extra = rng.some_bytes(1, 8);
+                let extra = rng.bytes(1, 8);
                 bytes.splice(at..at, extra);
             }
         }
@@ -171,19 +132,19 @@ fn payload(rng: &mut Rng, leaf: Leaf) -> Option<Vec<u8>> {
                     action: if rng.chance(2) {
                         rng.below(5) as i32 - 1
                     } else {
-                        rng.next() as i32
+                        rng.next_u64() as i32
                     },
                 }
                 .encode_to_vec()
             },
-            Leaf::Info => |rng| rng.some_bytes(0, 4),
+            Leaf::Info => |rng| rng.bytes(0, 4),
         }
     };
     match rng.below(20) {
         0 => None,
         1 => Some(Vec::new()),
-        2 if rng.chance(50) => Some(rng.some_bytes(lodcloth::service::request::MAX_REQUEST_BYTES + 1, 40_000)),
-        3..=5 => Some(rng.some_bytes(0, 64)),
+        2 if rng.chance(50) => Some(rng.bytes(lodcloth::service::request::MAX_REQUEST_BYTES + 1, 40_000)),
+        3..=5 => Some(rng.bytes(0, 64)),
         6..=9 => {
             let bytes = valid()(rng);
             Some(mutate(rng, bytes))
@@ -217,7 +178,7 @@ pub fn request(rng: &mut Rng, instances: &[&str]) -> Request {
         0..=6 => rng.pick(instances).to_string(),
         7 => "ghost".into(),
         8 => rng.pick(&["*", "a$*", "$*b", "x-y_z", "é", "0"]).to_string(),
-        _ => format!("unknown{}", rng.next() % 1000),
+        _ => format!("unknown{}", rng.next_u64() % 1000),
     };
     Request {
         leaf,
