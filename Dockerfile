@@ -22,8 +22,9 @@ RUN rustup toolchain install --no-self-update \
     && cargo --version
 
 # What the manifest needs to be read: build.rs compiles proto/ with protox (no
-# protoc), and Cargo.toml's [[bench]] target must exist even though it is not
-# built. examples/ and tests/ are discovered only when present: not needed.
+# protoc), and Cargo.toml's [[bench]] targets must exist even though they are
+# not built. Its [[test]] targets name their paths, which cargo checks only
+# when it builds them: tests/ is not needed.
 COPY Cargo.toml Cargo.lock build.rs ./
 COPY proto/ proto/
 COPY benches/ benches/

@@ -3,7 +3,7 @@
 //! message naming it and is then recomputed; and a writer killed with SIGKILL
 //! at any moment leaves the old file or the new one, never a torn one.
 
-mod common;
+use crate::common;
 
 use std::fs;
 use std::path::{Path, PathBuf};
@@ -439,6 +439,16 @@ fn open_removes_temp_files_of_dead_writers_and_old_ones_but_not_live_or_foreign_
 const KILL_DIR_ENV: &str = "LODCLOTH_CACHE_KILL_TEST_DIR";
 const KILL_HELPER: &str = "kill_helper_writes_alternating_large_entries_forever";
 
+/// The helper's full test name in this binary (`cache::…` inside
+/// tests/sim.rs): `--exact` matches nothing otherwise, and the helper would
+/// exit at once.
+fn kill_helper_name() -> String {
+    match module_path!().split_once("::") {
+        Some((_crate, module)) => format!("{module}::{KILL_HELPER}"),
+        None => KILL_HELPER.to_string(),
+    }
+}
+
 /// Two large entries (≈ 1 MB each) for the same key, so that each write takes
 /// a while. The bulk is in long note names rather than many notes, so that
 /// encoding (done before the temporary file exists) is cheap next to writing
@@ -496,7 +506,7 @@ fn a_writer_killed_at_any_moment_leaves_the_old_or_the_new_file_never_a_torn_one
         let round = rounds;
         rounds += 1;
         let mut child = Command::new(&exe)
-            .args([KILL_HELPER, "--exact", "--ignored", "--test-threads=1"])
+            .args([&kill_helper_name(), "--exact", "--ignored", "--test-threads=1"])
             .env(KILL_DIR_ENV, dir.path())
             .stdin(Stdio::null())
             .stdout(Stdio::null())

@@ -6,8 +6,8 @@
 //! Needs Debian's `chromium` (`.ci/run` installs it; `LODCLOTH_CHROMIUM`
 //! names another binary).
 
-mod browser;
-mod daemon;
+use crate::browser;
+use crate::daemon;
 
 use std::path::PathBuf;
 use std::process::{Child, Command, Stdio};
@@ -104,6 +104,7 @@ async fn start_view(endpoint: String) -> (String, tokio::sync::oneshot::Sender<(
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_page_draws_the_cloth_coloured_by_error_and_switches_level_from_a_click() {
+    let _serial = daemon::serial().await;
     let d = start_daemon(("view-a", "view-b"));
     let c = client(&[d.endpoint()]).await;
     let info = wait_info(&c, "view-a").await;
@@ -254,6 +255,7 @@ async fn next_json(ws: &mut Ws) -> Option<Value> {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_foxglove_client_gets_the_coloured_mesh_and_the_metrics() {
+    let _serial = daemon::serial().await;
     let d = start_daemon(("fox-a", "fox-b"));
     let c = client(&[d.endpoint()]).await;
     let info = wait_info(&c, "fox-a").await;
@@ -356,6 +358,7 @@ async fn a_foxglove_client_gets_the_coloured_mesh_and_the_metrics() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn record_writes_an_mcap_file_that_reads_back_with_the_mcap_crate() {
+    let _serial = daemon::serial().await;
     let d = start_daemon(("mcap-a", "mcap-b"));
     let c = client(&[d.endpoint()]).await;
     let info = wait_info(&c, "mcap-a").await;
@@ -474,6 +477,7 @@ async fn page_client(base: &str, instance: &str, seconds: f64, think: Duration) 
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_slow_page_gets_fresh_states_and_a_fast_one_gets_them_all() {
+    let _serial = daemon::serial().await;
     let d = start_daemon(("flow-a", "flow-b"));
     let c = client(&[d.endpoint()]).await;
     wait_info(&c, "flow-a").await;

@@ -3,7 +3,7 @@
 //! Σ m v never changes, and without forces off the spring axis the angular
 //! momentum Σ m x × v about the origin is conserved too.
 
-mod common;
+use crate::common;
 
 use common::{angular_momentum, build, cross, grid, lumped_masses, momentum, norm, params, uniform_material, Rng};
 use lodcloth::sim::{Integrator, Loads, Material, Orientation, Simulation, StabilityCheck, State};

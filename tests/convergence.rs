@@ -6,7 +6,7 @@
 //!
 //! Step sizes are powers of two so every run lands exactly on T.
 
-mod common;
+use crate::common;
 
 use std::sync::Arc;
 

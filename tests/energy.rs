@@ -6,7 +6,7 @@
 //! Energies come from the step report and are cross-checked once against a
 //! direct evaluation of ½mv² + ½K(L−L0)² − m g·x.
 
-mod common;
+use crate::common;
 
 use common::{build, fixed_pins, grid, lumped_masses, params, perturbed_state, uniform_material, Rng};
 use lodcloth::sim::{Integrator, Loads, Material, Orientation, Simulation, StabilityCheck, State, StepReport};

@@ -4,7 +4,7 @@
 //! acceleration ≈ 0, pins carry the whole weight), and across integrators
 //! (the rest state does not depend on how it was reached).
 
-mod common;
+use crate::common;
 
 use std::sync::Arc;
 

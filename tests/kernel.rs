@@ -4,7 +4,7 @@
 //! on random states; and the gather path (arbitrary node pairs) equals the
 //! grid path (stencil runs) on the same springs.
 
-mod common;
+use crate::common;
 
 use std::sync::Arc;
 

@@ -2,7 +2,7 @@
 //! oscillator: the free node moves along the spring with period 2π√(m/k).
 //! The period is measured from zero crossings of the elongation.
 
-mod common;
+use crate::common;
 
 use std::f64::consts::TAU;
 use std::sync::Arc;

@@ -3,9 +3,9 @@
 //! publishes, a switch flood, a client that vanishes mid-request, and a
 //! router that stops and comes back.
 
-mod common;
-mod daemon;
-mod fuzz;
+use crate::common;
+use crate::daemon;
+use crate::fuzz;
 
 use std::collections::BTreeMap;
 use std::sync::{Arc, Mutex};
@@ -94,6 +94,7 @@ fn test_config(port: u16, dir: &std::path::Path) -> ServiceConfig {
 
 #[test]
 fn a_million_generated_requests_are_each_accepted_correctly_or_refused_by_name() {
+    let _serial = daemon::serial_blocking();
     let dir = tempfile::tempdir().expect("temp dir");
     let config = test_config(7, dir.path());
     let instances: BTreeMap<String, InstanceConfig> =
@@ -206,6 +207,7 @@ async fn ask(c: &Client, r: &fuzz::Request) -> (usize, Vec<(i32, String)>) {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn generated_requests_over_the_bus_are_all_answered_while_publishing_keeps_its_rate() {
+    let _serial = daemon::serial().await;
     let d = Daemon::start(("a", "b"));
     let c = client(&[d.endpoint()]).await;
     let info = within(20, "info", wait_info(&c, "a")).await;
@@ -290,6 +292,7 @@ fn percentile(sorted: &[f64], p: f64) -> f64 {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_flood_of_switches_is_answered_and_the_instance_ends_consistent() {
+    let _serial = daemon::serial().await;
     let d = Daemon::start(("a", "b"));
     let c = Arc::new(client(&[d.endpoint()]).await);
     within(20, "info", wait_info(&c, "a")).await;
@@ -362,6 +365,7 @@ async fn a_flood_of_switches_is_answered_and_the_instance_ends_consistent() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_client_vanishing_mid_request_disturbs_nothing() {
+    let _serial = daemon::serial().await;
     let d = Daemon::start(("a", "b"));
     let c = client(&[d.endpoint()]).await;
     within(20, "info", wait_info(&c, "a")).await;
@@ -437,6 +441,7 @@ async fn router(port: u16) -> zenoh::Session {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn publishing_resumes_by_itself_after_the_router_restarts() {
+    let _serial = daemon::serial().await;
     let port = daemon::free_port();
     let endpoint = format!("tcp/127.0.0.1:{port}");
     let first = router(port).await;
@@ -556,6 +561,7 @@ async fn metrics_until(c: &Client, instance: &str, seconds: f64, pred: impl Fn(&
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_diverging_instance_is_rolled_back_then_halted_and_reported_while_others_step_on() {
+    let _serial = daemon::serial().await;
     let dir = tempfile::tempdir().expect("temp dir");
     // Explicit Euler at 25× its predicted limit, forced past the check.
     let scene = std::fs::read_to_string(daemon::scene_path("paper-1-top-edge.toml"))

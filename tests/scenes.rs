@@ -3,8 +3,6 @@
 //! node masses follow the chosen convention at every resolution; loads and
 //! pins resolve to the same physical quantities at every resolution.
 
-mod common;
-
 use std::path::{Path, PathBuf};
 
 use lodcloth::scene::{MassConvention, Scene, SceneError};

@@ -3,7 +3,7 @@
 //! observe-for-all, operate-for-operators policy of `[zenoh.access]`).
 //! Certificates and passwords are made at run time; nothing is committed.
 
-mod daemon;
+use crate::daemon;
 
 use std::io::Read;
 use std::path::{Path, PathBuf};
@@ -163,6 +163,7 @@ async fn assert_switch_denied(c: &Client, observer: &Client) {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn mtls_admits_only_the_ca_and_lets_only_operators_switch() {
+    let _serial = daemon::serial().await;
     let dir = tempfile::tempdir().expect("temp dir");
     let pki = tempfile::tempdir().expect("pki dir");
     let trusted = Authority::new(pki.path(), "trusted");
@@ -276,6 +277,7 @@ operator_certificates = ["operator"]
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn passwords_admit_users_and_only_operators_switch() {
+    let _serial = daemon::serial().await;
     let dir = tempfile::tempdir().expect("temp dir");
     let (op_pw, viewer_pw) = (random_secret(), random_secret());
     let users = dir.path().join("users.txt");

@@ -3,7 +3,7 @@
 //! continuity of the motion across them, refusals of bad requests,
 //! liveliness, two daemons seen by one client, graceful shutdown.
 
-mod daemon;
+use crate::daemon;
 
 use std::collections::HashMap;
 use std::time::Duration;
@@ -22,6 +22,7 @@ use lodcloth::sim::Topology;
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn states_arrive_at_the_configured_rate_and_pinned_nodes_stay_put() {
+    let _serial = daemon::serial().await;
     let d = Daemon::start(("rate", "rate-fixed"));
     let c = client(&[d.endpoint()]).await;
     let info = wait_info(&c, "rate").await;
@@ -63,6 +64,7 @@ async fn states_arrive_at_the_configured_rate_and_pinned_nodes_stay_put() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_switch_is_answered_and_the_motion_continues_without_a_jump() {
+    let _serial = daemon::serial().await;
     let d = Daemon::start(("sw", "sw-fixed"));
     let c = client(&[d.endpoint()]).await;
     wait_info(&c, "sw").await;
@@ -158,6 +160,7 @@ async fn a_switch_is_answered_and_the_motion_continues_without_a_jump() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn bad_requests_get_errors_naming_the_problem_and_publishing_goes_on() {
+    let _serial = daemon::serial().await;
     let d = Daemon::start(("bad", "bad-fixed"));
     let c = client(&[d.endpoint()]).await;
     wait_info(&c, "bad").await;
@@ -276,6 +279,7 @@ async fn bad_requests_get_errors_naming_the_problem_and_publishing_goes_on() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn clients_see_instances_appear_and_disappear() {
+    let _serial = daemon::serial().await;
     // The client listens first; the daemon connects to it.
     let port = free_port();
     let listen = format!("tcp/127.0.0.1:{port}");
@@ -332,6 +336,7 @@ async fn clients_see_instances_appear_and_disappear() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn one_client_sees_the_instances_of_two_daemons() {
+    let _serial = daemon::serial().await;
     let a = Daemon::start(("east-1", "east-2"));
     let b = Daemon::start(("west-1", "west-2"));
     let c = client(&[a.endpoint(), b.endpoint()]).await;
@@ -357,6 +362,7 @@ async fn one_client_sees_the_instances_of_two_daemons() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn an_invalid_config_is_refused_with_every_problem_by_path() {
+    let _serial = daemon::serial().await;
     let text = r#"
 prefix = "bad prefix"
 [zenoh]
@@ -459,6 +465,7 @@ fn mean_distance(a: &[u8], b: &[u8]) -> f64 {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_surface_publishes_its_whole_cloud_and_switches_size_without_a_jump() {
+    let _serial = daemon::serial().await;
     let dir = tempfile::tempdir().expect("temp dir");
     let d = start_surface_daemon(dir.path(), "same");
     let c = client(&[d.endpoint()]).await;
@@ -622,6 +629,7 @@ async fn a_surface_publishes_its_whole_cloud_and_switches_size_without_a_jump() 
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_surface_fit_is_cached_and_reused_by_the_next_daemon() {
+    let _serial = daemon::serial().await;
     let dir = tempfile::tempdir().expect("temp dir");
     let request = v1::SwitchRequest {
         target: Some(v1::switch_request::Target::Level(Level::Points(100).to_wire())),

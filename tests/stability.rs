@@ -8,7 +8,7 @@
 //! behaviour of explicit Euler (energy grows by 1 + (ω dt)² per step) and of
 //! implicit Euler (stable far beyond every explicit limit).
 
-mod common;
+use crate::common;
 
 use std::sync::Arc;
 

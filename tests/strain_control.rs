@@ -7,7 +7,7 @@
 //! Strains are measured directly from node positions, not taken from the
 //! step report (which is checked against them).
 
-mod common;
+use crate::common;
 
 use common::{build, fixed_pins, grid, lumped_masses, material, params, scalar_max_strain};
 use lodcloth::sim::{

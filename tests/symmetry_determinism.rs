@@ -5,7 +5,7 @@
 //! and their velocities equal. The grid's springs (both shear diagonals) and
 //! node masses are mirror symmetric, so only round-off can break the symmetry.
 
-mod common;
+use crate::common;
 
 use std::path::Path;
 

@@ -43,7 +43,7 @@ pub struct SpringGroup {
     /// The group's runs merged into one, for the force kernel: one slot per
     /// node from the first run's start to the last run's end, slots that are
     /// no spring (the columns between runs) masked. One long run costs
-    /// ~1.5× less per spring than row-long ones (`examples/group_cost`).
+    /// ~1.5× less per spring than row-long ones (`benches/group_cost.rs`).
     /// `None` when the group is a single run already or has no stencil.
     pub padded: Option<Padded>,
 }

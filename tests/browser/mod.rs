@@ -1,6 +1,6 @@
 //! A headless Chromium driven over the Chrome DevTools Protocol (CDP), for
 //! the browser test (`tests/clients.rs`) and the page benchmark
-//! (`examples/view_bench.rs`).
+//! (`benches/view_bench.rs`).
 #![allow(dead_code)]
 
 use std::path::Path;

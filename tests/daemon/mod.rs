@@ -205,3 +205,16 @@ pub fn refused_code(r: Result<v1::SwitchReply, ClientError>) -> (String, String)
 pub fn level_of(s: &v1::State) -> Level {
     Level::from_wire(s.level.as_ref().expect("level")).expect("a valid level")
 }
+
+static SERIAL: tokio::sync::Mutex<()> = tokio::sync::Mutex::const_new(());
+
+/// Held for the whole of a bus test, so they run one at a time (tests/bus.rs):
+/// several measure rates and latencies that a test beside them would disturb.
+pub async fn serial() -> tokio::sync::MutexGuard<'static, ()> {
+    SERIAL.lock().await
+}
+
+/// [`serial`] for a test without a runtime.
+pub fn serial_blocking() -> tokio::sync::MutexGuard<'static, ()> {
+    SERIAL.blocking_lock()
+}

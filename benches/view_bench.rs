@@ -6,7 +6,7 @@
 //!
 //! Daemon, viewer and browser share the machine, as on a laptop.
 //!
-//! `cargo run --release --example view_bench [-- --seconds S]`
+//! `cargo bench --bench view_bench -- [--seconds S]`
 //! Writes `out/view-bench/view_bench.csv`.
 
 #[path = "../tests/browser/mod.rs"]

@@ -4,7 +4,7 @@
 //! on loopback, bytes per state message, and switch latency (prepared and
 //! not yet prepared).
 //!
-//! `cargo run --release --example serve_bench [-- --quick] [--bus-only]`
+//! `cargo bench --bench serve_bench -- [--quick] [--bus-only]`
 
 use std::time::{Duration, Instant};
 

@@ -5,14 +5,14 @@
 //! time (Linux `/proc/thread-self/schedstat`; it excludes time the thread was
 //! preempted by other processes, so it is the steadier number there).
 //!
-//! `cargo run --release --example profile_step -- [integrator] [trials]`
+//! `cargo bench --bench profile_step -- [integrator] [trials]`
 //! (integrator: symplectic_euler (default), explicit_euler, rk4, implicit_euler).
 
 use lodcloth::scene::Scene;
 use lodcloth::sim::Integrator;
 
 fn main() {
-    let mut args = std::env::args().skip(1);
+    let mut args = std::env::args().skip(1).filter(|a| a != "--bench");
     let integrator = args
         .next()
         .map(|s| Integrator::from_name(&s).expect("unknown integrator"))
