@@ -55,6 +55,7 @@ fn trial(n: usize, integrator: Integrator, count: usize, seconds: f64) -> (f64, 
             duration: 1e9,
             looping: false,
             shadow: false,
+            hold: false,
         })
         .collect();
     let engine = Engine::start(

@@ -14,3 +14,4 @@ mod clients;
 mod robustness;
 mod security;
 mod service;
+mod snapshots;

@@ -186,6 +186,20 @@ pub struct ControlOutcome {
     pub frame: u64,
 }
 
+/// What an instance needs to resume where it was (the service persists it;
+/// see `service::snapshot`).
+#[derive(Debug, Clone)]
+pub struct Snapshot {
+    pub level: Level,
+    pub method: Method,
+    pub coefficient_version: u32,
+    pub frame: u64,
+    pub episode: u64,
+    pub paused: bool,
+    /// The full state, in f64 (a surface: its simulated points).
+    pub state: State,
+}
+
 /// Commands, applied between steps.
 pub enum Command {
     /// Continue at `prepared`'s level from the current state (transferred).
@@ -203,6 +217,22 @@ pub enum Command {
     },
     /// Start the scene over from rest at the current level.
     Reset { reply: oneshot::Sender<ControlOutcome> },
+    /// A copy of the instance's state; `None` while it is held or halted
+    /// (nothing worth resuming).
+    Snapshot {
+        reply: oneshot::Sender<Option<Box<Snapshot>>>,
+    },
+    /// Release an instance started with [`InstanceSetup::hold`]: resume
+    /// `saved` (at `prepared`'s level and coefficients when given, else at
+    /// the current ones), or with `saved` `None` start from rest. On error
+    /// the instance starts from rest too.
+    Restore {
+        prepared: Option<Arc<Prepared>>,
+        sim: Option<Box<Simulation>>,
+        cloud: Option<Box<CloudMap>>,
+        saved: Option<Box<Snapshot>>,
+        reply: oneshot::Sender<Result<(), String>>,
+    },
 }
 
 /// Everything an instance starts with.
@@ -219,6 +249,9 @@ pub struct InstanceSetup {
     pub looping: bool,
     /// Compare with the recorded reference and publish the live error.
     pub shadow: bool,
+    /// Neither step nor publish until a [`Command::Restore`] (a snapshot is
+    /// being prepared to resume from).
+    pub hold: bool,
 }
 
 /// The service's side of one running instance.
@@ -392,6 +425,8 @@ struct Runner {
     consecutive_divergences: u32,
     last_divergence_time: f64,
     halted: Option<Arc<str>>,
+    /// Waiting for a [`Command::Restore`]: no steps, no states.
+    held: bool,
     last: Option<StepReport>,
     // Metrics window.
     window_start: Instant,
@@ -462,6 +497,7 @@ impl Runner {
             consecutive_divergences: 0,
             last_divergence_time: f64::NEG_INFINITY,
             halted: None,
+            held: setup.hold,
             last: None,
             window_start: now,
             window_sim: 0.0,
@@ -492,7 +528,7 @@ impl Runner {
 
     /// When the next step is due.
     fn next_due(&self) -> Instant {
-        if self.paused {
+        if self.paused || self.held {
             return self.next_metrics;
         }
         self.origin + Duration::from_secs_f64((self.steps_since_origin + 1) as f64 * self.dt())
@@ -549,7 +585,79 @@ impl Runner {
                     frame: self.frames,
                 });
             }
+            Command::Snapshot { reply } => {
+                let snapshot = (!self.held && self.halted.is_none()).then(|| {
+                    Box::new(Snapshot {
+                        level: self.level,
+                        method: self.method,
+                        coefficient_version: self.coefficient_version,
+                        frame: self.frames,
+                        episode: self.episode,
+                        paused: self.paused,
+                        state: self.sim.state().clone(),
+                    })
+                });
+                let _ = reply.send(snapshot);
+            }
+            Command::Restore {
+                prepared,
+                sim,
+                cloud,
+                saved,
+                reply,
+            } => {
+                let outcome = match saved {
+                    Some(saved) if self.held => self.restore(prepared, sim.map(|s| *s), cloud.map(|c| *c), *saved),
+                    Some(_) => Err("the instance is already running".into()),
+                    None => Ok(()),
+                };
+                self.held = false;
+                self.reanchor(Instant::now());
+                self.update_status();
+                let _ = reply.send(outcome);
+            }
         }
+    }
+
+    /// Resume `saved`: its state, frame, episode and pause, at `prepared`'s
+    /// level and coefficients (or the current ones).
+    fn restore(
+        &mut self,
+        prepared: Option<Arc<Prepared>>,
+        sim: Option<Simulation>,
+        cloud: Option<CloudMap>,
+        saved: Snapshot,
+    ) -> Result<(), String> {
+        let level = prepared.as_ref().map_or(self.level, |p| p.level);
+        if saved.level != level {
+            return Err(format!("the snapshot is at {}, the simulation at {level}", saved.level));
+        }
+        match (prepared, sim) {
+            (Some(prepared), Some(mut sim)) => {
+                sim.set_state(saved.state).map_err(|e| e.to_string())?;
+                self.sim = sim;
+                if cloud.is_some() {
+                    self.cloud = cloud;
+                }
+                self.method = prepared.method;
+                self.material = prepared.material;
+                self.predicted_error = Some(prepared.predicted_error);
+                self.o_max = Some(prepared.o_max);
+                self.shadow = self
+                    .shadow_wanted
+                    .then(|| Shadow::new(prepared.clone(), self.sim.topology().n_nodes));
+            }
+            (None, None) => self.sim.set_state(saved.state).map_err(|e| e.to_string())?,
+            _ => return Err("a restore needs both the prepared level and its simulation".into()),
+        }
+        self.level = level;
+        self.coefficient_version = saved.coefficient_version;
+        self.frames = saved.frame;
+        self.episode = saved.episode;
+        self.paused = saved.paused;
+        self.checkpoint.clone_from(self.sim.state());
+        self.live_error = None;
+        Ok(())
     }
 
     fn switch(
@@ -679,7 +787,7 @@ impl Runner {
 
     /// Take the steps due at `now`.
     fn advance(&mut self, now: Instant) {
-        if self.paused {
+        if self.paused || self.held {
             self.reanchor(now);
             return;
         }
@@ -780,6 +888,11 @@ impl Runner {
 
     /// Hand out a state and metrics when their time has come.
     fn publish(&mut self, now: Instant) {
+        if self.held {
+            self.next_publish = now + self.publish_every;
+            self.next_metrics = now + self.metrics_every;
+            return;
+        }
         if now >= self.next_publish {
             self.next_publish = advance_deadline(self.next_publish, self.publish_every, now);
             let frame = Arc::new(self.snapshot(false));

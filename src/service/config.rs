@@ -45,6 +45,34 @@ pub struct RawConfig {
     pub estimation: RawEstimation,
     #[serde(default)]
     pub instances: Vec<RawInstance>,
+    /// Instance snapshots, so a restart resumes every cloth where it was
+    /// (absent: no snapshots).
+    pub snapshots: Option<RawSnapshots>,
+}
+
+/// `[snapshots]`: each instance's state persisted at an interval and at
+/// shutdown, and resumed from at start.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RawSnapshots {
+    /// Directory of the snapshot files (`<instance>.snapshot`), relative to
+    /// the working directory; created when missing.
+    pub dir: PathBuf,
+    /// Seconds between snapshots (default 30); 0 = only at shutdown.
+    #[serde(default = "default_snapshot_interval")]
+    pub interval: f64,
+    /// Resume from the snapshots at start (default true); false only writes
+    /// them.
+    #[serde(default = "default_true")]
+    pub resume: bool,
+}
+
+fn default_snapshot_interval() -> f64 {
+    30.0
+}
+
+fn default_true() -> bool {
+    true
 }
 
 fn default_prefix() -> String {
@@ -244,6 +272,7 @@ pub struct ServiceConfig {
     pub engine: EngineConfig,
     pub estimation: EstimationConfig,
     pub instances: Vec<InstanceConfig>,
+    pub snapshots: Option<RawSnapshots>,
 }
 
 /// Validated engine settings.
@@ -412,6 +441,17 @@ impl ServiceConfig {
         if raw.instances.is_empty() {
             p.push("instances: at least one instance is needed".into());
         }
+        if let Some(snap) = &raw.snapshots {
+            if snap.dir.as_os_str().is_empty() {
+                p.push("snapshots.dir: must name a directory".into());
+            }
+            if !(snap.interval >= 0.0 && snap.interval <= 86_400.0) {
+                p.push(format!(
+                    "snapshots.interval: {} must be in [0, 86400] seconds (0: only at shutdown)",
+                    snap.interval
+                ));
+            }
+        }
         let mut instances = Vec::new();
         for (i, r) in raw.instances.iter().enumerate() {
             let at = format!("instances[{i}]");
@@ -504,6 +544,7 @@ impl ServiceConfig {
         Ok(ServiceConfig {
             prefix: raw.prefix,
             cache: raw.cache,
+            snapshots: raw.snapshots,
             zenoh: raw.zenoh,
             engine: EngineConfig {
                 threads,

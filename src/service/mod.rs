@@ -10,12 +10,18 @@
 //! background OS threads at a lower scheduling priority, so stepping keeps
 //! the cores; a switch to a level that is not ready waits for it while every
 //! instance keeps stepping.
+//!
+//! With `[snapshots]`, every instance's state is written at an interval and
+//! at shutdown; at start an instance with a snapshot that fits its config is
+//! held (no steps, no states) until its level is prepared, then resumes
+//! where it was (frame, episode, time, level, coefficients).
 
 pub mod client;
 pub mod config;
 pub mod keys;
 pub mod request;
 pub mod security;
+pub mod snapshot;
 
 use std::collections::BTreeMap;
 use std::future::Future;
@@ -33,12 +39,12 @@ use zenoh::Session;
 use crate::cache::CoefficientCache;
 use crate::engine::{
     CloudMap, Command, Engine, EngineSettings, InstanceHandle, InstanceSetup, MetricsFrame, PrepareError, Prepared,
-    Preparer, StateFrame,
+    Preparer, Snapshot, StateFrame,
 };
 use crate::estimate::Method;
 use crate::proto::{self, schema, v1, Level};
 use crate::sim::Simulation;
-use config::{ConfigError, ServiceConfig};
+use config::{ConfigError, RawSnapshots, ServiceConfig};
 use request::{Refusal, SwitchTarget};
 use v1::error::Code;
 
@@ -124,7 +130,11 @@ pub async fn serve(
     };
     let mut setups = Vec::new();
     let mut preparers = Vec::new();
+    let mut resumes = BTreeMap::new();
     for ic in &config.instances {
+        if let Some(saved) = config.snapshots.as_ref().and_then(|s| resumable(s, ic)) {
+            resumes.insert(ic.name.clone(), saved);
+        }
         let preparer = Arc::new(Preparer::new(Arc::new(ic.clone()), config.estimation, cache.clone()));
         let start = preparer.quick_start().map_err(|source| ServiceError::Prepare {
             instance: ic.name.clone(),
@@ -141,6 +151,7 @@ pub async fn serve(
             duration: ic.duration(),
             looping: ic.looping,
             shadow: ic.shadow_reference,
+            hold: resumes.contains_key(&ic.name),
         });
         preparers.push(preparer);
     }
@@ -217,7 +228,10 @@ pub async fn serve(
         .declare_queryable(keys::instances(&ctx.prefix))
         .await
         .map_err(zerr)?;
-    tasks.spawn(precompute(ctx.clone(), config.estimation.precompute));
+    tasks.spawn(precompute(ctx.clone(), config.estimation.precompute, resumes));
+    if let Some(snap) = config.snapshots.as_ref().filter(|s| s.interval > 0.0) {
+        tasks.spawn(snapshot_every(ctx.clone(), snap.clone()));
+    }
     tracing::info!(
         prefix = %ctx.prefix,
         instances = ctx.instances.len(),
@@ -257,6 +271,10 @@ pub async fn serve(
     while tasks.join_next().await.is_some() {}
     drop(tokens);
     drop((info_q, switch_q, control_q, list_q));
+    if let Some(snap) = &config.snapshots {
+        let written = save_snapshots(&ctx, &snap.dir).await;
+        tracing::info!(written, dir = %snap.dir.display(), "instance snapshots written");
+    }
     let stopped = tokio::task::spawn_blocking(move || engine.stop()).await;
     if stopped.is_err() {
         tracing::error!("the engine did not stop cleanly");
@@ -303,9 +321,126 @@ async fn prepare(preparer: Arc<Preparer>, level: Level, method: Method) -> Resul
     rx.await.map_err(|_| failed("the preparation thread stopped".into()))?
 }
 
-/// At start-up: give every instance its configured method's coefficients at
-/// its start level, then prepare the other levels.
-async fn precompute(ctx: Arc<Context>, all_levels: bool) {
+/// The snapshot `config`'s instance resumes from, if there is one that fits;
+/// why not is logged.
+fn resumable(snapshots: &RawSnapshots, config: &config::InstanceConfig) -> Option<Box<Snapshot>> {
+    if !snapshots.resume {
+        return None;
+    }
+    match snapshot::read(&snapshots.dir, &config.name) {
+        Ok(None) => None,
+        Ok(Some(saved)) => match snapshot::fits(&saved, config) {
+            Ok(()) => {
+                let s = &saved.snapshot;
+                tracing::info!(instance = %config.name, level = %s.level, method = %s.method, time = s.state.time, frame = s.frame, "resuming from its snapshot");
+                Some(Box::new(saved.snapshot))
+            }
+            Err(why) => {
+                tracing::warn!(instance = %config.name, "not resuming from its snapshot: {why}; starting afresh");
+                None
+            }
+        },
+        Err(e) => {
+            tracing::warn!(instance = %config.name, "{e}; starting afresh (the file is replaced at the next snapshot)");
+            None
+        }
+    }
+}
+
+/// Release held instances: prepare each snapshot's level and method (its
+/// coefficients come from the cache when they were estimated before) and
+/// resume it there, or start from rest when that fails.
+async fn resume(ctx: &Context, resumes: BTreeMap<String, Box<Snapshot>>) {
+    for (name, saved) in resumes {
+        let Some(inst) = ctx.instances.get(&name) else { continue };
+        let _guard = inst.switching.lock().await;
+        let config = inst.preparer.config().clone();
+        // Never switched: the quick start's simulation is the one it ran.
+        let quick = saved.level == config.start && saved.method == Method::Same && saved.coefficient_version == 1;
+        let parts = if quick {
+            Ok((None, None, None))
+        } else {
+            prepare(inst.preparer.clone(), saved.level, saved.method)
+                .await
+                .map(|r| (Some(r.prepared), Some(Box::new(r.sim)), r.cloud.map(Box::new)))
+        };
+        let (time, level) = (saved.state.time, saved.level);
+        let (prepared, sim, cloud, saved) = match parts {
+            Ok((p, s, c)) => (p, s, c, Some(saved)),
+            Err(e) => {
+                tracing::warn!(instance = %name, "cannot prepare its snapshot's level: {e}; starting afresh");
+                (None, None, None, None)
+            }
+        };
+        let resuming = saved.is_some();
+        let (tx, rx) = oneshot::channel();
+        let command = Command::Restore {
+            prepared,
+            sim,
+            cloud,
+            saved,
+            reply: tx,
+        };
+        if inst.handle.send(command).is_err() {
+            return;
+        }
+        match rx.await {
+            Ok(Ok(())) if resuming => tracing::info!(instance = %name, %level, time, "resumed from its snapshot"),
+            Ok(Ok(())) => {}
+            Ok(Err(e)) => tracing::warn!(instance = %name, "cannot resume from its snapshot: {e}; started afresh"),
+            Err(_) => return,
+        }
+    }
+}
+
+/// Write every instance's snapshot every `interval` seconds.
+async fn snapshot_every(ctx: Arc<Context>, snapshots: RawSnapshots) {
+    let mut tick = tokio::time::interval(Duration::from_secs_f64(snapshots.interval));
+    tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    tick.tick().await;
+    loop {
+        tick.tick().await;
+        save_snapshots(&ctx, &snapshots.dir).await;
+    }
+}
+
+/// Snapshot every instance and write the files (off the runtime's threads);
+/// failures are logged and keep the previous file. Returns how many were
+/// written.
+async fn save_snapshots(ctx: &Context, dir: &std::path::Path) -> usize {
+    let mut written = 0;
+    for inst in ctx.instances.values() {
+        let (tx, rx) = oneshot::channel();
+        if inst.handle.send(Command::Snapshot { reply: tx }).is_err() {
+            break;
+        }
+        let Ok(Ok(Some(s))) = tokio::time::timeout(Duration::from_secs(5), rx).await else {
+            continue;
+        };
+        let name = inst.handle.name.clone();
+        let identity = snapshot::identity(inst.preparer.config());
+        let saved_ms = std::time::SystemTime::now()
+            .duration_since(UNIX_EPOCH)
+            .map_or(0, |d| d.as_millis() as u64);
+        let dir = dir.to_path_buf();
+        let write = tokio::task::spawn_blocking(move || {
+            let bytes = snapshot::encode(&name, identity, saved_ms, &s);
+            snapshot::write(&dir, &name, &bytes)
+        });
+        match write.await {
+            Ok(Ok(_)) => written += 1,
+            Ok(Err(e)) => tracing::warn!(instance = %inst.handle.name, "snapshot not written: {e}"),
+            Err(e) => tracing::warn!(instance = %inst.handle.name, "snapshot not written: {e}"),
+        }
+    }
+    written
+}
+
+/// At start-up: resume the instances that have a snapshot, give every
+/// instance its configured method's coefficients at its start level, then
+/// prepare the other levels.
+async fn precompute(ctx: Arc<Context>, all_levels: bool, resumes: BTreeMap<String, Box<Snapshot>>) {
+    resume(&ctx, resumes).await;
     for inst in ctx.instances.values() {
         let config = inst.preparer.config().clone();
         let level = config.start;

@@ -1,0 +1,199 @@
+//! Instance snapshots (`[snapshots]`): a restarted daemon resumes every
+//! instance where it was, from files written at an interval and at shutdown;
+//! a damaged file is reported and the instance starts afresh, nothing else
+//! disturbed.
+
+use std::path::Path;
+use std::time::Duration;
+
+use lodcloth::proto::{unpack_positions, v1, Level};
+use lodcloth::service::config::ServiceConfig;
+use lodcloth::service::snapshot;
+
+use crate::daemon::{self, client, collect_states, free_port, level_of, wait_info, within, Daemon};
+
+/// The two test instances ("a": paper scene 1 starting at 16², "b": the
+/// fixed-dt one at 8²), snapshots in `snapshots` every half second.
+fn config(port: u16, dir: &Path) -> String {
+    daemon::config_text(port, dir, ("a", "b"))
+        + &format!(
+            "[snapshots]\ndir = \"{}\"\ninterval = 0.5\n",
+            dir.join("snapshots").display()
+        )
+}
+
+fn read(dir: &Path, instance: &str) -> snapshot::Saved {
+    snapshot::read(&dir.join("snapshots"), instance)
+        .expect("a readable snapshot")
+        .expect("a snapshot file")
+}
+
+fn max_abs_diff(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max)
+}
+
+/// The first state of `instance` that `c` receives.
+async fn first_state(c: &lodcloth::service::client::Client, instance: &str) -> v1::State {
+    loop {
+        if let Some(s) = collect_states(c, instance, 0.2).await.into_iter().next() {
+            return s;
+        }
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_restarted_daemon_resumes_each_instance_where_it_was() {
+    let _serial = daemon::serial().await;
+    let dir = tempfile::tempdir().expect("temp dir");
+    let scratch = || tempfile::tempdir().expect("temp dir");
+
+    // 1. Run: switch "a" to 12², pause "b", let "a" swing for a while.
+    let port = free_port();
+    let d = Daemon::run(port, &config(port, dir.path()), scratch());
+    let c = client(&[d.endpoint()]).await;
+    wait_info(&c, "a").await;
+    wait_info(&c, "b").await;
+    let req = v1::SwitchRequest {
+        target: Some(v1::switch_request::Target::Level(Level::new(12, 12).to_wire())),
+        method: String::new(),
+    };
+    let switched = within(30, "switch", c.switch("a", &req, Duration::from_secs(25)))
+        .await
+        .expect("switch to 12x12");
+    let paused = c
+        .control("b", v1::control_request::Action::Pause)
+        .await
+        .expect("pause b");
+    assert!(paused.paused);
+    let states = collect_states(&c, "a", 1.5).await;
+    let last = states.last().expect("states of a").clone();
+    // The interval has written a snapshot while running.
+    let periodic = read(dir.path(), "a");
+    assert!(periodic.snapshot.frame > 0 && periodic.snapshot.frame <= last.frame + 100);
+    d.shutdown().await.expect("clean exit");
+
+    // At shutdown: the state after the last one published, at 12², moving.
+    let saved = read(dir.path(), "a").snapshot;
+    assert_eq!(saved.level, Level::new(12, 12));
+    assert_eq!(saved.coefficient_version, switched.coefficient_version);
+    assert!(saved.frame >= last.frame && saved.frame > periodic.snapshot.frame);
+    assert!(
+        saved.state.time >= last.time - 1e-9,
+        "{} < {}",
+        saved.state.time,
+        last.time
+    );
+    assert_eq!(saved.episode, last.episode);
+    let speed = saved.state.vel.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+    assert!(speed > 1e-3, "the cloth was saved at rest (max speed {speed})");
+    let saved_b = read(dir.path(), "b").snapshot;
+    assert!(saved_b.paused);
+
+    // 2. Restart: no state from rest, the first one where "a" was.
+    let port = free_port();
+    let d = Daemon::run(port, &config(port, dir.path()), scratch());
+    let c = client(&[d.endpoint()]).await;
+    let first = within(30, "a state after the restart", first_state(&c, "a")).await;
+    let resumed = collect_states(&c, "a", 1.0).await;
+    for s in std::iter::once(&first).chain(&resumed) {
+        assert_eq!(
+            level_of(s),
+            Level::new(12, 12),
+            "frame {} is not at the saved level",
+            s.frame
+        );
+        assert!(
+            s.episode == saved.episode && s.time >= saved.state.time - 1e-9 && s.frame >= saved.frame,
+            "a state from before the snapshot: episode {}, t = {}, frame {} (saved: {}, {}, {})",
+            s.episode,
+            s.time,
+            s.frame,
+            saved.episode,
+            saved.state.time,
+            saved.frame
+        );
+        assert!(s.coefficient_version >= saved.coefficient_version);
+    }
+    // Continuity: a fresh start would be at rest at t ≈ 0; the first state
+    // is within a fraction of a second of the saved one and close to it.
+    assert!(
+        first.time - saved.state.time < 0.5,
+        "first state {} s after the snapshot",
+        first.time - saved.state.time
+    );
+    let pos = unpack_positions(&first.positions).expect("positions");
+    let moved = max_abs_diff(&pos, &saved.state.pos);
+    let dt = first.time - saved.state.time;
+    assert!(
+        moved <= 0.01 + 2.0 * speed * dt,
+        "{moved} m from the saved positions after {dt} s"
+    );
+    let info_a = wait_info(&c, "a").await;
+    assert_eq!(
+        Level::from_wire(info_a.level.as_ref().expect("level")),
+        Ok(Level::new(12, 12))
+    );
+    // "b" is still paused: no steps, the same frame.
+    let mut info_b = wait_info(&c, "b").await;
+    for _ in 0..50 {
+        if info_b.paused {
+            break;
+        }
+        tokio::time::sleep(Duration::from_millis(100)).await;
+        info_b = wait_info(&c, "b").await;
+    }
+    assert!(info_b.paused, "b was resumed unpaused");
+    d.shutdown().await.expect("clean exit");
+
+    // 3. A damaged snapshot: "a" starts afresh, "b" still resumes, and the
+    // next snapshot replaces the damaged file.
+    let file = snapshot::path(&dir.path().join("snapshots"), "a");
+    let mut bytes = std::fs::read(&file).expect("snapshot bytes");
+    let middle = bytes.len() / 2;
+    bytes[middle] ^= 0x55;
+    std::fs::write(&file, bytes).expect("damage");
+    assert!(snapshot::read(&dir.path().join("snapshots"), "a").is_err());
+    let port = free_port();
+    let d = Daemon::run(port, &config(port, dir.path()), scratch());
+    let c = client(&[d.endpoint()]).await;
+    let fresh = within(30, "a state after the second restart", first_state(&c, "a")).await;
+    assert_eq!(fresh.episode, 0);
+    assert!(fresh.time < 1.0, "a resumed a damaged snapshot: t = {}", fresh.time);
+    assert_eq!(
+        level_of(&fresh),
+        Level::new(16, 16),
+        "a fresh start is at the start level"
+    );
+    let mut info_b = wait_info(&c, "b").await;
+    for _ in 0..50 {
+        if info_b.paused {
+            break;
+        }
+        tokio::time::sleep(Duration::from_millis(100)).await;
+        info_b = wait_info(&c, "b").await;
+    }
+    assert!(info_b.paused, "b did not resume beside a damaged snapshot of a");
+    d.shutdown().await.expect("clean exit");
+    assert!(read(dir.path(), "a").snapshot.state.time < saved.state.time);
+}
+
+#[test]
+fn snapshot_settings_are_checked_by_path() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let base = daemon::config_text(free_port(), dir.path(), ("a", "b"));
+    for (section, field) in [
+        ("[snapshots]\ndir = \"s\"\ninterval = -1.0\n", "snapshots.interval"),
+        ("[snapshots]\ndir = \"s\"\ninterval = nan\n", "snapshots.interval"),
+        ("[snapshots]\ndir = \"\"\n", "snapshots.dir"),
+        ("[snapshots]\ninterval = 5.0\n", "dir"),
+        ("[snapshots]\ndir = \"s\"\nevery = 5.0\n", "every"),
+    ] {
+        let e = ServiceConfig::from_toml(&(base.clone() + section), "test.toml")
+            .expect_err(section)
+            .to_string();
+        assert!(e.contains(field), "{section}: {e}");
+    }
+    let ok = ServiceConfig::from_toml(&(base + "[snapshots]\ndir = \"s\"\n"), "test.toml").expect("defaults");
+    let s = ok.snapshots.expect("snapshots");
+    assert_eq!((s.interval, s.resume), (30.0, true));
+}
