@@ -42,6 +42,17 @@ $PY watch sphere --count 3 --timeout 10
 if $PY switch nope --level 16x16 --timeout 10; then echo "an unknown instance was accepted" >&2; exit 1; fi
 kill -TERM $DAEMON
 wait $DAEMON
-trap - EXIT
 grep -q "stopped" "$LOG"
+# The default config snapshots every instance at shutdown; a second start
+# resumes them (paper-1 at the 16x16 it was switched to) instead of
+# starting from rest.
+test -s out/snapshots/paper-1.snapshot && test -s out/snapshots/sphere.snapshot
+"$BIN" serve --log-json > out/ci-serve-2.log 2>&1 &
+DAEMON=$!
+for _ in $(seq 50); do "$BIN" health > /dev/null 2>&1 && break; sleep 0.2; done
+timeout 300 "$BIN" watch paper-1 --count 3
+kill -TERM $DAEMON
+wait $DAEMON
+trap - EXIT
+grep "resumed from its snapshot" out/ci-serve-2.log | grep -q '"instance":"paper-1"'
 echo "daemon smoke test passed"
