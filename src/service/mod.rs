@@ -347,49 +347,54 @@ fn resumable(snapshots: &RawSnapshots, config: &config::InstanceConfig) -> Optio
     }
 }
 
-/// Release held instances: prepare each snapshot's level and method (its
-/// coefficients come from the cache when they were estimated before) and
-/// resume it there, or start from rest when that fails.
-async fn resume(ctx: &Context, resumes: BTreeMap<String, Box<Snapshot>>) {
+/// Release held instances, all at once: prepare each snapshot's level and
+/// method (its coefficients come from the cache when they were estimated
+/// before) and resume it there, or start from rest when that fails.
+async fn resume(ctx: Arc<Context>, resumes: BTreeMap<String, Box<Snapshot>>) {
+    let mut each = tokio::task::JoinSet::new();
     for (name, saved) in resumes {
-        let Some(inst) = ctx.instances.get(&name) else { continue };
-        let _guard = inst.switching.lock().await;
-        let config = inst.preparer.config().clone();
-        // Never switched: the quick start's simulation is the one it ran.
-        let quick = saved.level == config.start && saved.method == Method::Same && saved.coefficient_version == 1;
-        let parts = if quick {
-            Ok((None, None, None))
-        } else {
-            prepare(inst.preparer.clone(), saved.level, saved.method)
-                .await
-                .map(|r| (Some(r.prepared), Some(Box::new(r.sim)), r.cloud.map(Box::new)))
-        };
-        let (time, level) = (saved.state.time, saved.level);
-        let (prepared, sim, cloud, saved) = match parts {
-            Ok((p, s, c)) => (p, s, c, Some(saved)),
-            Err(e) => {
-                tracing::warn!(instance = %name, "cannot prepare its snapshot's level: {e}; starting afresh");
-                (None, None, None, None)
-            }
-        };
-        let resuming = saved.is_some();
-        let (tx, rx) = oneshot::channel();
-        let command = Command::Restore {
-            prepared,
-            sim,
-            cloud,
-            saved,
-            reply: tx,
-        };
-        if inst.handle.send(command).is_err() {
-            return;
+        each.spawn(resume_one(ctx.clone(), name, saved));
+    }
+    while each.join_next().await.is_some() {}
+}
+
+async fn resume_one(ctx: Arc<Context>, name: String, saved: Box<Snapshot>) {
+    let Some(inst) = ctx.instances.get(&name) else { return };
+    let _guard = inst.switching.lock().await;
+    let config = inst.preparer.config().clone();
+    // Never switched: the quick start's simulation is the one it ran.
+    let quick = saved.level == config.start && saved.method == Method::Same && saved.coefficient_version == 1;
+    let parts = if quick {
+        Ok((None, None, None))
+    } else {
+        prepare(inst.preparer.clone(), saved.level, saved.method)
+            .await
+            .map(|r| (Some(r.prepared), Some(Box::new(r.sim)), r.cloud.map(Box::new)))
+    };
+    let (time, level) = (saved.state.time, saved.level);
+    let (prepared, sim, cloud, saved) = match parts {
+        Ok((p, s, c)) => (p, s, c, Some(saved)),
+        Err(e) => {
+            tracing::warn!(instance = %name, "cannot prepare its snapshot's level: {e}; starting afresh");
+            (None, None, None, None)
         }
-        match rx.await {
-            Ok(Ok(())) if resuming => tracing::info!(instance = %name, %level, time, "resumed from its snapshot"),
-            Ok(Ok(())) => {}
-            Ok(Err(e)) => tracing::warn!(instance = %name, "cannot resume from its snapshot: {e}; started afresh"),
-            Err(_) => return,
-        }
+    };
+    let resuming = saved.is_some();
+    let (tx, rx) = oneshot::channel();
+    let command = Command::Restore {
+        prepared,
+        sim,
+        cloud,
+        saved,
+        reply: tx,
+    };
+    if inst.handle.send(command).is_err() {
+        return;
+    }
+    match rx.await {
+        Ok(Ok(())) if resuming => tracing::info!(instance = %name, %level, time, "resumed from its snapshot"),
+        Ok(Ok(())) | Err(_) => {}
+        Ok(Err(e)) => tracing::warn!(instance = %name, "cannot resume from its snapshot: {e}; started afresh"),
     }
 }
 
@@ -440,7 +445,7 @@ async fn save_snapshots(ctx: &Context, dir: &std::path::Path) -> usize {
 /// instance its configured method's coefficients at its start level, then
 /// prepare the other levels.
 async fn precompute(ctx: Arc<Context>, all_levels: bool, resumes: BTreeMap<String, Box<Snapshot>>) {
-    resume(&ctx, resumes).await;
+    resume(ctx.clone(), resumes).await;
     for inst in ctx.instances.values() {
         let config = inst.preparer.config().clone();
         let level = config.start;
