@@ -699,7 +699,15 @@ const SCENE_ROOTS: [&str; 9] = [
     "forces",
     "wind",
 ];
-const CONFIG_ROOTS: [&str; 6] = ["prefix", "cache", "zenoh", "engine", "estimation", "instances"];
+const CONFIG_ROOTS: [&str; 7] = [
+    "prefix",
+    "cache",
+    "zenoh",
+    "engine",
+    "estimation",
+    "instances",
+    "snapshots",
+];
 
 /// A refused scene: its message names the file and, for a parse error, a
 /// line and column of it; for invalid values, every problem starts with its
