@@ -418,24 +418,60 @@ async fn a_client_vanishing_mid_request_disturbs_nothing() {
     d.shutdown().await.expect("clean shutdown");
 }
 
-/// A zenoh router on `port` in this process.
-async fn router(port: u16) -> zenoh::Session {
-    let mut config = zenoh::Config::default();
-    for (k, v) in [
-        ("mode", "\"router\"".to_string()),
-        ("listen/endpoints", format!("[\"tcp/127.0.0.1:{port}\"]")),
-        ("scouting/multicast/enabled", "false".into()),
-    ] {
-        config.insert_json5(k, &v).expect("router config");
-    }
-    let deadline = Instant::now() + Duration::from_secs(10);
-    loop {
-        // The port may linger briefly after the previous router closed.
-        match zenoh::open(config.clone()).await {
-            Ok(s) => return s,
-            Err(e) if Instant::now() > deadline => panic!("router on {port}: {e}"),
-            Err(_) => tokio::time::sleep(Duration::from_millis(50)).await,
+/// The shipped `lodcloth router` on `port`, in its own process, multicast
+/// scouting off (from a zenoh config file, so `--zenoh-config` is driven
+/// too). Killed when dropped; [`Router::stop`] stops it with SIGTERM.
+struct Router(std::process::Child);
+
+impl Router {
+    /// Start it and wait until it accepts connections (the port may linger
+    /// briefly after the previous router, and then the router exits: retry).
+    fn start(port: u16, zenoh_config: &std::path::Path) -> Router {
+        let deadline = Instant::now() + Duration::from_secs(10);
+        loop {
+            let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_lodcloth"))
+                .args(["router", "--listen", &format!("tcp/127.0.0.1:{port}"), "--zenoh-config"])
+                .arg(zenoh_config)
+                .stdout(std::process::Stdio::null())
+                .stderr(std::process::Stdio::null())
+                .spawn()
+                .expect("lodcloth router");
+            loop {
+                if std::net::TcpStream::connect(("127.0.0.1", port)).is_ok() {
+                    return Router(child);
+                }
+                if let Ok(Some(status)) = child.try_wait() {
+                    assert!(Instant::now() < deadline, "lodcloth router on {port} exits: {status}");
+                    break;
+                }
+                assert!(Instant::now() < deadline, "lodcloth router on {port} does not listen");
+                std::thread::sleep(Duration::from_millis(20));
+            }
+            std::thread::sleep(Duration::from_millis(50));
         }
+    }
+
+    /// SIGTERM; the router must close its session and exit 0.
+    fn stop(mut self) {
+        let pid = self.0.id().to_string();
+        let sent = std::process::Command::new("kill").args(["-TERM", &pid]).status();
+        assert!(sent.is_ok_and(|s| s.success()), "kill -TERM {pid}");
+        let deadline = Instant::now() + Duration::from_secs(10);
+        let status = loop {
+            if let Some(status) = self.0.try_wait().expect("router status") {
+                break status;
+            }
+            assert!(Instant::now() < deadline, "lodcloth router ignores SIGTERM");
+            std::thread::sleep(Duration::from_millis(10));
+        };
+        assert!(status.success(), "lodcloth router stopped with {status}");
+    }
+}
+
+impl Drop for Router {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
     }
 }
 
@@ -444,9 +480,11 @@ async fn publishing_resumes_by_itself_after_the_router_restarts() {
     let _serial = daemon::serial().await;
     let port = daemon::free_port();
     let endpoint = format!("tcp/127.0.0.1:{port}");
-    let first = router(port).await;
-    // The daemon and the client both in client mode, through the router.
     let dir = tempfile::tempdir().expect("temp dir");
+    let router_config = dir.path().join("router.json5");
+    std::fs::write(&router_config, "{ scouting: { multicast: { enabled: false } } }\n").expect("router config");
+    let first = tokio::task::block_in_place(|| Router::start(port, &router_config));
+    // The daemon and the client both in client mode, through the router.
     let text = config_text(daemon::free_port(), dir.path(), ("a", "b"))
         .replace(
             "mode = \"peer\"",
@@ -473,11 +511,10 @@ async fn publishing_resumes_by_itself_after_the_router_restarts() {
     );
 
     let stopped = Instant::now();
-    first.close().await.expect("stop the router");
-    drop(first);
+    tokio::task::block_in_place(|| first.stop());
     tokio::time::sleep(Duration::from_secs(1)).await;
     let restarted = Instant::now();
-    let _second = router(port).await;
+    let _second = tokio::task::block_in_place(|| Router::start(port, &router_config));
     let deadline = Instant::now() + Duration::from_secs(30);
     let resumed = loop {
         let first_after = arrivals
