@@ -10,11 +10,14 @@
 //!    second and a bad request every second; the daemon's resident memory
 //!    sampled every 5 s, written to `out/soak/memory.csv` and `.svg`.
 //!
-//! `cargo bench --bench soak -- [--subscribers 100] [--minutes 10]`
+//! `cargo bench --bench soak -- [--subscribers 100] [--minutes 10]
+//! [--fast-processes P]` (P > 0: the fast subscribers in P child processes
+//! instead of this one).
 
 #[path = "../tests/daemon/mod.rs"]
 mod daemon;
 
+use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
@@ -158,14 +161,55 @@ async fn slow_subscribers(endpoint: String, n: usize) {
     }
 }
 
+/// Child mode: `n` fast subscribers; every second, each new state as
+/// `L <subscriber> <arrival unix ns> <latency ms>` on stdout, until killed.
+async fn fast_subscribers(endpoint: String, n: usize) {
+    let mut sessions = Vec::new();
+    let seen: Arc<Mutex<Vec<(usize, u64, f64)>>> = Arc::default();
+    for i in 0..n {
+        let c = client(std::slice::from_ref(&endpoint)).await;
+        let seen = seen.clone();
+        c.session
+            .declare_subscriber(keys::state(PREFIX, "a"))
+            .callback(move |s| {
+                let arrived = now_nanos();
+                let state = v1::State::decode(s.payload().to_bytes().as_ref()).expect("State");
+                if !state.transition {
+                    let ms = arrived.saturating_sub(state.stepped_unix_nanos) as f64 / 1e6;
+                    seen.lock().expect("seen").push((i, arrived, ms));
+                }
+            })
+            .background()
+            .await
+            .expect("subscriber");
+        sessions.push(c);
+    }
+    loop {
+        tokio::time::sleep(Duration::from_secs(1)).await;
+        let batch = std::mem::take(&mut *seen.lock().expect("seen"));
+        let text: String = batch.iter().map(|(i, t, ms)| format!("L {i} {t} {ms}\n")).collect();
+        use std::io::Write;
+        let mut out = std::io::stdout().lock();
+        let _ = out.write_all(text.as_bytes());
+        let _ = out.flush();
+    }
+}
+
 #[tokio::main(flavor = "multi_thread", worker_threads = 2)]
 async fn main() {
     let args: Vec<String> = std::env::args().collect();
+    if let Some(i) = args.iter().position(|a| a == "--fast-child") {
+        let endpoint = args[i + 1].clone();
+        return fast_subscribers(endpoint, arg("--fast", 10.0) as usize).await;
+    }
     if let Some(i) = args.iter().position(|a| a == "--slow-child") {
         let endpoint = args[i + 1].clone();
         return slow_subscribers(endpoint, arg("--slow", 10.0) as usize).await;
     }
     let subscribers = arg("--subscribers", 100.0) as usize;
+    // 0: the fast subscribers are sessions of this process; P: they are
+    // spread over P child processes (as separate clients would be).
+    let fast_processes = arg("--fast-processes", 0.0) as usize;
     let minutes = arg("--minutes", 10.0);
     let phase = arg("--phase-seconds", 15.0);
     let dir = tempfile::tempdir().expect("temp dir");
@@ -217,29 +261,80 @@ async fn main() {
             .spawn()
             .expect("slow subscribers"),
     );
+    let n_fast = subscribers - n_slow;
+    // Each child's output is drained as it comes (a full pipe would stall it).
+    let mut fast_children: Vec<(Child, usize, std::thread::JoinHandle<String>)> = (0..fast_processes)
+        .map(|p| {
+            let k = n_fast / fast_processes + usize::from(p < n_fast % fast_processes);
+            let mut child = std::process::Command::new(&exe)
+                .args(["--fast-child", &endpoint, "--fast", &k.to_string()])
+                .stdout(std::process::Stdio::piped())
+                .spawn()
+                .expect("fast subscribers");
+            let mut out = child.stdout.take().expect("child stdout");
+            let reader = std::thread::spawn(move || {
+                use std::io::Read;
+                let mut text = String::new();
+                let _ = out.read_to_string(&mut text);
+                text
+            });
+            (Child(child), k, reader)
+        })
+        .collect();
     let mut tallies = Vec::new();
     let mut sessions = Vec::new();
-    for _ in 0..subscribers - n_slow {
+    for _ in 0..if fast_processes > 0 { 0 } else { n_fast } {
         let t = Arc::new(Tally::default());
         sessions.push(subscribe(endpoint.clone(), "a", Duration::ZERO, t.clone()).await);
         tallies.push((false, t));
     }
-    tokio::time::sleep(Duration::from_secs(2)).await;
+    // Child processes open their sessions one after another: give them
+    // time to have every subscriber declared before the phase.
+    let settle = if fast_processes > 0 {
+        2 + n_fast.div_ceil(fast_processes) as u64 / 3
+    } else {
+        2
+    };
+    tokio::time::sleep(Duration::from_secs(settle)).await;
     for (_, t) in &tallies {
         t.latencies.lock().expect("l").clear();
         t.received.store(0, Ordering::Relaxed);
     }
+    let window = (now_nanos(), Instant::now());
     let (rtf_n, overruns) = real_time_factor(&c, "a", phase).await;
-    let fast: Vec<f64> = tallies
+    let window = (window.0, window.0 + window.1.elapsed().as_nanos() as u64);
+    let mut fast: Vec<f64> = tallies
         .iter()
         .filter(|(slow, _)| !slow)
         .flat_map(|(_, t)| t.latencies.lock().expect("l").clone())
         .collect();
-    let fast_received: Vec<u64> = tallies
+    let mut fast_received: Vec<u64> = tallies
         .iter()
         .filter(|(slow, _)| !slow)
         .map(|(_, t)| t.received.load(Ordering::Relaxed))
         .collect();
+    // Let the children print their last second, then read what arrived
+    // within the phase.
+    tokio::time::sleep(Duration::from_millis(1200)).await;
+    for (mut child, k, reader) in fast_children {
+        let _ = child.0.kill();
+        let _ = child.0.wait();
+        let output = reader.join().unwrap_or_default();
+        let mut per_sub: BTreeMap<usize, u64> = (0..k).map(|i| (i, 0)).collect();
+        for line in output.lines() {
+            let f: Vec<&str> = line.split_whitespace().collect();
+            if let ["L", i, t, ms] = f[..] {
+                let (Ok(i), Ok(t), Ok(ms)) = (i.parse::<usize>(), t.parse::<u64>(), ms.parse::<f64>()) else {
+                    continue;
+                };
+                if (window.0..=window.1).contains(&t) {
+                    fast.push(ms);
+                    *per_sub.entry(i).or_default() += 1;
+                }
+            }
+        }
+        fast_received.extend(per_sub.values());
+    }
     // The child prints its cumulative count every second: read it now and
     // compare with the count at the start of the phase.
     let _ = slow_child.0.kill();
