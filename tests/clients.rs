@@ -9,6 +9,7 @@
 use crate::browser;
 use crate::daemon;
 
+use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
@@ -310,21 +311,55 @@ async fn a_foxglove_client_gets_the_coloured_mesh_and_the_metrics() {
         .await
         .expect("subscribe");
 
+    // Subscription id → is it the mesh (else the metrics). A channel the
+    // bridge advertises again (a new id) is subscribed to again, as a
+    // Foxglove client does; a bridge that never sends both fails the
+    // deadline instead of looping on the one that flows.
+    let mut subscriptions: BTreeMap<u32, bool> = BTreeMap::from([(1, true), (2, false)]);
+    let deadline = Instant::now() + Duration::from_secs(60);
     let (mut updates, mut metric_msgs) = (Vec::new(), Vec::new());
     while updates.len() < 3 || metric_msgs.is_empty() {
+        assert!(
+            Instant::now() < deadline,
+            "in 60 s: {} mesh updates, {} metrics messages",
+            updates.len(),
+            metric_msgs.len()
+        );
         let m = within(30, "message data", ws.next())
             .await
             .expect("open")
             .expect("a message");
-        let Message::Binary(b) = m else { continue };
+        let b = match m {
+            Message::Binary(b) => b,
+            Message::Text(t) => {
+                let v: Value = serde_json::from_str(t.as_str()).expect("JSON");
+                if v["op"] != "advertise" {
+                    continue;
+                }
+                for ch in v["channels"].as_array().expect("channels") {
+                    let is_mesh = ch["topic"] == json!(mesh_topic("fox-a"));
+                    if is_mesh || ch["topic"] == json!(metrics_topic("fox-a")) {
+                        let id = subscriptions.keys().last().copied().unwrap_or(0) + 1;
+                        subscriptions.insert(id, is_mesh);
+                        let again =
+                            json!({ "op": "subscribe", "subscriptions": [{ "id": id, "channelId": ch["id"] }] });
+                        ws.send(Message::Text(again.to_string().into()))
+                            .await
+                            .expect("subscribe again");
+                    }
+                }
+                continue;
+            }
+            _ => continue,
+        };
         // op 1: u32 subscription id, u64 log time, payload.
         assert_eq!(b[0], 1, "message data opcode");
         let sub = u32::from_le_bytes(b[1..5].try_into().expect("4 bytes"));
         let payload = &b[13..];
-        match sub {
-            1 => updates.push(foxglove::messages::SceneUpdate::decode(payload).expect("a SceneUpdate")),
-            2 => metric_msgs.push(v1::Metrics::decode(payload).expect("lodcloth Metrics")),
-            other => panic!("data for subscription {other}"),
+        match subscriptions.get(&sub) {
+            Some(true) => updates.push(foxglove::messages::SceneUpdate::decode(payload).expect("a SceneUpdate")),
+            Some(false) => metric_msgs.push(v1::Metrics::decode(payload).expect("lodcloth Metrics")),
+            None => panic!("data for subscription {sub}"),
         }
     }
     let nodes = 16 * 16;
