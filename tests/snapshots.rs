@@ -41,6 +41,18 @@ async fn first_state(c: &lodcloth::service::client::Client, instance: &str) -> v
     }
 }
 
+/// Whether `instance` reports itself paused within 5 s (its info says
+/// not-paused while it is held, before its snapshot is applied).
+async fn resumes_paused(c: &lodcloth::service::client::Client, instance: &str) -> bool {
+    for _ in 0..50 {
+        if wait_info(c, instance).await.paused {
+            return true;
+        }
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    false
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_restarted_daemon_resumes_each_instance_where_it_was() {
     let _serial = daemon::serial().await;
@@ -133,16 +145,8 @@ async fn a_restarted_daemon_resumes_each_instance_where_it_was() {
         Level::from_wire(info_a.level.as_ref().expect("level")),
         Ok(Level::new(12, 12))
     );
-    // "b" is still paused: no steps, the same frame.
-    let mut info_b = wait_info(&c, "b").await;
-    for _ in 0..50 {
-        if info_b.paused {
-            break;
-        }
-        tokio::time::sleep(Duration::from_millis(100)).await;
-        info_b = wait_info(&c, "b").await;
-    }
-    assert!(info_b.paused, "b was resumed unpaused");
+    // "b" is still paused.
+    assert!(resumes_paused(&c, "b").await, "b was resumed unpaused");
     d.shutdown().await.expect("clean exit");
 
     // 3. A damaged snapshot: "a" starts afresh, "b" still resumes, and the
@@ -164,15 +168,10 @@ async fn a_restarted_daemon_resumes_each_instance_where_it_was() {
         Level::new(16, 16),
         "a fresh start is at the start level"
     );
-    let mut info_b = wait_info(&c, "b").await;
-    for _ in 0..50 {
-        if info_b.paused {
-            break;
-        }
-        tokio::time::sleep(Duration::from_millis(100)).await;
-        info_b = wait_info(&c, "b").await;
-    }
-    assert!(info_b.paused, "b did not resume beside a damaged snapshot of a");
+    assert!(
+        resumes_paused(&c, "b").await,
+        "b did not resume beside a damaged snapshot of a"
+    );
     d.shutdown().await.expect("clean exit");
     assert!(read(dir.path(), "a").snapshot.state.time < saved.state.time);
 }
