@@ -24,10 +24,10 @@ use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use prost::Message;
 
-use daemon::{client, wait_info, PREFIX};
+use daemon::{wait_info, PREFIX};
 use lodcloth::output::{line_chart_svg, Series};
 use lodcloth::proto::{v1, Level};
-use lodcloth::service::client::Client;
+use lodcloth::service::client::{client_config, Client, ClientOptions};
 use lodcloth::service::keys;
 
 fn arg(name: &str, default: f64) -> f64 {
@@ -92,6 +92,38 @@ async fn subscribe(endpoint: String, instance: &str, delay: Duration, tally: Arc
         }
     });
     c
+}
+
+/// zenoh's low-latency unicast transport (no batching, no TX task: a put
+/// writes to each link from the caller) on every session, daemon and
+/// readers alike (both ends must agree): `SOAK_LOWLATENCY=1`.
+fn lowlatency() -> bool {
+    std::env::var("SOAK_LOWLATENCY").is_ok_and(|v| v == "1")
+}
+
+/// A peer session connected to `endpoint` (see [`lowlatency`]).
+async fn client(endpoints: &[String]) -> Client {
+    let mut config = client_config(&ClientOptions::new(endpoints)).expect("client config");
+    if lowlatency() {
+        config
+            .insert_json5("transport/unicast/lowlatency", "true")
+            .expect("lowlatency");
+        config
+            .insert_json5("transport/unicast/qos/enabled", "false")
+            .expect("qos");
+    }
+    let deadline = Instant::now() + Duration::from_secs(10);
+    loop {
+        match zenoh::open(config.clone()).await {
+            Ok(session) => {
+                let mut c = Client::with_session(session, PREFIX);
+                c.timeout = Duration::from_secs(5);
+                return c;
+            }
+            Err(e) if Instant::now() > deadline => panic!("cannot connect to {endpoints:?}: {e}"),
+            Err(_) => tokio::time::sleep(Duration::from_millis(100)).await,
+        }
+    }
 }
 
 /// Count a state and its latency (end of step → now).
@@ -215,7 +247,20 @@ async fn main() {
     let dir = tempfile::tempdir().expect("temp dir");
     let port = daemon::free_port();
     let config = dir.path().join("soak.toml");
-    std::fs::write(&config, daemon::config_text(port, dir.path(), ("a", "b"))).expect("config");
+    let mut text = daemon::config_text(port, dir.path(), ("a", "b"));
+    if lowlatency() {
+        let json5 = dir.path().join("zenoh.json5");
+        std::fs::write(
+            &json5,
+            "{ transport: { unicast: { lowlatency: true, qos: { enabled: false } } } }",
+        )
+        .expect("zenoh config");
+        text = text.replace(
+            "[zenoh]\n",
+            &format!("[zenoh]\nconfig_file = \"{}\"\n", json5.display()),
+        );
+    }
+    std::fs::write(&config, text).expect("config");
     let exe = std::env::current_exe().expect("exe");
     let lodcloth = exe
         .parent()
@@ -263,7 +308,7 @@ async fn main() {
     );
     let n_fast = subscribers - n_slow;
     // Each child's output is drained as it comes (a full pipe would stall it).
-    let mut fast_children: Vec<(Child, usize, std::thread::JoinHandle<String>)> = (0..fast_processes)
+    let fast_children: Vec<(Child, usize, std::thread::JoinHandle<String>)> = (0..fast_processes)
         .map(|p| {
             let k = n_fast / fast_processes + usize::from(p < n_fast % fast_processes);
             let mut child = std::process::Command::new(&exe)
