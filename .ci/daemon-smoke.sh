@@ -26,9 +26,14 @@ if "$BIN" switch paper-1 17x17; then echo "a level outside the allowed set was a
 test -s out/ci-record.mcap
 "$BIN" view --listen 127.0.0.1:8090 > out/ci-view.log 2>&1 &
 VIEW=$!
-for _ in $(seq 50); do curl -fsS http://127.0.0.1:8090/api/instances 2>/dev/null | grep -q sphere && break; sleep 0.2; done
-curl -fsS http://127.0.0.1:8090/api/instances | grep -q '"name":"paper-1","alive":true'
-curl -fsS http://127.0.0.1:8090/ | grep -q '<canvas id="view"'
+# (curl's output is read whole before grep: `curl | grep -q` fails under
+# pipefail when grep exits before curl has written everything.)
+for _ in $(seq 50); do
+  grep -q sphere <<< "$(curl -fsS http://127.0.0.1:8090/api/instances 2>/dev/null || true)" && break
+  sleep 0.2
+done
+grep -q '"name":"paper-1","alive":true' <<< "$(curl -fsS http://127.0.0.1:8090/api/instances)"
+grep -q '<canvas id="view"' <<< "$(curl -fsS http://127.0.0.1:8090/)"
 kill -TERM $VIEW
 wait $VIEW
 VIEW=
@@ -51,8 +56,15 @@ test -s out/snapshots/paper-1.snapshot && test -s out/snapshots/sphere.snapshot
 DAEMON=$!
 for _ in $(seq 50); do "$BIN" health > /dev/null 2>&1 && break; sleep 0.2; done
 timeout 300 "$BIN" watch paper-1 --count 3
+for _ in $(seq 600); do
+  grep '"instance":"paper-1"' out/ci-serve-2.log | grep -q "predicted and live error attached" && break
+  sleep 0.2
+done
 kill -TERM $DAEMON
 wait $DAEMON
 trap - EXIT
 grep "resumed from its snapshot" out/ci-serve-2.log | grep -q '"instance":"paper-1"'
+# paper-1 resumed with its saved coefficients at once; its level, prepared
+# again in the background, is then attached (prediction and live error).
+grep '"instance":"paper-1"' out/ci-serve-2.log | grep -q "predicted and live error attached"
 echo "daemon smoke test passed"

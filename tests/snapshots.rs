@@ -53,6 +53,27 @@ async fn resumes_paused(c: &lodcloth::service::client::Client, instance: &str) -
     false
 }
 
+/// The predicted errors of `instance`'s metrics, from now until the first
+/// one that carries one (at most 30 s).
+fn predictions(c: &lodcloth::service::client::Client, instance: &str) -> tokio::task::JoinHandle<Vec<Option<f64>>> {
+    use prost::Message;
+    let session = c.session.clone();
+    let key = lodcloth::service::keys::metrics(daemon::PREFIX, instance);
+    tokio::spawn(async move {
+        let sub = session.declare_subscriber(key).await.expect("metrics subscriber");
+        let deadline = tokio::time::Instant::now() + Duration::from_secs(30);
+        let mut seen = Vec::new();
+        while let Ok(Ok(sample)) = tokio::time::timeout_at(deadline, sub.recv_async()).await {
+            let m = v1::Metrics::decode(sample.payload().to_bytes().as_ref()).expect("Metrics");
+            seen.push(m.predicted_error);
+            if m.predicted_error.is_some() {
+                break;
+            }
+        }
+        seen
+    })
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_restarted_daemon_resumes_each_instance_where_it_was() {
     let _serial = daemon::serial().await;
@@ -100,11 +121,31 @@ async fn a_restarted_daemon_resumes_each_instance_where_it_was() {
     assert!(speed > 1e-3, "the cloth was saved at rest (max speed {speed})");
     let saved_b = read(dir.path(), "b").snapshot;
     assert!(saved_b.paused);
+    // It ran with the switch's coefficients, and they are saved.
+    let coefficients = saved.coefficients.expect("the snapshot has its coefficients");
+    let wire = switched.coefficients.as_ref().expect("the switch's coefficients");
+    assert_eq!(coefficients.dt, switched.dt);
+    assert_eq!(
+        [
+            (wire.structural_k, wire.structural_c),
+            (wire.shear_k, wire.shear_c),
+            (wire.bend_k, wire.bend_c)
+        ],
+        coefficients.material.springs.map(|k| (k.k, k.c))
+    );
 
-    // 2. Restart: no state from rest, the first one where "a" was.
+    // 2. Restart: no state from rest, the first one where "a" was. The
+    // reference is recorded for longer this time (a snapshot need not match
+    // that), so preparing its level again takes seconds.
     let port = free_port();
-    let d = Daemon::run(port, &config(port, dir.path()), scratch());
+    let longer = daemon::config_text_recording(port, dir.path(), ("a", "b"), 30_000)
+        + &format!(
+            "[snapshots]\ndir = \"{}\"\ninterval = 0.5\n",
+            dir.path().join("snapshots").display()
+        );
+    let d = Daemon::run(port, &longer, scratch());
     let c = client(&[d.endpoint()]).await;
+    let prediction = predictions(&c, "a");
     let first = within(30, "a state after the restart", first_state(&c, "a")).await;
     let resumed = collect_states(&c, "a", 1.0).await;
     for s in std::iter::once(&first).chain(&resumed) {
@@ -147,6 +188,32 @@ async fn a_restarted_daemon_resumes_each_instance_where_it_was() {
     );
     // "b" is still paused.
     assert!(resumes_paused(&c, "b").await, "b was resumed unpaused");
+    // "a" resumed with its saved coefficients before its level was prepared
+    // again (its first metrics have no prediction); once the level is
+    // prepared it is attached: the metrics carry the level's prediction
+    // (which the longer reference changes, but not the coefficients or dt).
+    let seen = within(35, "the prediction", prediction).await.expect("metrics task");
+    assert_eq!(
+        seen.first(),
+        Some(&None),
+        "resumed only after its level was prepared: {seen:?}"
+    );
+    let info_a = wait_info(&c, "a").await;
+    let level_12 = info_a
+        .levels
+        .iter()
+        .find(|l| l.level.as_ref().and_then(|w| Level::from_wire(w).ok()) == Some(Level::new(12, 12)))
+        .expect("12x12 in the info");
+    assert!(level_12.ready && level_12.predicted_error.is_some(), "{level_12:?}");
+    assert_eq!(
+        seen.last(),
+        Some(&level_12.predicted_error),
+        "the attached prediction: {seen:?}"
+    );
+    assert_eq!(
+        level_12.dt, switched.dt,
+        "the level prepared again runs at the saved dt"
+    );
     d.shutdown().await.expect("clean exit");
 
     // 3. A damaged snapshot: "a" starts afresh, "b" still resumes, and the

@@ -198,6 +198,19 @@ pub struct Snapshot {
     pub paused: bool,
     /// The full state, in f64 (a surface: its simulated points).
     pub state: State,
+    /// The coefficients and time step it ran with: a cloth resumes with
+    /// them at once instead of waiting for its level to be prepared again
+    /// (None in files written before they were saved).
+    pub coefficients: Option<Coefficients>,
+}
+
+/// What a level ran with: enough to rebuild its simulation without its
+/// reference.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Coefficients {
+    pub material: Material,
+    /// The time step (s).
+    pub dt: f64,
 }
 
 /// Commands, applied between steps.
@@ -223,15 +236,26 @@ pub enum Command {
         reply: oneshot::Sender<Option<Box<Snapshot>>>,
     },
     /// Release an instance started with [`InstanceSetup::hold`]: resume
-    /// `saved` (at `prepared`'s level and coefficients when given, else at
-    /// the current ones), or with `saved` `None` start from rest. On error
-    /// the instance starts from rest too.
+    /// `saved` (at `prepared`'s level and coefficients when given; with
+    /// `sim` alone, at the snapshot's own coefficients, `sim` built with
+    /// them, and no prediction or shadow until an [`Command::Attach`]; with
+    /// neither, at the current ones), or with `saved` `None` start from
+    /// rest. On error the instance starts from rest too.
     Restore {
         prepared: Option<Arc<Prepared>>,
         sim: Option<Box<Simulation>>,
         cloud: Option<Box<CloudMap>>,
         saved: Option<Box<Snapshot>>,
         reply: oneshot::Sender<Result<(), String>>,
+    },
+    /// Give an instance resumed from its snapshot's coefficients its
+    /// prepared level (predicted error, error normaliser, shadow reference),
+    /// if it still runs exactly what was prepared: the same level, method,
+    /// coefficient version, material and dt. Replies whether it did.
+    Attach {
+        prepared: Arc<Prepared>,
+        coefficient_version: u32,
+        reply: oneshot::Sender<bool>,
     },
 }
 
@@ -595,6 +619,10 @@ impl Runner {
                         episode: self.episode,
                         paused: self.paused,
                         state: self.sim.state().clone(),
+                        coefficients: Some(Coefficients {
+                            material: self.material,
+                            dt: self.dt(),
+                        }),
                     })
                 });
                 let _ = reply.send(snapshot);
@@ -616,6 +644,27 @@ impl Runner {
                 self.update_status();
                 let _ = reply.send(outcome);
             }
+            Command::Attach {
+                prepared,
+                coefficient_version,
+                reply,
+            } => {
+                let same = self.level == prepared.level
+                    && self.method == prepared.method
+                    && self.coefficient_version == coefficient_version
+                    && self.material == prepared.material
+                    && self.dt() == prepared.dt
+                    && self.predicted_error.is_none();
+                if same {
+                    self.predicted_error = Some(prepared.predicted_error);
+                    self.o_max = Some(prepared.o_max);
+                    self.shadow = self
+                        .shadow_wanted
+                        .then(|| Shadow::new(prepared.clone(), self.sim.topology().n_nodes));
+                    self.update_status();
+                }
+                let _ = reply.send(same);
+            }
         }
     }
 
@@ -628,7 +677,11 @@ impl Runner {
         cloud: Option<CloudMap>,
         saved: Snapshot,
     ) -> Result<(), String> {
-        let level = prepared.as_ref().map_or(self.level, |p| p.level);
+        let level = match (&prepared, &sim) {
+            (Some(p), _) => p.level,
+            (None, Some(_)) => saved.level,
+            (None, None) => self.level,
+        };
         if saved.level != level {
             return Err(format!("the snapshot is at {}, the simulation at {level}", saved.level));
         }
@@ -647,8 +700,23 @@ impl Runner {
                     .shadow_wanted
                     .then(|| Shadow::new(prepared.clone(), self.sim.topology().n_nodes));
             }
+            (None, Some(mut sim)) => {
+                let Some(saved_with) = saved.coefficients else {
+                    return Err("a restore without a prepared level needs the snapshot's coefficients".into());
+                };
+                if sim.params().material != saved_with.material || sim.params().dt != saved_with.dt {
+                    return Err("the simulation was not built with the snapshot's coefficients".into());
+                }
+                sim.set_state(saved.state).map_err(|e| e.to_string())?;
+                self.sim = sim;
+                self.method = saved.method;
+                self.material = saved_with.material;
+                self.predicted_error = None;
+                self.o_max = None;
+                self.shadow = None;
+            }
             (None, None) => self.sim.set_state(saved.state).map_err(|e| e.to_string())?,
-            _ => return Err("a restore needs both the prepared level and its simulation".into()),
+            (Some(_), None) => return Err("a restore needs both the prepared level and its simulation".into()),
         }
         self.level = level;
         self.coefficient_version = saved.coefficient_version;

@@ -642,12 +642,61 @@ impl Preparer {
     /// A cloth level with lumped masses, dt the largest step ≤ 0.75 × the
     /// predicted limit that divides the metric frame interval the reference
     /// will have (so the estimated model later lines up with it).
+    /// A cloth `level` at rest with `material` at `dt`, without its
+    /// reference: what a snapshot's instance resumes with while its level
+    /// is prepared again. `None` for a surface (its model comes from the
+    /// simplification, which preparing does anyway).
+    pub fn resume_simulation(
+        &self,
+        level: Level,
+        material: Material,
+        dt: f64,
+    ) -> Option<Result<Simulation, PrepareError>> {
+        let (InstanceKind::Cloth(scene), Level::Grid { nx, ny }) = (&self.config.kind, level) else {
+            return None;
+        };
+        let failed = |message: String| PrepareError::Failed {
+            level,
+            method: Method::Same,
+            message,
+        };
+        if !self.config.levels.contains(&level) {
+            return Some(Err(PrepareError::NotAllowed {
+                level,
+                allowed: allowed(&self.config.levels),
+            }));
+        }
+        let scene = Self::cloth_scene(scene, &self.config);
+        Some(
+            self.cloth_at(&scene, nx, ny, material, Some(dt))
+                .map(|(sim, _)| sim)
+                .map_err(failed),
+        )
+    }
+
     fn quick_cloth(&self, scene: &Scene, nx: usize, ny: usize) -> Result<(Simulation, f64), String> {
+        self.cloth_at(scene, nx, ny, scene.params.material, self.config.dt)
+    }
+
+    /// A cloth at rest at `nx`×`ny` with `material`; at `dt`, or when
+    /// `None` at the largest step within 0.75 of the stability limit that
+    /// divides the metric interval.
+    fn cloth_at(
+        &self,
+        scene: &Scene,
+        nx: usize,
+        ny: usize,
+        material: Material,
+        dt: Option<f64>,
+    ) -> Result<(Simulation, f64), String> {
         let topology = Arc::new(Topology::grid(scene.shape(nx, ny), scene.orientation));
         let masses: Vec<f64> = topology.node_areas.iter().map(|a| a * scene.areal_density).collect();
         let loads = scene.loads(&topology).map_err(|e| e.to_string())?;
         let interval = scene.params.dt * self.estimation.spec.metric_stride as f64;
-        let params = scene.params;
+        let params = crate::sim::SimParams {
+            material,
+            ..scene.params
+        };
         let build = |dt: f64, check| {
             Simulation::new(
                 topology.clone(),
@@ -659,7 +708,7 @@ impl Preparer {
             )
             .map_err(|e| e.to_string())
         };
-        let dt = match self.config.dt {
+        let dt = match dt {
             Some(dt) => dt,
             None => {
                 let limit = build(interval, StabilityCheck::Force)?.dt_limit();

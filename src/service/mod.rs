@@ -360,10 +360,84 @@ async fn resume(ctx: Arc<Context>, resumes: BTreeMap<String, Box<Snapshot>>) {
 
 async fn resume_one(ctx: Arc<Context>, name: String, saved: Box<Snapshot>) {
     let Some(inst) = ctx.instances.get(&name) else { return };
-    let _guard = inst.switching.lock().await;
+    let guard = inst.switching.lock().await;
     let config = inst.preparer.config().clone();
     // Never switched: the quick start's simulation is the one it ran.
     let quick = saved.level == config.start && saved.method == Method::Same && saved.coefficient_version == 1;
+    // A cloth whose snapshot has its coefficients resumes with them at
+    // once; its level is prepared afterwards and attached.
+    let at_once = match saved.coefficients {
+        Some(c) if !quick => {
+            let preparer = inst.preparer.clone();
+            let level = saved.level;
+            tokio::task::spawn_blocking(move || preparer.resume_simulation(level, c.material, c.dt))
+                .await
+                .ok()
+                .flatten()
+        }
+        _ => None,
+    };
+    let at_once = match at_once {
+        Some(Ok(sim)) => Some(sim),
+        Some(Err(e)) => {
+            tracing::warn!(instance = %name, "cannot rebuild its snapshot's level from the saved coefficients: {e}; preparing it first");
+            None
+        }
+        None => None,
+    };
+    if let Some(sim) = at_once {
+        let (time, level, method, version) = (saved.state.time, saved.level, saved.method, saved.coefficient_version);
+        let (tx, rx) = oneshot::channel();
+        let command = Command::Restore {
+            prepared: None,
+            sim: Some(Box::new(sim)),
+            cloud: None,
+            saved: Some(saved),
+            reply: tx,
+        };
+        if inst.handle.send(command).is_err() {
+            return;
+        }
+        match rx.await {
+            Ok(Ok(())) => {
+                tracing::info!(instance = %name, %level, time, "resumed from its snapshot (its saved coefficients; the level is prepared in the background)");
+            }
+            Ok(Err(e)) => {
+                tracing::warn!(instance = %name, "cannot resume from its snapshot: {e}; started afresh");
+                return;
+            }
+            Err(_) => return,
+        }
+        // Switches may go on while the level is prepared; the attach is
+        // skipped if one lands first.
+        drop(guard);
+        match prepare(inst.preparer.clone(), level, method).await {
+            Ok(ready) => {
+                let (tx, rx) = oneshot::channel();
+                let command = Command::Attach {
+                    prepared: ready.prepared,
+                    coefficient_version: version,
+                    reply: tx,
+                };
+                if inst.handle.send(command).is_ok() {
+                    match rx.await {
+                        Ok(true) => {
+                            tracing::info!(instance = %name, %level, "its level is prepared: predicted and live error attached")
+                        }
+                        Ok(false) => {
+                            tracing::info!(instance = %name, %level, "its level is prepared but not attached: it switched meanwhile, or the coefficients prepared differ from the saved ones (no predicted or live error until the next switch)")
+                        }
+                        Err(_) => {}
+                    }
+                }
+            }
+            Err(e) => {
+                tracing::warn!(instance = %name, %level, "cannot prepare its resumed level: {e}; it runs on without predicted or live error")
+            }
+        }
+        return;
+    }
+    let _guard = guard;
     let parts = if quick {
         Ok((None, None, None))
     } else {

@@ -1,6 +1,7 @@
 //! Instance snapshots: what an instance needs to resume where it was after
 //! the daemon restarts (level, method, coefficient version, frame, episode,
-//! paused, and the full state in f64), one file per instance.
+//! paused, the coefficients and dt it ran with, and the full state in f64),
+//! one file per instance.
 //!
 //! The format is binary and self-checking:
 //!
@@ -26,11 +27,11 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use crate::cache::fnv1a64;
-use crate::engine::Snapshot;
+use crate::engine::{Coefficients, Snapshot};
 use crate::estimate::Method;
 use crate::proto::Level;
 use crate::service::config::{InstanceConfig, InstanceKind};
-use crate::sim::State;
+use crate::sim::{Material, SpringCoeffs, State};
 
 const MAGIC: &[u8; 20] = b"LODCLOTH SNAPSHOT 1\n";
 /// Largest header accepted (it is a few hundred bytes).
@@ -65,6 +66,13 @@ pub struct Header {
     pub nodes: usize,
     /// When it was taken (Unix milliseconds).
     pub saved_unix_ms: u64,
+    /// The coefficients it ran with: (K, C) of the structural, shear and
+    /// bend springs (absent in files written before they were saved).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub material: Option<[[f64; 2]; 3]>,
+    /// The time step it ran with (s).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dt: Option<f64>,
 }
 
 /// A snapshot read back: whose it is and the engine's part.
@@ -120,6 +128,8 @@ pub fn encode(instance: &str, identity: u64, saved_unix_ms: u64, s: &Snapshot) -
         step: s.state.step,
         nodes: n,
         saved_unix_ms,
+        material: s.coefficients.map(|c| c.material.springs.map(|k| [k.k, k.c])),
+        dt: s.coefficients.map(|c| c.dt),
     };
     let json = serde_json::to_vec(&header).unwrap_or_default();
     let mut out = Vec::with_capacity(MAGIC.len() + 4 + json.len() + 16 * 3 * n + 8);
@@ -184,6 +194,26 @@ pub fn decode(bytes: &[u8]) -> Result<Saved, String> {
             header.time
         ));
     }
+    let coefficients = match (header.material, header.dt) {
+        (None, None) => None,
+        (Some(m), Some(dt)) => {
+            if !(dt.is_finite() && dt > 0.0) {
+                return Err(format!("header: dt {dt} is not a positive number"));
+            }
+            if let Some(bad) = m.iter().flatten().find(|x| !(x.is_finite() && **x >= 0.0)) {
+                return Err(format!(
+                    "header: material coefficient {bad} is not a finite non-negative number"
+                ));
+            }
+            Some(Coefficients {
+                material: Material {
+                    springs: m.map(|[k, c]| SpringCoeffs { k, c }),
+                },
+                dt,
+            })
+        }
+        _ => return Err("header: material and dt come together".into()),
+    };
     let (pos, vel) = floats.split_at(3 * n);
     Ok(Saved {
         instance: header.instance,
@@ -202,6 +232,7 @@ pub fn decode(bytes: &[u8]) -> Result<Saved, String> {
                 time: header.time,
                 step: header.step,
             },
+            coefficients,
         },
     })
 }
@@ -288,6 +319,16 @@ mod tests {
                 time: 4.125,
                 step: 4125,
             },
+            coefficients: Some(Coefficients {
+                material: Material {
+                    springs: [
+                        SpringCoeffs { k: 1234.5678, c: 0.1 },
+                        SpringCoeffs { k: 1.0 / 3.0, c: 0.0 },
+                        SpringCoeffs { k: 7e-3, c: 2.5e-4 },
+                    ],
+                },
+                dt: 1.0 / 1200.0,
+            }),
         }
     }
 
@@ -307,6 +348,43 @@ mod tests {
         let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
         assert_eq!(bits(&b.state.pos), bits(&s.state.pos));
         assert_eq!(bits(&b.state.vel), bits(&s.state.vel));
+        // Exactly: a resumed instance re-attaches its prepared level only
+        // if the material is the very one it ran with.
+        assert_eq!(b.coefficients, s.coefficients);
+    }
+
+    #[test]
+    fn a_snapshot_without_coefficients_reads_back_without_them() {
+        let s = Snapshot {
+            coefficients: None,
+            ..sample()
+        };
+        let bytes = encode("a", 1, 2, &s);
+        let text = String::from_utf8_lossy(&bytes);
+        assert!(!text.contains("\"material\"") && !text.contains("\"dt\""));
+        assert_eq!(decode(&bytes).expect("decodes").snapshot.coefficients, None);
+    }
+
+    #[test]
+    fn impossible_coefficients_are_refused_by_name() {
+        for (material, dt, needle) in [
+            ("[[-1.0,0.0],[1.0,0.0],[1.0,0.0]]", "0.001", "material coefficient -1"),
+            ("[[1.0,0.0],[1.0,0.0],[1.0,0.0]]", "0.0", "dt 0"),
+        ] {
+            let header = format!(
+                "{{\"instance\":\"a\",\"identity\":\"1\",\"level\":\"1x1\",\"method\":\"same\",\
+                 \"coefficient_version\":1,\"frame\":0,\"episode\":0,\"paused\":false,\"time\":0.0,\
+                 \"step\":0,\"nodes\":1,\"saved_unix_ms\":0,\"material\":{material},\"dt\":{dt}}}"
+            );
+            let mut bytes = MAGIC.to_vec();
+            bytes.extend_from_slice(&(header.len() as u32).to_le_bytes());
+            bytes.extend_from_slice(header.as_bytes());
+            bytes.extend_from_slice(&[0; 48]);
+            let sum = fnv1a64(&bytes);
+            bytes.extend_from_slice(&sum.to_le_bytes());
+            let e = decode(&bytes).unwrap_err();
+            assert!(e.contains(needle), "{needle}: {e}");
+        }
     }
 
     #[test]
