@@ -22,6 +22,7 @@ use lodcloth::proto::{v1, Level};
 use lodcloth::service::client::{Client, ClientError, ClientOptions};
 use lodcloth::service::config::{InstanceConfig, ServiceConfig};
 use lodcloth::service::request::{self, Refusal, SwitchTarget};
+use lodcloth::service::snapshot;
 use lodcloth::service::{encoding, keys};
 use v1::error::Code;
 
@@ -610,6 +611,14 @@ async fn a_diverging_instance_is_rolled_back_then_halted_and_reported_while_othe
         .replace("dt = 2e-4", "dt = 5e-3");
     let scene_file = dir.path().join("unstable.toml");
     std::fs::write(&scene_file, scene).expect("write scene");
+    // Snapshots every 0.2 s: a halted instance's must not be replaced by
+    // its diverged state.
+    let snapshots = dir.path().join("snapshots");
+    let taken = |instance: &str| {
+        snapshot::read(&snapshots, instance)
+            .expect("a readable snapshot")
+            .map(|s| (s.saved_unix_ms, s.snapshot.frame))
+    };
     let port = daemon::free_port();
     let text = config_text(port, dir.path(), ("a", "b"))
         + &format!(
@@ -622,8 +631,12 @@ levels = ["8x8"]
 start = "8x8"
 method = "same"
 dt = 5e-3
+[snapshots]
+dir = "{}"
+interval = 0.2
 "#,
-            scene_file.display()
+            scene_file.display(),
+            snapshots.display()
         );
     let d = Daemon::run(port, &text, dir);
     let c = client(&[d.endpoint()]).await;
@@ -657,9 +670,22 @@ dt = 5e-3
     assert_eq!(info.halted, halted.halted, "info reports the halt too");
     assert!(info.paused);
 
+    let (bad_before, a_before) = (taken("bad"), taken("a"));
+
     // The others step on at their rate, untouched.
     let t0 = Instant::now();
     tokio::time::sleep(Duration::from_secs(2)).await;
+    // Snapshots went on for "a" but not for the halted "bad": its last one,
+    // if any, is from before the halt.
+    assert_eq!(taken("bad"), bad_before, "the halted instance's snapshot was replaced");
+    if let Some((_, frame)) = bad_before {
+        assert!(
+            frame <= halted.frame,
+            "snapshot at frame {frame}, halted at {}",
+            halted.frame
+        );
+    }
+    assert!(taken("a") > a_before, "snapshots stopped for the others: {a_before:?}");
     let rate = rate_between(&arrivals, t0, Instant::now());
     assert!(rate >= 45.0, "a publishes {rate:.1}/s beside the diverging instance");
     let a = metrics_until(&c, "a", 5.0, |_| true).await;
