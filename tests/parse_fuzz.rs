@@ -862,6 +862,12 @@ fn check_config_valid(c: &ServiceConfig) -> Result<(), TestCaseError> {
         s.spec.frames,
         s.spec.metric_stride
     );
+    prop_assert!(
+        s.spec.estimate_stride <= s.spec.frames,
+        "an estimate stride of {} records no sample in {} reference steps",
+        s.spec.estimate_stride,
+        s.spec.frames
+    );
     prop_assert!(!c.instances.is_empty());
     for (i, inst) in c.instances.iter().enumerate() {
         prop_assert!(

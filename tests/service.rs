@@ -370,6 +370,9 @@ mode = "satellite"
 listen = ["carrier-pigeon"]
 [engine]
 max_substeps = 0
+[estimation]
+reference_steps = 1000
+estimate_stride = 2000
 [[instances]]
 name = "instances"
 scene = "no/such/scene.toml"
@@ -387,6 +390,7 @@ dt = -1.0
         "zenoh.mode: 'satellite'",
         "zenoh.listen[0]: 'carrier-pigeon'",
         "engine.max_substeps",
+        "estimation.estimate_stride: 2000 is longer than estimation.reference_steps (1000)",
         "instances[0].name: 'instances'",
         "instances[0].scene:",
         "instances[0].levels[0]: 1x1",

@@ -434,6 +434,12 @@ impl ServiceConfig {
         }
         if s.estimate_stride < 2 {
             p.push("estimation.estimate_stride: must be at least 2".into());
+        } else if s.estimate_stride > s.reference_steps {
+            p.push(format!(
+                "estimation.estimate_stride: {} is longer than estimation.reference_steps ({}): no estimation \
+                 sample would be recorded",
+                s.estimate_stride, s.reference_steps
+            ));
         }
         if s.fit_frames < 2 {
             p.push("estimation.fit_frames: must be at least 2".into());
