@@ -639,9 +639,6 @@ impl Preparer {
         }
     }
 
-    /// A cloth level with lumped masses, dt the largest step ≤ 0.75 × the
-    /// predicted limit that divides the metric frame interval the reference
-    /// will have (so the estimated model later lines up with it).
     /// A cloth `level` at rest with `material` at `dt`, without its
     /// reference: what a snapshot's instance resumes with while its level
     /// is prepared again. `None` for a surface (its model comes from the
@@ -674,13 +671,15 @@ impl Preparer {
         )
     }
 
+    /// The quick start: the scene's own coefficients at the configured dt.
     fn quick_cloth(&self, scene: &Scene, nx: usize, ny: usize) -> Result<(Simulation, f64), String> {
         self.cloth_at(scene, nx, ny, scene.params.material, self.config.dt)
     }
 
-    /// A cloth at rest at `nx`×`ny` with `material`; at `dt`, or when
-    /// `None` at the largest step within 0.75 of the stability limit that
-    /// divides the metric interval.
+    /// A cloth level at rest with lumped masses and `material`; at `dt`, or
+    /// when `None` at the largest step ≤ 0.75 × the predicted limit that
+    /// divides the metric frame interval the reference will have (so the
+    /// estimated model later lines up with it).
     fn cloth_at(
         &self,
         scene: &Scene,

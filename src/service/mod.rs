@@ -347,9 +347,11 @@ fn resumable(snapshots: &RawSnapshots, config: &config::InstanceConfig) -> Optio
     }
 }
 
-/// Release held instances, all at once: prepare each snapshot's level and
-/// method (its coefficients come from the cache when they were estimated
-/// before) and resume it there, or start from rest when that fails.
+/// Release held instances, all at once. A cloth whose snapshot holds its
+/// coefficients resumes with them at once, and its level is attached when
+/// prepared again; any other first has its snapshot's level and method
+/// prepared (coefficients from the cache when they were estimated before)
+/// and resumes there. Either starts from rest when that fails.
 async fn resume(ctx: Arc<Context>, resumes: BTreeMap<String, Box<Snapshot>>) {
     let mut each = tokio::task::JoinSet::new();
     for (name, saved) in resumes {
