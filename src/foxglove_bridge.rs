@@ -228,6 +228,47 @@ struct InstanceChannels {
     last_mesh: Option<Instant>,
 }
 
+/// Instances' channels opened in a context ahead of [`relay`]. Open them
+/// before a WebSocket server starts on the context: the foxglove SDK
+/// (0.30) sends a client the advertisement of a channel added while the
+/// client is connected *before* it records the channel as advertised to
+/// that client, so a client that subscribes at once is told "unknown
+/// channel" and never gets its data. Channels that exist when a client
+/// connects are advertised before its messages are read. (Instances that
+/// appear later are still opened as they come.)
+pub struct RelayChannels(HashMap<String, InstanceChannels>);
+
+impl RelayChannels {
+    /// The channels of each of `names` in `ctx`.
+    pub fn open(ctx: &Arc<Context>, names: &[String]) -> anyhow::Result<RelayChannels> {
+        let mut channels = HashMap::new();
+        for name in names {
+            if !channels.contains_key(name) {
+                channels.insert(name.clone(), open_instance(ctx, name)?);
+            }
+        }
+        Ok(RelayChannels(channels))
+    }
+}
+
+/// One instance's mesh and metrics channels in `ctx`.
+fn open_instance(ctx: &Arc<Context>, name: &str) -> anyhow::Result<InstanceChannels> {
+    let metrics = ChannelBuilder::new(metrics_topic(name))
+        .context(ctx)
+        .message_encoding("protobuf")
+        .schema(Schema::new(schema::METRICS, "protobuf", DESCRIPTORS))
+        .build_raw()
+        .map_err(|e| anyhow::anyhow!("metrics channel of {name}: {e}"))?;
+    Ok(InstanceChannels {
+        mesh: ChannelBuilder::new(mesh_topic(name))
+            .context(ctx)
+            .build::<SceneUpdate>(),
+        metrics,
+        info: None,
+        last_mesh: None,
+    })
+}
+
 /// What a relay did.
 #[derive(Debug, Default, Clone)]
 pub struct RelayCounts {
@@ -247,12 +288,14 @@ pub struct RelayOptions {
     pub max_hz: f64,
 }
 
-/// Relay the daemon's states and metrics into `ctx`'s channels until `until`
-/// completes; `progress` sees the counts after every state.
+/// Relay the daemon's states and metrics into `ctx`'s channels (`opened`
+/// ahead, the others as their instances appear) until `until` completes;
+/// `progress` sees the counts after every state.
 pub async fn relay(
     client: &Client,
     ctx: &Arc<Context>,
     options: &RelayOptions,
+    opened: RelayChannels,
     until: impl Future<Output = ()>,
     mut progress: impl FnMut(&RelayCounts),
 ) -> anyhow::Result<RelayCounts> {
@@ -270,24 +313,9 @@ pub async fn relay(
         .await
         .map_err(zerr)?;
     let min_interval = Duration::from_secs_f64(1.0 / options.max_hz.max(1e-3));
-    let mut channels: HashMap<String, InstanceChannels> = HashMap::new();
+    let mut channels = opened.0;
     let mut counts = RelayCounts::default();
-    let open = |name: &str| -> anyhow::Result<InstanceChannels> {
-        let metrics = ChannelBuilder::new(metrics_topic(name))
-            .context(ctx)
-            .message_encoding("protobuf")
-            .schema(Schema::new(schema::METRICS, "protobuf", DESCRIPTORS))
-            .build_raw()
-            .map_err(|e| anyhow::anyhow!("metrics channel of {name}: {e}"))?;
-        Ok(InstanceChannels {
-            mesh: ChannelBuilder::new(mesh_topic(name))
-                .context(ctx)
-                .build::<SceneUpdate>(),
-            metrics,
-            info: None,
-            last_mesh: None,
-        })
-    };
+    let open = |name: &str| open_instance(ctx, name);
     tokio::pin!(until);
     loop {
         tokio::select! {

@@ -9,7 +9,7 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use prost::Message;
 
-use lodcloth::foxglove_bridge::{relay, RelayOptions};
+use lodcloth::foxglove_bridge::{relay, RelayChannels, RelayOptions};
 use lodcloth::output::{Precision, TrajectoryWriter};
 use lodcloth::proto::{unpack_positions, v1, Level};
 use lodcloth::service::client::{Client, ClientOptions, ClientSecurity};
@@ -502,10 +502,12 @@ pub fn record_mcap(c: Connect, instance: String, seconds: f64, path: PathBuf) ->
         let options = relay_options(Some(instance.clone()), f64::INFINITY)?;
         let bar = crate::progress_bar((seconds * 10.0).ceil() as u64, "recording (0.1 s)");
         let started = Instant::now();
+        let opened = RelayChannels::open(&ctx, std::slice::from_ref(&instance))?;
         let counts = relay(
             &client,
             &ctx,
             &options,
+            opened,
             tokio::time::sleep(Duration::from_secs_f64(seconds)),
             |_| bar.set_position((started.elapsed().as_secs_f64() * 10.0) as u64),
         )
@@ -537,6 +539,22 @@ pub fn foxglove(c: Connect, host: String, port: u16, instance: Option<String>, m
     runtime()?.block_on(async {
         let client = connect(&c).await?;
         let ctx = foxglove::Context::new();
+        // The channels of the instances known now exist before any client
+        // can connect (see `RelayChannels`).
+        let names = match &options.instance {
+            Some(name) => vec![name.clone()],
+            None => client
+                .list()
+                .await
+                .map(|lists| {
+                    lists
+                        .iter()
+                        .flat_map(|l| l.instances.iter().map(|i| i.instance.clone()))
+                        .collect()
+                })
+                .unwrap_or_default(),
+        };
+        let opened = RelayChannels::open(&ctx, &names)?;
         let server = foxglove::WebSocketServer::new()
             .name("lodcloth")
             .bind(host.clone(), port)
@@ -551,7 +569,7 @@ pub fn foxglove(c: Connect, host: String, port: u16, instance: Option<String>, m
         let _ = std::io::stdout().flush();
         // A periodic line instead of a bar: the bridge runs until stopped.
         let mut last_log = Instant::now();
-        let counts = relay(&client, &ctx, &options, shutdown_signal(), |n| {
+        let counts = relay(&client, &ctx, &options, opened, shutdown_signal(), |n| {
             if last_log.elapsed() >= Duration::from_secs(30) {
                 last_log = Instant::now();
                 tracing::info!(
