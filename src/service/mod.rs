@@ -364,14 +364,14 @@ async fn resume_one(ctx: Arc<Context>, name: String, saved: Box<Snapshot>) {
     let Some(inst) = ctx.instances.get(&name) else { return };
     let guard = inst.switching.lock().await;
     let config = inst.preparer.config().clone();
+    let (time, level, method, version) = (saved.state.time, saved.level, saved.method, saved.coefficient_version);
     // Never switched: the quick start's simulation is the one it ran.
-    let quick = saved.level == config.start && saved.method == Method::Same && saved.coefficient_version == 1;
-    // A cloth whose snapshot has its coefficients resumes with them at
+    let quick = level == config.start && method == Method::Same && version == 1;
+    // A cloth whose snapshot holds its coefficients resumes with them at
     // once; its level is prepared afterwards and attached.
     let at_once = match saved.coefficients {
         Some(c) if !quick => {
             let preparer = inst.preparer.clone();
-            let level = saved.level;
             tokio::task::spawn_blocking(move || preparer.resume_simulation(level, c.material, c.dt))
                 .await
                 .ok()
@@ -379,75 +379,23 @@ async fn resume_one(ctx: Arc<Context>, name: String, saved: Box<Snapshot>) {
         }
         _ => None,
     };
-    let at_once = match at_once {
-        Some(Ok(sim)) => Some(sim),
-        Some(Err(e)) => {
-            tracing::warn!(instance = %name, "cannot rebuild its snapshot's level from the saved coefficients: {e}; preparing it first");
-            None
+    let parts = match at_once {
+        Some(Ok(sim)) => Ok((None, Some(Box::new(sim)), None)),
+        other => {
+            if let Some(Err(e)) = other {
+                tracing::warn!(instance = %name, "cannot rebuild its snapshot's level from the saved coefficients: {e}; preparing it first");
+            }
+            if quick {
+                Ok((None, None, None))
+            } else {
+                prepare(inst.preparer.clone(), level, method)
+                    .await
+                    .map(|r| (Some(r.prepared), Some(Box::new(r.sim)), r.cloud.map(Box::new)))
+            }
         }
-        None => None,
     };
-    if let Some(sim) = at_once {
-        let (time, level, method, version) = (saved.state.time, saved.level, saved.method, saved.coefficient_version);
-        let (tx, rx) = oneshot::channel();
-        let command = Command::Restore {
-            prepared: None,
-            sim: Some(Box::new(sim)),
-            cloud: None,
-            saved: Some(saved),
-            reply: tx,
-        };
-        if inst.handle.send(command).is_err() {
-            return;
-        }
-        match rx.await {
-            Ok(Ok(())) => {
-                tracing::info!(instance = %name, %level, time, "resumed from its snapshot (its saved coefficients; the level is prepared in the background)");
-            }
-            Ok(Err(e)) => {
-                tracing::warn!(instance = %name, "cannot resume from its snapshot: {e}; started afresh");
-                return;
-            }
-            Err(_) => return,
-        }
-        // Switches may go on while the level is prepared; the attach is
-        // skipped if one lands first.
-        drop(guard);
-        match prepare(inst.preparer.clone(), level, method).await {
-            Ok(ready) => {
-                let (tx, rx) = oneshot::channel();
-                let command = Command::Attach {
-                    prepared: ready.prepared,
-                    coefficient_version: version,
-                    reply: tx,
-                };
-                if inst.handle.send(command).is_ok() {
-                    match rx.await {
-                        Ok(true) => {
-                            tracing::info!(instance = %name, %level, "its level is prepared: predicted and live error attached")
-                        }
-                        Ok(false) => {
-                            tracing::info!(instance = %name, %level, "its level is prepared but not attached: it switched meanwhile, or the coefficients prepared differ from the saved ones (no predicted or live error until the next switch)")
-                        }
-                        Err(_) => {}
-                    }
-                }
-            }
-            Err(e) => {
-                tracing::warn!(instance = %name, %level, "cannot prepare its resumed level: {e}; it runs on without predicted or live error")
-            }
-        }
-        return;
-    }
-    let _guard = guard;
-    let parts = if quick {
-        Ok((None, None, None))
-    } else {
-        prepare(inst.preparer.clone(), saved.level, saved.method)
-            .await
-            .map(|r| (Some(r.prepared), Some(Box::new(r.sim)), r.cloud.map(Box::new)))
-    };
-    let (time, level) = (saved.state.time, saved.level);
+    // Rebuilt from the saved coefficients: no prepared level yet.
+    let attach_later = matches!(parts, Ok((None, Some(_), _)));
     let (prepared, sim, cloud, saved) = match parts {
         Ok((p, s, c)) => (p, s, c, Some(saved)),
         Err(e) => {
@@ -468,9 +416,43 @@ async fn resume_one(ctx: Arc<Context>, name: String, saved: Box<Snapshot>) {
         return;
     }
     match rx.await {
-        Ok(Ok(())) if resuming => tracing::info!(instance = %name, %level, time, "resumed from its snapshot"),
-        Ok(Ok(())) | Err(_) => {}
-        Ok(Err(e)) => tracing::warn!(instance = %name, "cannot resume from its snapshot: {e}; started afresh"),
+        Ok(Ok(())) if resuming => {
+            tracing::info!(instance = %name, %level, time, at_once = attach_later, "resumed from its snapshot")
+        }
+        Ok(Ok(())) | Err(_) => return,
+        Ok(Err(e)) => {
+            tracing::warn!(instance = %name, "cannot resume from its snapshot: {e}; started afresh");
+            return;
+        }
+    }
+    if !attach_later {
+        return;
+    }
+    // Switches may go on while the level is prepared; the attach is
+    // skipped if one lands first.
+    drop(guard);
+    let attached = match prepare(inst.preparer.clone(), level, method).await {
+        Ok(ready) => {
+            let (tx, rx) = oneshot::channel();
+            let command = Command::Attach {
+                prepared: ready.prepared,
+                coefficient_version: version,
+                reply: tx,
+            };
+            if inst.handle.send(command).is_err() {
+                return;
+            }
+            rx.await.unwrap_or(false)
+        }
+        Err(e) => {
+            tracing::warn!(instance = %name, %level, "cannot prepare its resumed level: {e}; it runs on without predicted or live error");
+            return;
+        }
+    };
+    if attached {
+        tracing::info!(instance = %name, %level, "its level is prepared: predicted and live error attached");
+    } else {
+        tracing::info!(instance = %name, %level, "its level is prepared but not attached: it switched meanwhile, or the coefficients prepared differ from the saved ones (no predicted or live error until the next switch)");
     }
 }
 
