@@ -315,7 +315,6 @@ pub async fn relay(
     let min_interval = Duration::from_secs_f64(1.0 / options.max_hz.max(1e-3));
     let mut channels = opened.0;
     let mut counts = RelayCounts::default();
-    let open = |name: &str| open_instance(ctx, name);
     tokio::pin!(until);
     loop {
         tokio::select! {
@@ -326,7 +325,7 @@ pub async fn relay(
                     continue;
                 };
                 if !channels.contains_key(name) {
-                    channels.insert(name.to_string(), open(name)?);
+                    channels.insert(name.to_string(), open_instance(ctx, name)?);
                 }
                 let bytes = sample.payload().to_bytes();
                 channels[name].metrics.log(&bytes);
@@ -339,7 +338,7 @@ pub async fn relay(
                 };
                 counts.states += 1;
                 if !channels.contains_key(name) {
-                    channels.insert(name.to_string(), open(name)?);
+                    channels.insert(name.to_string(), open_instance(ctx, name)?);
                 }
                 let ch = channels.get_mut(name).expect("inserted above");
                 let due = ch.last_mesh.is_none_or(|t| t.elapsed() >= min_interval);
