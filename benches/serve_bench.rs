@@ -12,7 +12,8 @@ use prost::Message;
 
 use lodcloth::engine::{Engine, EngineSettings, InstanceSetup, StateFrame};
 use lodcloth::estimate::Method;
-use lodcloth::proto::{v1, Level};
+use lodcloth::plan::Level;
+use lodcloth::proto::{v1, WireLevel};
 use lodcloth::scene::Scene;
 use lodcloth::service::client::Client;
 use lodcloth::service::config::ServiceConfig;

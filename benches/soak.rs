@@ -26,7 +26,8 @@ use prost::Message;
 
 use daemon::{wait_info, PREFIX};
 use lodcloth::output::{line_chart_svg, Series};
-use lodcloth::proto::{v1, Level};
+use lodcloth::plan::Level;
+use lodcloth::proto::{v1, WireLevel};
 use lodcloth::service::client::{client_config, Client, ClientOptions};
 use lodcloth::service::keys;
 

@@ -24,7 +24,8 @@ use foxglove::messages::{
 use foxglove::{Channel, ChannelBuilder, Context, PartialMetadata, RawChannel, Schema};
 use prost::Message;
 
-use crate::proto::{schema, unpack_positions, v1, Level};
+use crate::plan::Level;
+use crate::proto::{schema, unpack_positions, v1, WireLevel};
 use crate::service::client::Client;
 
 /// The wire contract's file descriptor set (the schema of raw channels).

@@ -2,47 +2,43 @@
 //! time, with behaviour kept coherent across levels.
 //!
 //! # Layout
-//! Dependencies point one way: `main → {experiments, output, cache} →
-//! estimate → {lod, scene} → sim` (`cache` also names `scene`'s mass
-//! convention).
+//! Two crates; dependencies point one way:
+//! `core ← engine ← service ← {view, foxglove_bridge, CLI}`, with `proto`
+//! converting at the service's edge and `experiments`/`output` beside the
+//! service, on the core alone.
 //!
-//! - [`sim`] — the pure core: topology (springs by type in a fixed order),
-//!   state (flat arrays), forces (Sung 2018 eq. 1), integrators (explicit,
-//!   symplectic and implicit Euler, RK4), strain control, stability
-//!   prediction. No I/O, no threads, no allocation per step.
-//! - [`scene`] — scene files (TOML): cloth size and resolution, material,
-//!   pins, forces over time, wind; validated into ready-to-run simulations at
-//!   any resolution.
-//! - [`lod`] — barycentric correlation between resolutions, state transfer.
-//! - [`estimate`] — pure coefficient estimation (same, BCD, GKD, lsq, fit),
-//!   reference recording and the error metric (Sung 2018 eq. 9).
-//! - [`output`] — trajectory files, CSV reports, pictures (PNG render, SVG charts).
-//! - [`cache`] — on-disk cache of estimated coefficients: one checksummed TOML
-//!   file per (scene, resolutions, method, mass, integrator, dt), written
-//!   atomically so a crash never leaves a torn file.
-//! - [`experiments`] — longer studies built on the core (stability sweeps).
+//! - The pure core, the `lodcloth-core` crate (`crates/lodcloth-core`),
+//!   re-exported here under the same names: [`sim`], [`scene`], [`lod`],
+//!   [`estimate`], [`points`], [`cache`], [`plan`] (what an instance is in
+//!   domain types and how its levels are prepared), [`hash`], [`atomic`] and
+//!   [`names`]. It depends on no async runtime, bus, web or plotting crate.
 //! - [`engine`] — the only code that knows threads and the wall clock:
 //!   instances stepping at fixed dt on OS threads, paced to real time;
-//!   commands applied between steps; newest-value state and metrics out;
-//!   level preparation (reference, estimate, calibration) off those threads.
-//! - [`service`] — tokio + zenoh around the engine: config, publishers,
-//!   queryables, liveliness, key expressions (`service::keys`), and the
-//!   client used by the CLI and tests.
+//!   commands applied between steps; newest-value state and metrics out.
+//!   It takes [`plan::InstancePlan`]s and never sees config or wire types.
+//! - [`service`] — tokio + zenoh around the engine: config (validated into
+//!   plans), publishers, queryables, liveliness, key expressions
+//!   (`service::keys`), request checks, snapshots, and the client used by the
+//!   CLI and tests.
 //! - [`proto`] — the wire contract (`proto/lodcloth/v1/lodcloth.proto`) and
 //!   every wire ↔ domain conversion.
-//! - `main.rs` — the `lodcloth` command line: `serve` and its clients,
-//!   `simulate`, `experiment`, `stability`, `inspect`.
+//! - [`view`] and [`foxglove_bridge`] — clients of the bus: the browser view
+//!   and the Foxglove WebSocket bridge.
+//! - [`experiments`] — longer studies on the core (Table 1, Pareto fronts,
+//!   switch continuity, stability sweeps), returning values.
+//! - [`output`] — trajectory files, CSV reports, pictures (PNG render, SVG charts).
+//! - `src/cli/` — the `lodcloth` command line: `serve` and its clients,
+//!   `simulate`, `experiment`, `points`, `inspect`.
+//!
+//! `docs/architecture.md` walks through how a state and a switch request
+//! flow through these layers.
 
-pub mod cache;
+pub use lodcloth_core::{atomic, cache, estimate, hash, lod, names, plan, points, scene, sim};
+
 pub mod engine;
-pub mod estimate;
 pub mod experiments;
 pub mod foxglove_bridge;
-pub mod lod;
 pub mod output;
-pub mod points;
 pub mod proto;
-pub mod scene;
 pub mod service;
-pub mod sim;
 pub mod view;

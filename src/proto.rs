@@ -1,6 +1,5 @@
 //! The wire contract (`proto/lodcloth/v1/lodcloth.proto`, compiled by
-//! `build.rs`) and every conversion between wire and domain types. Nothing
-//! else in the crate builds or reads protobuf messages field by field.
+//! `build.rs`) and every conversion between wire and domain types.
 
 #![allow(missing_docs, clippy::doc_lazy_continuation, clippy::large_enum_variant)]
 
@@ -9,9 +8,7 @@ pub mod v1 {
     include!(concat!(env!("OUT_DIR"), "/lodcloth.v1.rs"));
 }
 
-use std::fmt;
-use std::str::FromStr;
-
+use crate::plan::Level;
 use crate::sim::{Material, SpringCoeffs};
 
 /// Schema names sent with every put and reply (`application/protobuf;<schema>`).
@@ -27,39 +24,17 @@ pub mod schema {
     pub const ERROR: &str = "lodcloth.v1.Error";
 }
 
-/// A level of detail: a grid cloth of `nx × ny` nodes, written `NXxNY`
-/// (e.g. `32x32`), or a point-sampled surface simulated on `n` points of
-/// its cloud, written `N` or `Npts` (e.g. `300pts`). Configs also accept a
-/// bare integer for a point count.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
-pub enum Level {
-    Grid { nx: usize, ny: usize },
-    Points(usize),
+/// A [`Level`] on the wire: `nx`/`ny` for a grid, `points` for a surface.
+pub trait WireLevel: Sized {
+    /// The wire message of this level.
+    fn to_wire(self) -> v1::Level;
+    /// The level a wire message names; an error when it sets both a grid
+    /// and a point count.
+    fn from_wire(l: &v1::Level) -> Result<Self, String>;
 }
 
-impl Level {
-    /// A grid level.
-    pub fn new(nx: usize, ny: usize) -> Level {
-        Level::Grid { nx, ny }
-    }
-
-    /// Simulated nodes (grid nodes or surface points): the level's cost.
-    pub fn nodes(self) -> usize {
-        match self {
-            Level::Grid { nx, ny } => nx * ny,
-            Level::Points(n) => n,
-        }
-    }
-
-    /// `(nx, ny)` of a grid level.
-    pub fn grid(self) -> Option<(usize, usize)> {
-        match self {
-            Level::Grid { nx, ny } => Some((nx, ny)),
-            Level::Points(_) => None,
-        }
-    }
-
-    pub fn to_wire(self) -> v1::Level {
+impl WireLevel for Level {
+    fn to_wire(self) -> v1::Level {
         match self {
             Level::Grid { nx, ny } => v1::Level {
                 nx: nx as u32,
@@ -74,69 +49,13 @@ impl Level {
         }
     }
 
-    /// The level a wire message names; an error when it sets both a grid
-    /// and a point count.
-    pub fn from_wire(l: &v1::Level) -> Result<Level, String> {
+    fn from_wire(l: &v1::Level) -> Result<Level, String> {
         match (l.points, l.nx, l.ny) {
             (0, nx, ny) => Ok(Level::new(nx as usize, ny as usize)),
             (n, 0, 0) => Ok(Level::Points(n as usize)),
             (n, nx, ny) => Err(format!(
                 "level sets both a grid ({nx}x{ny}) and a point count ({n}); set one"
             )),
-        }
-    }
-}
-
-impl fmt::Display for Level {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            Level::Grid { nx, ny } => write!(f, "{nx}x{ny}"),
-            Level::Points(n) => write!(f, "{n}pts"),
-        }
-    }
-}
-
-impl FromStr for Level {
-    type Err = String;
-
-    fn from_str(s: &str) -> Result<Level, String> {
-        let bad = || {
-            format!("'{s}' is not a level; write NXxNY for a cloth (e.g. 32x32) or N for a surface's point count (e.g. 300)")
-        };
-        let t = s.trim();
-        if let Some((a, b)) = t.split_once(['x', 'X']) {
-            let nx = a.trim().parse::<usize>().map_err(|_| bad())?;
-            let ny = b.trim().parse::<usize>().map_err(|_| bad())?;
-            return Ok(Level::new(nx, ny));
-        }
-        let digits = t
-            .strip_suffix("points")
-            .or_else(|| t.strip_suffix("pts"))
-            .unwrap_or(t)
-            .trim();
-        digits.parse::<usize>().map(Level::Points).map_err(|_| bad())
-    }
-}
-
-impl serde::Serialize for Level {
-    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
-        s.collect_str(self)
-    }
-}
-
-impl<'de> serde::Deserialize<'de> for Level {
-    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Level, D::Error> {
-        #[derive(serde::Deserialize)]
-        #[serde(untagged)]
-        enum Raw {
-            Count(u64),
-            Text(String),
-        }
-        match Raw::deserialize(d)? {
-            Raw::Count(n) => usize::try_from(n)
-                .map(Level::Points)
-                .map_err(|_| serde::de::Error::custom(format!("{n} points is too many"))),
-            Raw::Text(s) => s.parse().map_err(serde::de::Error::custom),
         }
     }
 }
@@ -206,19 +125,6 @@ pub fn error(code: v1::error::Code, message: impl Into<String>) -> v1::Error {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn levels_parse_and_print() {
-        assert_eq!("32x24".parse::<Level>(), Ok(Level::new(32, 24)));
-        assert_eq!(" 8X8 ".parse::<Level>(), Ok(Level::new(8, 8)));
-        assert!("-3x4".parse::<Level>().is_err());
-        assert!("x".parse::<Level>().is_err());
-        assert!("pts".parse::<Level>().is_err());
-        assert_eq!(Level::new(40, 40).to_string(), "40x40");
-        assert_eq!("273".parse::<Level>(), Ok(Level::Points(273)));
-        assert_eq!("273pts".parse::<Level>(), Ok(Level::Points(273)));
-        assert_eq!(Level::Points(85).to_string().parse::<Level>(), Ok(Level::Points(85)));
-    }
 
     #[test]
     fn levels_cross_the_wire_and_mixed_levels_are_refused() {

@@ -6,6 +6,7 @@
 //! `cargo test --release --test bus` (one file: `--test bus robustness::`).
 
 mod browser;
+#[path = "../crates/lodcloth-core/tests/common/mod.rs"]
 mod common;
 mod daemon;
 mod fuzz;

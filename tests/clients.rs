@@ -24,7 +24,8 @@ use tokio_tungstenite::{MaybeTlsStream, WebSocketStream};
 use browser::Browser;
 use daemon::*;
 use lodcloth::foxglove_bridge::{mesh_topic, metrics_topic};
-use lodcloth::proto::{v1, Level};
+use lodcloth::plan::Level;
+use lodcloth::proto::v1;
 use lodcloth::service::client::ClientOptions;
 use lodcloth::view::ViewOptions;
 

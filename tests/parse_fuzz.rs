@@ -16,10 +16,10 @@
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, OnceLock};
 
-use lodcloth::engine::{PrepareError, Preparer};
 use lodcloth::points::{io, PointCloud};
 use lodcloth::scene::{Scene, SceneError};
-use lodcloth::service::config::{ConfigError, InstanceKind, ServiceConfig};
+use lodcloth::plan::{InstanceKind, PrepareError, Preparer};
+use lodcloth::service::config::{ConfigError, ServiceConfig};
 use lodcloth::sim::{SimError, StabilityCheck};
 use ply_rs_bw::ply::Encoding;
 use proptest::prelude::*;

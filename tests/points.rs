@@ -807,7 +807,7 @@ fn surface_fit_recovers_known_stiffness() {
 
 /// A surface instance of `scene_text` (written to `dir`) at `levels`, as
 /// the daemon's preparer sees it.
-fn surface_preparer(dir: &Path, scene_text: &str, levels: &str, method: &str) -> lodcloth::engine::Preparer {
+fn surface_preparer(dir: &Path, scene_text: &str, levels: &str, method: &str) -> lodcloth::plan::Preparer {
     let scene = dir.join("surface.toml");
     std::fs::write(&scene, scene_text).expect("scene written");
     let text = format!(
@@ -817,7 +817,7 @@ fn surface_preparer(dir: &Path, scene_text: &str, levels: &str, method: &str) ->
     );
     let config = lodcloth::service::config::ServiceConfig::from_toml(&text, "test").expect("valid config");
     let instance = std::sync::Arc::new(config.instances[0].clone());
-    lodcloth::engine::Preparer::new(instance, config.estimation, None)
+    lodcloth::plan::Preparer::new(instance, config.estimation, None)
 }
 
 #[test]
@@ -830,7 +830,7 @@ fn lsq_on_a_surface_recovers_the_reference_springs_and_bcd_gkd_run_on_the_local_
     let scene = "name = \"s\"\ncloud = \"sphere\"\ncount = 400\ngravity = [0.0, 0.0, -9.81]\npin_below = -0.35\nduration = 0.5\nstretch = [50.0, 0.05]\nbend = [5.0, 0.005]\n[[pulls]]\npoint = \"top\"\noffset = [0.0, 0.0, 0.2]\n";
     let preparer = surface_preparer(dir.path(), scene, "[400, 120]", "lsq");
     let full = preparer
-        .prepare(lodcloth::proto::Level::Points(400), lodcloth::estimate::Method::Lsq)
+        .prepare(lodcloth::plan::Level::Points(400), lodcloth::estimate::Method::Lsq)
         .expect("lsq prepared");
     let [st, sh, be] = full.material.springs;
     for (name, got, want) in [
@@ -858,7 +858,7 @@ fn lsq_on_a_surface_recovers_the_reference_springs_and_bcd_gkd_run_on_the_local_
         lodcloth::estimate::Method::Fit,
     ] {
         let p = preparer
-            .prepare(lodcloth::proto::Level::Points(120), method)
+            .prepare(lodcloth::plan::Level::Points(120), method)
             .unwrap_or_else(|e| panic!("{method}: {e}"));
         let [st, _, be] = p.material.springs;
         assert!(
@@ -897,8 +897,8 @@ fn a_size_switch_carries_affine_positions_and_velocities_exactly() {
     };
     let (from, to) = (build(200), build(100));
     let (mut from_map, to_map) = (
-        lodcloth::engine::CloudMap::of(&from),
-        lodcloth::engine::CloudMap::of(&to),
+        lodcloth::points::cloud::CloudMap::of(&from),
+        lodcloth::points::cloud::CloudMap::of(&to),
     );
     let a = [[1.1, 0.2, -0.1], [0.05, 0.9, 0.3], [-0.2, 0.1, 1.2]];
     let b = [0.3, -0.1, 0.25];

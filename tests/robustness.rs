@@ -18,9 +18,10 @@ use common::Rng;
 use daemon::{client, collect_states, config_text, level_of, wait_info, within, Daemon, PREFIX};
 use fuzz::Leaf;
 use lodcloth::estimate::Method;
-use lodcloth::proto::{v1, Level};
+use lodcloth::plan::{InstancePlan, Level};
+use lodcloth::proto::{v1, WireLevel};
 use lodcloth::service::client::{Client, ClientError, ClientOptions};
-use lodcloth::service::config::{InstanceConfig, ServiceConfig};
+use lodcloth::service::config::ServiceConfig;
 use lodcloth::service::request::{self, Refusal, SwitchTarget};
 use lodcloth::service::snapshot;
 use lodcloth::service::{encoding, keys};
@@ -35,7 +36,7 @@ enum Accepted {
 }
 
 /// The daemon's checks, in its order: key, payload, fields.
-fn check(r: &fuzz::Request, instances: &BTreeMap<String, InstanceConfig>) -> Result<Accepted, Refusal> {
+fn check(r: &fuzz::Request, instances: &BTreeMap<String, InstancePlan>) -> Result<Accepted, Refusal> {
     let key = r.key(PREFIX);
     let name = request::instance_name(
         PREFIX,
@@ -98,7 +99,7 @@ fn a_million_generated_requests_are_each_accepted_correctly_or_refused_by_name()
     let _serial = daemon::serial_blocking();
     let dir = tempfile::tempdir().expect("temp dir");
     let config = test_config(7, dir.path());
-    let instances: BTreeMap<String, InstanceConfig> =
+    let instances: BTreeMap<String, InstancePlan> =
         config.instances.iter().map(|i| (i.name.clone(), i.clone())).collect();
     let names: Vec<&str> = instances.keys().map(String::as_str).collect();
     let n: u64 = std::env::var("LODCLOTH_FUZZ_REQUESTS")

@@ -10,7 +10,8 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use daemon::{collect_states, free_port, level_of, scene_path, within, Daemon, PREFIX};
-use lodcloth::proto::{v1, Level};
+use lodcloth::plan::Level;
+use lodcloth::proto::{v1, WireLevel};
 use lodcloth::service::client::{Client, ClientError, ClientOptions, ClientSecurity};
 use lodcloth::service::config::ServiceConfig;
 use rcgen::{BasicConstraints, CertificateParams, CertifiedIssuer, DnType, IsCa, KeyPair};

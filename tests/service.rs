@@ -13,7 +13,8 @@ use tokio::sync::oneshot;
 
 use daemon::*;
 use lodcloth::lod::Correlation;
-use lodcloth::proto::{unpack_positions, v1, Level};
+use lodcloth::plan::Level;
+use lodcloth::proto::{unpack_positions, v1, WireLevel};
 use lodcloth::scene::Scene;
 use lodcloth::service::client::ClientError;
 use lodcloth::service::config::ServiceConfig;

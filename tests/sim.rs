@@ -1,23 +1,11 @@
-//! Simulation, estimation, point-sampled surfaces and parsing: one test
-//! binary, so the release build links (thin LTO) the library once rather
-//! than once per file.
+//! Tests of the root package that need no bus: the LOD experiments, the
+//! point-sampled surfaces through the engine's transfer, and the parsing of
+//! every file and config the daemon reads. One test binary, so the release
+//! build links (thin LTO) the library once rather than once per file. The
+//! core's own tests are in `crates/lodcloth-core/tests/`.
 //!
-//! `cargo test --release --test sim` (one file: `--test sim energy::`).
+//! `cargo test --release --test sim` (one file: `--test sim points::`).
 
-mod common;
-
-mod cache;
-mod conservation;
-mod convergence;
-mod energy;
-mod equilibrium;
-mod estimation;
-mod kernel;
 mod lod;
-mod oscillator;
 mod parse_fuzz;
 mod points;
-mod scenes;
-mod stability;
-mod strain_control;
-mod symmetry_determinism;

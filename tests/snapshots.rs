@@ -6,7 +6,8 @@
 use std::path::Path;
 use std::time::Duration;
 
-use lodcloth::proto::{unpack_positions, v1, Level};
+use lodcloth::plan::Level;
+use lodcloth::proto::{unpack_positions, v1, WireLevel};
 use lodcloth::service::config::ServiceConfig;
 use lodcloth::service::snapshot;
 

@@ -14,7 +14,6 @@
 //! same instant) also go through a small unbounded channel so that both
 //! reach the bus.
 
-pub mod prepare;
 mod shadow;
 
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -27,75 +26,13 @@ use tokio::sync::{oneshot, watch};
 
 use crate::estimate::Method;
 use crate::lod::transfer_state;
-use crate::points::model::PointModel;
-use crate::points::transfer::Transfer;
-use crate::proto::Level;
+use crate::plan::{Level, Prepared};
+use crate::points::cloud::CloudMap;
 use crate::sim::vec3::V3;
 use crate::sim::{Material, Simulation, State, StepReport, Topology};
 use shadow::Shadow;
 
-pub use prepare::{Basis, PrepareError, Prepared, Preparer, Start};
 
-/// How a surface level's simulated points move its full cloud: which cloud
-/// points are simulated, the MLS transfer, and the cloud it last produced.
-#[derive(Debug, Clone)]
-pub struct CloudMap {
-    /// Cloud index of each simulated point.
-    pub kept: Arc<Vec<u32>>,
-    transfer: Transfer,
-    /// The deformed cloud after the last [`CloudMap::update`].
-    pub positions: Vec<V3>,
-    pub normals: Vec<V3>,
-    /// Scratch for velocity transfer at a switch.
-    scratch: Vec<V3>,
-}
-
-impl CloudMap {
-    /// The map of `model`'s level (cloud at rest).
-    pub fn of(model: &PointModel) -> CloudMap {
-        CloudMap {
-            kept: Arc::new(model.kept.clone()),
-            transfer: model.transfer.clone(),
-            positions: model.rest.positions.clone(),
-            normals: model.normals.clone(),
-            scratch: vec![[0.0; 3]; model.rest.len()],
-        }
-    }
-
-    /// Points in the full cloud.
-    pub fn cloud_points(&self) -> usize {
-        self.positions.len()
-    }
-
-    /// Move the cloud to simulated positions `pos` (SoA).
-    pub fn update(&mut self, pos: &[f64]) {
-        self.transfer.apply(pos, &mut self.positions, &mut self.normals);
-    }
-
-    /// The state of another level of the same cloud (`to` simulates cloud
-    /// points `to.kept`) from `state` of this one: positions and velocities
-    /// are carried through this level's transfer (linear in both, exact for
-    /// affine motion), then read at the other level's points.
-    pub fn carry(&mut self, state: &State, to: &CloudMap) -> State {
-        self.update(&state.pos);
-        self.transfer.interpolate(&state.vel, &mut self.scratch);
-        let m = to.kept.len();
-        let mut pos = vec![0.0; 3 * m];
-        let mut vel = vec![0.0; 3 * m];
-        for (k, &i) in to.kept.iter().enumerate() {
-            for c in 0..3 {
-                pos[c * m + k] = self.positions[i as usize][c];
-                vel[c * m + k] = self.scratch[i as usize][c];
-            }
-        }
-        State {
-            pos,
-            vel,
-            time: state.time,
-            step: state.step,
-        }
-    }
-}
 
 /// A snapshot of an instance's cloth, as the engine hands it to the bus.
 #[derive(Debug, Clone)]
@@ -300,7 +237,7 @@ impl InstanceHandle {
     }
 
     pub fn status(&self) -> Status {
-        prepare::lock(&self.status).clone()
+        lock(&self.status).clone()
     }
 }
 
@@ -835,7 +772,7 @@ impl Runner {
     }
 
     fn update_status(&self) {
-        let mut s = prepare::lock(&self.status);
+        let mut s = lock(&self.status);
         s.level = self.level;
         s.method = self.method;
         s.material = self.material;
@@ -1000,7 +937,7 @@ impl Runner {
             self.window_sim = 0.0;
             self.window_steps = 0;
             self.window_busy = Duration::ZERO;
-            prepare::lock(&self.status).frame = self.frames;
+            lock(&self.status).frame = self.frames;
         }
     }
 }
@@ -1044,4 +981,10 @@ fn worker(mut runners: Vec<Runner>, stop: Arc<AtomicBool>, _settings: EngineSett
             std::thread::park_timeout(wake - now);
         }
     }
+}
+
+/// Lock, ignoring poisoning: a status is plain data that every critical
+/// section writes whole, so a panicking writer leaves no half-made value.
+fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(|e| e.into_inner())
 }

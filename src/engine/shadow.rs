@@ -2,8 +2,8 @@
 
 use std::sync::Arc;
 
-use super::prepare::{Basis, Prepared};
-use super::CloudMap;
+use crate::plan::{Basis, Prepared};
+use crate::points::cloud::CloudMap;
 use crate::points::estimate::SurfaceReference;
 use crate::sim::vec3::{dist, V3};
 

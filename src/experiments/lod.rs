@@ -1,113 +1,18 @@
 //! Level-of-detail experiments: the paper's Table 1 and beyond, the
 //! speed/accuracy Pareto front, LOD planning and level-switch continuity.
 //! No files and no printing here: results come back as values, progress as
-//! log lines through a callback; `main.rs` writes CSV, markdown and charts.
+//! log lines through a callback; `lodcloth experiment` (src/cli/experiment.rs) writes CSV, markdown and charts.
 
 use std::sync::Arc;
 use std::time::Instant;
 
 use rayon::prelude::*;
 
-use crate::cache::{CacheEntry, CacheError, CacheKey, CoefficientCache, Provenance};
-use crate::estimate::{
-    no_progress, Details, ErrorReport, EstimateError, FitOptions, LodProblem, Method, RecordSpec, Reference,
-    ReferenceError,
-};
+use crate::estimate::{no_progress, ErrorReport, EstimateError, FitOptions, LodProblem, Method, RecordSpec, Reference};
 use crate::lod::transfer_state;
-use crate::scene::{MassConvention, Scene, SceneError};
-use crate::sim::{Integrator, Material, StabilityCheck};
-
-/// Errors of the experiments.
-#[derive(Debug, thiserror::Error)]
-pub enum ExperimentError {
-    #[error(transparent)]
-    Scene(#[from] SceneError),
-    #[error("{scene}: {source}")]
-    Reference { scene: String, source: ReferenceError },
-    #[error(transparent)]
-    Estimate(#[from] EstimateError),
-    #[error(transparent)]
-    Cache(#[from] CacheError),
-    #[error("{0}")]
-    Invalid(String),
-}
-
-/// Runs estimators, through the on-disk coefficient cache when there is one.
-#[derive(Debug, Clone, Default)]
-pub struct Estimator {
-    pub cache: Option<CoefficientCache>,
-    /// Everything besides the cache key's fields that changes an estimate
-    /// (record spec, fit settings), folded into the key's method string.
-    pub tag: String,
-}
-
-/// What [`Estimator::estimate`] returns.
-#[derive(Debug, Clone)]
-pub struct Estimated {
-    pub material: Material,
-    pub notes: String,
-    /// Wall seconds spent estimating (0 on a cache hit).
-    pub seconds: f64,
-    pub cached: bool,
-}
-
-impl Estimator {
-    /// Estimate with `method`, or read it from the cache.
-    pub fn estimate(
-        &self,
-        problem: &LodProblem,
-        method: Method,
-        fit: &FitOptions,
-    ) -> Result<Estimated, ExperimentError> {
-        let compute = || -> Result<Estimated, ExperimentError> {
-            let t = Instant::now();
-            let est = problem.estimate(method, fit, &mut no_progress)?;
-            Ok(Estimated {
-                material: est.material,
-                notes: notes(&est.details),
-                seconds: t.elapsed().as_secs_f64(),
-                cached: false,
-            })
-        };
-        let Some(cache) = self.cache.as_ref().filter(|_| method != Method::Same) else {
-            return compute();
-        };
-        let train = fit.train_range(problem.frames());
-        let key = CacheKey {
-            scene: problem.scene.name.clone(),
-            scene_hash: problem.scene.source_hash,
-            reference: (problem.scene.nx, problem.scene.ny),
-            target: (problem.nx, problem.ny),
-            method: format!(
-                "{method}[{};train={}..{};frames={};iter={}]",
-                self.tag, train.start, train.end, fit.max_frames, fit.max_iterations
-            ),
-            mass: problem.mass.name().to_string(),
-            integrator: problem.integrator.name().to_string(),
-            dt: problem.dt,
-        };
-        let mut fresh = None;
-        let (entry, provenance) = cache.get_or_compute(&key, || -> Result<CacheEntry, ExperimentError> {
-            let e = compute()?;
-            let mut entry = CacheEntry::new(key.clone(), e.material);
-            entry.notes.insert("estimate_seconds".into(), e.seconds);
-            fresh = Some(e);
-            Ok(entry)
-        })?;
-        Ok(match (provenance, fresh) {
-            (Provenance::Hit, _) | (_, None) => Estimated {
-                material: entry.material,
-                notes: format!(
-                    "cached ({:.1} s when computed)",
-                    entry.notes.get("estimate_seconds").copied().unwrap_or(f64::NAN)
-                ),
-                seconds: 0.0,
-                cached: true,
-            },
-            (_, Some(e)) => e,
-        })
-    }
-}
+use crate::plan::{default_problem, level_dt, stable_problem, Estimator, PlanError};
+use crate::scene::{MassConvention, Scene};
+use crate::sim::{Integrator, Material};
 
 /// A method under a mass convention: one column of Table 1.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -160,109 +65,6 @@ pub const TABLE1_VARIANTS: [Variant; 8] = [
     },
 ];
 
-/// Record the reference run of `scene` at its own resolution.
-pub fn record_reference(
-    scene: &Scene,
-    spec: RecordSpec,
-    log: &mut dyn FnMut(String),
-) -> Result<(Arc<Reference>, f64), ExperimentError> {
-    let mut s = scene.clone();
-    s.stability = StabilityCheck::Enforce;
-    let sim = s.build()?;
-    let start = Instant::now();
-    let mut last = Instant::now();
-    let name = scene.name.clone();
-    let reference = Reference::record(sim, spec, &mut |done, total| {
-        if last.elapsed().as_secs_f64() > 5.0 {
-            last = Instant::now();
-            log(format!("{name}: reference {done}/{total} steps"));
-        }
-    })
-    .map_err(|source| ExperimentError::Reference {
-        scene: scene.name.clone(),
-        source,
-    })?;
-    let wall = start.elapsed().as_secs_f64();
-    let simulated = spec.frames as f64 * reference.dt;
-    Ok((Arc::new(reference), wall / simulated))
-}
-
-/// The largest dt ≤ `margin` × the predicted stability limit of `material` at
-/// level n×n that divides the reference's metric frame interval.
-pub fn level_dt(
-    scene: &Scene,
-    reference: &Arc<Reference>,
-    nx: usize,
-    ny: usize,
-    mass: MassConvention,
-    integrator: Integrator,
-    material: Material,
-    margin: f64,
-) -> Result<(f64, f64), ExperimentError> {
-    let interval = reference.dt * reference.spec.metric_stride as f64;
-    let probe = LodProblem::new(scene, reference.clone(), nx, ny, mass, integrator, interval)?;
-    let limit = probe.simulation(material)?.dt_limit();
-    let k = (interval / (margin * limit)).ceil().max(1.0);
-    Ok((interval / k, limit))
-}
-
-/// Level n×n of `scene` as the daemon and `lod-plan` run it: lumped masses,
-/// the scene's integrator, dt at ≤ 0.75 of the `same` model's stability limit.
-pub fn default_problem(scene: &Scene, reference: &Arc<Reference>, level: usize) -> Result<LodProblem, ExperimentError> {
-    let integrator = scene.params.integrator;
-    let mass = MassConvention::Lumped;
-    let (dt, _) = level_dt(
-        scene,
-        reference,
-        level,
-        level,
-        mass,
-        integrator,
-        reference.material,
-        0.75,
-    )?;
-    Ok(LodProblem::new(
-        scene,
-        reference.clone(),
-        level,
-        level,
-        mass,
-        integrator,
-        dt,
-    )?)
-}
-
-/// `problem` itself when `material` runs within 0.8 of its predicted
-/// stability limit at `problem.dt`, else the same level at the largest dt
-/// that does; with the model's limit. Every scored model obeys this bound.
-pub fn stable_problem(problem: &LodProblem, material: Material) -> Result<(LodProblem, f64), ExperimentError> {
-    let limit = problem.simulation(material)?.dt_limit();
-    if problem.dt <= 0.8 * limit {
-        return Ok((problem.clone(), limit));
-    }
-    let (nx, ny) = (problem.nx, problem.ny);
-    let (dt, limit) = level_dt(
-        &problem.scene,
-        &problem.reference,
-        nx,
-        ny,
-        problem.mass,
-        problem.integrator,
-        material,
-        0.8,
-    )?;
-    let q = LodProblem::new(
-        &problem.scene,
-        problem.reference.clone(),
-        nx,
-        ny,
-        problem.mass,
-        problem.integrator,
-        dt,
-    )?;
-    Ok((q, limit))
-}
-
 /// Options of [`table1_scene`].
 #[derive(Debug, Clone)]
 pub struct Table1Options {
@@ -306,18 +108,18 @@ pub fn table1_scene(
     options: &Table1Options,
     estimator: &Estimator,
     log: &mut dyn FnMut(String),
-) -> Result<Vec<Table1Row>, ExperimentError> {
+) -> Result<Vec<Table1Row>, PlanError> {
     let frames = reference.frames.len();
     let train = options.fit.train_range(frames);
     let held_out = train.end..frames;
     if held_out.is_empty() {
-        return Err(ExperimentError::Invalid(
+        return Err(PlanError::Invalid(
             "the fit's training window covers every frame: nothing is held out".into(),
         ));
     }
     let n_ref = reference.topology.n_nodes;
     let integrator = scene.params.integrator;
-    let run = |level: usize, variant: &Variant| -> Result<Table1Row, ExperimentError> {
+    let run = |level: usize, variant: &Variant| -> Result<Table1Row, PlanError> {
         // dt from the `same` model, then checked against the estimate.
         let (dt, _) = level_dt(
             scene,
@@ -361,7 +163,7 @@ pub fn table1_scene(
         // Variants run side by side on both cores (each one single-threaded
         // except `fit`, which shares rayon's pool); costs are therefore
         // measured with the other core busy too, like a daemon's instances.
-        let level_rows: Vec<Result<Table1Row, ExperimentError>> =
+        let level_rows: Vec<Result<Table1Row, PlanError>> =
             options.variants.par_iter().map(|v| run(level, v)).collect();
         for row in level_rows {
             let r = row?;
@@ -390,41 +192,6 @@ fn strip(mut r: ErrorReport) -> ErrorReport {
     r.worst_positions = Vec::new();
     r.frame_means = Vec::new();
     r
-}
-
-/// One-line diagnostics of an estimate.
-pub fn notes(details: &Details) -> String {
-    match details {
-        Details::Same => String::new(),
-        Details::Inverse(e) => {
-            let r = &e.rejections;
-            let considered: u64 = r.considered.iter().sum();
-            let rejected: u64 = r.near_rest.iter().sum::<u64>() + r.negative_k.iter().sum::<u64>();
-            let fallbacks = e.fallback_k.iter().chain(&e.fallback_c).filter(|&&f| f).count();
-            format!(
-                "rejected K samples {rejected}/{considered} (near rest {}, negative {}); C: no rel. velocity {}, negative {}; fallbacks {fallbacks}",
-                r.near_rest.iter().sum::<u64>(),
-                r.negative_k.iter().sum::<u64>(),
-                r.no_relative_velocity.iter().sum::<u64>(),
-                r.negative_c.iter().sum::<u64>()
-            )
-        }
-        Details::Lsq(e) => format!(
-            "condition {:.2e}, relative residual {:.3}, clamped {}",
-            e.condition,
-            e.relative_residual,
-            e.clamped.iter().filter(|&&c| c).count()
-        ),
-        Details::Fit(f) => format!(
-            "start {} (train rms {:.3}%), train rms {:.3}% after {} iterations, {} runs, {}",
-            f.start,
-            100.0 * f.start_rms,
-            100.0 * f.rms,
-            f.iterations,
-            f.evaluations,
-            f.stop
-        ),
-    }
 }
 
 /// A level-switch experiment's outcome (fine → coarse and back).
@@ -462,11 +229,11 @@ pub fn switch_test(
     material: Material,
     at: usize,
     window: usize,
-) -> Result<SwitchReport, ExperimentError> {
+) -> Result<SwitchReport, PlanError> {
     let reference = &problem.reference;
     let frames = reference.frames.len();
     if at == 0 || at + window > frames {
-        return Err(ExperimentError::Invalid(format!(
+        return Err(PlanError::Invalid(format!(
             "switch at frame {at} with a {window}-frame window does not fit in {frames} frames"
         )));
     }
@@ -602,7 +369,7 @@ pub fn pareto(
     fit: &FitOptions,
     estimator: &Estimator,
     log: &mut dyn FnMut(String),
-) -> Result<Vec<ParetoPoint>, ExperimentError> {
+) -> Result<Vec<ParetoPoint>, PlanError> {
     let frames = reference.frames.len();
     let mut points = Vec::new();
     for &level in levels {
@@ -700,7 +467,7 @@ pub fn lod_plan(
     fit: &FitOptions,
     estimator: &Estimator,
     log: &mut dyn FnMut(String),
-) -> Result<Vec<PlanStep>, ExperimentError> {
+) -> Result<Vec<PlanStep>, PlanError> {
     let mut levels = levels.to_vec();
     levels.sort_unstable();
     let frames = reference.frames.len();
@@ -753,7 +520,7 @@ pub fn generalisation(
     fit: &FitOptions,
     estimator: &Estimator,
     log: &mut dyn FnMut(String),
-) -> Result<Generalisation, ExperimentError> {
+) -> Result<Generalisation, PlanError> {
     let mut problems = Vec::new();
     for (scene, reference) in scenes {
         problems.push(default_problem(scene, reference, level)?);

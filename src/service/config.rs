@@ -11,7 +11,8 @@ use std::sync::Arc;
 use super::security;
 use crate::estimate::{Method, RecordSpec};
 use crate::points::scene::SurfaceScene;
-use crate::proto::Level;
+use crate::names;
+use crate::plan::{EstimationPlan, InstanceKind, InstancePlan, Level};
 use crate::scene::Scene;
 use crate::sim::Integrator;
 
@@ -270,8 +271,8 @@ pub struct ServiceConfig {
     pub cache: PathBuf,
     pub zenoh: RawZenoh,
     pub engine: EngineConfig,
-    pub estimation: EstimationConfig,
-    pub instances: Vec<InstanceConfig>,
+    pub estimation: EstimationPlan,
+    pub instances: Vec<InstancePlan>,
     pub snapshots: Option<RawSnapshots>,
 }
 
@@ -282,79 +283,6 @@ pub struct EngineConfig {
     pub max_substeps: u32,
     pub max_lag: f64,
     pub metrics_hz: f64,
-}
-
-/// Validated estimation settings.
-#[derive(Debug, Clone, Copy)]
-pub struct EstimationConfig {
-    pub spec: RecordSpec,
-    pub fit_frames: usize,
-    pub fit_iterations: u32,
-    pub precompute: bool,
-}
-
-/// What an instance simulates.
-#[derive(Debug, Clone)]
-pub enum InstanceKind {
-    /// A cloth scene at the reference resolution.
-    Cloth(Box<Scene>),
-    /// A point-sampled surface; its reference simulates every point.
-    Surface(Arc<SurfaceScene>),
-}
-
-/// A validated instance: its scene loaded, at the reference resolution.
-#[derive(Debug, Clone)]
-pub struct InstanceConfig {
-    pub name: String,
-    pub kind: InstanceKind,
-    pub levels: Vec<Level>,
-    pub start: Level,
-    pub method: Method,
-    pub integrator: Integrator,
-    pub dt: Option<f64>,
-    pub publish_hz: f64,
-    pub shadow_reference: bool,
-    pub looping: bool,
-}
-
-impl InstanceConfig {
-    /// The reference level: the cloth scene's grid, or every point of the surface.
-    pub fn reference(&self) -> Level {
-        match &self.kind {
-            InstanceKind::Cloth(scene) => Level::new(scene.nx, scene.ny),
-            InstanceKind::Surface(scene) => Level::Points(scene.points()),
-        }
-    }
-
-    /// `cloth` or `surface`.
-    pub fn kind_name(&self) -> &'static str {
-        match self.kind {
-            InstanceKind::Cloth(_) => "cloth",
-            InstanceKind::Surface(_) => "surface",
-        }
-    }
-
-    pub fn scene_name(&self) -> &str {
-        match &self.kind {
-            InstanceKind::Cloth(scene) => &scene.name,
-            InstanceKind::Surface(scene) => &scene.name,
-        }
-    }
-
-    pub fn description(&self) -> &str {
-        match &self.kind {
-            InstanceKind::Cloth(scene) => &scene.description,
-            InstanceKind::Surface(scene) => &scene.description,
-        }
-    }
-
-    /// Scene length (s): the instance starts over here when looping.
-    pub fn duration(&self) -> f64 {
-        match &self.kind {
-            InstanceKind::Cloth(scene) => scene.duration,
-            InstanceKind::Surface(scene) => scene.duration,
-        }
-    }
 }
 
 /// Smallest grid side of a level.
@@ -470,25 +398,14 @@ impl ServiceConfig {
             if raw.instances[..i].iter().any(|o| o.name == r.name) {
                 p.push(format!("{at}.name: '{}' is used by an earlier instance", r.name));
             }
-            let method = Method::from_name(&r.method);
-            if method.is_none() {
-                p.push(format!(
-                    "{at}.method: '{}' is not one of same, bcd, gkd, lsq, fit",
-                    r.method
-                ));
-            }
-            let integrator = match &r.integrator {
-                None => None,
-                Some(name) => {
-                    let it = Integrator::from_name(name);
-                    if it.is_none() {
-                        p.push(format!(
-                            "{at}.integrator: '{name}' is not one of explicit_euler, symplectic_euler, rk4, implicit_euler"
-                        ));
-                    }
-                    it
-                }
-            };
+            let method = names::parse::<Method>(&r.method)
+                .map_err(|e| p.push(format!("{at}.method: {e}")))
+                .ok();
+            let integrator = r.integrator.as_deref().and_then(|name| {
+                names::parse::<Integrator>(name)
+                    .map_err(|e| p.push(format!("{at}.integrator: {e}")))
+                    .ok()
+            });
             if let Some(dt) = r.dt {
                 if !(dt > 0.0 && dt.is_finite()) {
                     p.push(format!("{at}.dt: {dt} must be positive and finite"));
@@ -523,7 +440,7 @@ impl ServiceConfig {
             let (Some((kind, scene_integrator)), Some(method)) = (kind, method) else {
                 continue;
             };
-            instances.push(InstanceConfig {
+            instances.push(InstancePlan {
                 name: r.name.clone(),
                 kind,
                 levels: r.levels.clone(),
@@ -558,7 +475,7 @@ impl ServiceConfig {
                 max_lag: e.max_lag,
                 metrics_hz: e.metrics_hz,
             },
-            estimation: EstimationConfig {
+            estimation: EstimationPlan {
                 spec: RecordSpec {
                     frames: s.reference_steps,
                     metric_stride: s.metric_stride,

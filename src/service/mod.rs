@@ -38,11 +38,12 @@ use zenoh::Session;
 
 use crate::cache::CoefficientCache;
 use crate::engine::{
-    CloudMap, Command, Engine, EngineSettings, InstanceHandle, InstanceSetup, MetricsFrame, PrepareError, Prepared,
-    Preparer, Snapshot, StateFrame,
+    Command, Engine, EngineSettings, InstanceHandle, InstanceSetup, MetricsFrame, Snapshot, StateFrame,
 };
 use crate::estimate::Method;
-use crate::proto::{self, schema, v1, Level};
+use crate::plan::{InstancePlan, Level, PrepareError, Prepared, Preparer};
+use crate::points::cloud::CloudMap;
+use crate::proto::{self, schema, v1, WireLevel};
 use crate::sim::Simulation;
 use config::{ConfigError, RawSnapshots, ServiceConfig};
 use request::{Refusal, SwitchTarget};
@@ -167,7 +168,7 @@ pub async fn serve(
     let (closing_tx, closing) = watch::channel(false);
     let mut instances = BTreeMap::new();
     for (handle, preparer) in engine.handles().iter().zip(&preparers) {
-        debug_assert_eq!(handle.name, preparer.config().name);
+        debug_assert_eq!(handle.name, preparer.plan().name);
         instances.insert(
             handle.name.clone(),
             Arc::new(Instance {
@@ -323,7 +324,7 @@ async fn prepare(preparer: Arc<Preparer>, level: Level, method: Method) -> Resul
 
 /// The snapshot `config`'s instance resumes from, if there is one that fits;
 /// why not is logged.
-fn resumable(snapshots: &RawSnapshots, config: &config::InstanceConfig) -> Option<Box<Snapshot>> {
+fn resumable(snapshots: &RawSnapshots, config: &InstancePlan) -> Option<Box<Snapshot>> {
     if !snapshots.resume {
         return None;
     }
@@ -363,7 +364,7 @@ async fn resume(ctx: Arc<Context>, resumes: BTreeMap<String, Box<Snapshot>>) {
 async fn resume_one(ctx: Arc<Context>, name: String, saved: Box<Snapshot>) {
     let Some(inst) = ctx.instances.get(&name) else { return };
     let guard = inst.switching.lock().await;
-    let config = inst.preparer.config().clone();
+    let config = inst.preparer.plan().clone();
     let (time, level, method, version) = (saved.state.time, saved.level, saved.method, saved.coefficient_version);
     // Never switched: the quick start's simulation is the one it ran.
     let quick = level == config.start && method == Method::Same && version == 1;
@@ -481,7 +482,7 @@ async fn save_snapshots(ctx: &Context, dir: &std::path::Path) -> usize {
             continue;
         };
         let name = inst.handle.name.clone();
-        let identity = snapshot::identity(inst.preparer.config());
+        let identity = snapshot::identity(inst.preparer.plan());
         let saved_ms = std::time::SystemTime::now()
             .duration_since(UNIX_EPOCH)
             .map_or(0, |d| d.as_millis() as u64);
@@ -505,7 +506,7 @@ async fn save_snapshots(ctx: &Context, dir: &std::path::Path) -> usize {
 async fn precompute(ctx: Arc<Context>, all_levels: bool, resumes: BTreeMap<String, Box<Snapshot>>) {
     resume(ctx.clone(), resumes).await;
     for inst in ctx.instances.values() {
-        let config = inst.preparer.config().clone();
+        let config = inst.preparer.plan().clone();
         let level = config.start;
         // Prepare without holding the switch lock (client switches go on
         // meanwhile); apply only if nobody has switched the instance since.
@@ -533,7 +534,7 @@ async fn precompute(ctx: Arc<Context>, all_levels: bool, resumes: BTreeMap<Strin
         return;
     }
     for inst in ctx.instances.values() {
-        let config = inst.preparer.config().clone();
+        let config = inst.preparer.plan().clone();
         for &level in &config.levels {
             if let Err(e) = prepare(inst.preparer.clone(), level, config.method).await {
                 tracing::warn!(instance = %config.name, %level, "cannot prepare: {e}");
@@ -728,7 +729,7 @@ async fn answer_info(ctx: &Context, q: Query) {
 
 fn instance_info(inst: &Instance) -> v1::InstanceInfo {
     let s = inst.handle.status();
-    let c = inst.preparer.config();
+    let c = inst.preparer.plan();
     let levels = c
         .levels
         .iter()
@@ -783,7 +784,7 @@ async fn answer_list(ctx: &Context, q: Query) {
             .values()
             .map(|inst| {
                 let s = inst.handle.status();
-                let c = inst.preparer.config();
+                let c = inst.preparer.plan();
                 v1::InstanceSummary {
                     instance: c.name.clone(),
                     scene: c.scene_name().to_string(),
@@ -858,7 +859,7 @@ async fn answer_switch(ctx: Arc<Context>, q: Query) {
     let arrived = Instant::now();
     let checked = target(&ctx, &q, "switch").and_then(|inst| {
         let req: v1::SwitchRequest = decode(&q, schema::SWITCH_REQUEST)?;
-        Ok((inst, request::switch_plan(inst.preparer.config(), &req)?))
+        Ok((inst, request::switch_plan(inst.preparer.plan(), &req)?))
     });
     let (inst, plan) = match checked {
         Ok(c) => c,
@@ -877,7 +878,7 @@ async fn answer_switch(ctx: Arc<Context>, q: Query) {
         )
         .await;
     };
-    let config = inst.preparer.config().clone();
+    let config = inst.preparer.plan().clone();
     let method = plan.method;
     let level = match plan.target {
         SwitchTarget::Level(level) => level,

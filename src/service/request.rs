@@ -6,10 +6,12 @@
 
 use prost::Message;
 
-use super::config::InstanceConfig;
 use super::keys;
 use crate::estimate::Method;
-use crate::proto::{v1, Level};
+use crate::names;
+use crate::plan::InstancePlan;
+use crate::plan::Level;
+use crate::proto::{v1, WireLevel};
 use v1::error::Code;
 
 /// Largest request payload accepted (bytes). A `SwitchRequest` or
@@ -106,15 +108,14 @@ pub fn decode<M: Message + Default>(
 
 /// Check a switch request against `config`: a method it knows, exactly one
 /// target, an allowed level or a positive finite error bound.
-pub fn switch_plan(config: &InstanceConfig, req: &v1::SwitchRequest) -> Result<SwitchPlan, Refusal> {
+pub fn switch_plan(config: &InstancePlan, req: &v1::SwitchRequest) -> Result<SwitchPlan, Refusal> {
     let method = if req.method.is_empty() {
         config.method
     } else {
-        Method::from_name(&req.method).ok_or_else(|| {
-            Refusal::bad(format!(
-                "method '{}' is not one of same, bcd, gkd, lsq, fit",
-                req.method.escape_debug()
-            ))
+        // The name comes from the network: escaped before it is echoed.
+        names::parse::<Method>(&req.method).map_err(|e| {
+            let given = e.given.escape_debug().to_string();
+            Refusal::bad(format!("method {}", names::UnknownName { given, ..e }))
         })?
     };
     let target = match &req.target {
@@ -127,7 +128,7 @@ pub fn switch_plan(config: &InstanceConfig, req: &v1::SwitchRequest) -> Result<S
                     format!(
                         "level {level} is not allowed for '{}'; allowed: {}",
                         config.name,
-                        crate::engine::prepare::allowed(&config.levels)
+                        crate::plan::allowed(&config.levels)
                     ),
                 ));
             }

@@ -21,16 +21,17 @@
 //! do the I/O.
 
 use std::fs;
-use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use crate::cache::fnv1a64;
+use crate::atomic;
+use crate::hash::fnv1a64;
 use crate::engine::{Coefficients, Snapshot};
 use crate::estimate::Method;
-use crate::proto::Level;
-use crate::service::config::{InstanceConfig, InstanceKind};
+use crate::plan::Level;
+use crate::names;
+use crate::plan::{InstanceKind, InstancePlan};
 use crate::sim::{Material, SpringCoeffs, State};
 
 const MAGIC: &[u8; 20] = b"LODCLOTH SNAPSHOT 1\n";
@@ -87,7 +88,7 @@ pub struct Saved {
 /// What a snapshot must match to be resumed: the instance's name, kind,
 /// scene (its source text, and the point cloud's), reference, integrator
 /// and configured dt. A config that changes any of these starts afresh.
-pub fn identity(config: &InstanceConfig) -> u64 {
+pub fn identity(config: &InstancePlan) -> u64 {
     let source = match &config.kind {
         InstanceKind::Cloth(scene) => scene.source_hash,
         InstanceKind::Surface(scene) => scene.source_hash,
@@ -109,7 +110,22 @@ pub fn identity(config: &InstanceConfig) -> u64 {
 
 /// The file of `instance` in `dir`.
 pub fn path(dir: &Path, instance: &str) -> PathBuf {
-    dir.join(format!("{instance}.snapshot"))
+    dir.join(format!("{instance}.{SUFFIX}"))
+}
+
+/// A snapshot file's extension.
+const SUFFIX: &str = "snapshot";
+
+/// Deletes the temporary files of snapshot writes that a crash left in `dir`
+/// (see [`atomic::remove_stale_temp_files`]); a missing `dir` has none.
+pub fn sweep(dir: &Path) -> Result<usize, SnapshotError> {
+    if !dir.is_dir() {
+        return Ok(0);
+    }
+    atomic::remove_stale_temp_files(dir, SUFFIX).map_err(|e| SnapshotError::Write {
+        path: e.path.display().to_string(),
+        source: e.source,
+    })
 }
 
 /// The bytes of a snapshot of `instance` (pure).
@@ -169,8 +185,7 @@ pub fn decode(bytes: &[u8]) -> Result<Saved, String> {
     let header: Header = serde_json::from_slice(&rest[4..4 + h]).map_err(|e| format!("header: {e}"))?;
     let identity = u64::from_str_radix(&header.identity, 16)
         .map_err(|_| format!("header: identity `{}` is not hexadecimal", header.identity))?;
-    let method =
-        Method::from_name(&header.method).ok_or_else(|| format!("header: unknown method `{}`", header.method))?;
+    let method = names::parse::<Method>(&header.method).map_err(|e| format!("header.method: {e}"))?;
     let values = &rest[4 + h..];
     let n = header.nodes;
     if n == 0 || values.len() != 16 * 3 * n {
@@ -246,17 +261,11 @@ pub fn write(dir: &Path, instance: &str, bytes: &[u8]) -> Result<PathBuf, Snapsh
         move |source| SnapshotError::Write { path, source }
     };
     fs::create_dir_all(dir).map_err(err(dir))?;
-    let tmp = dir.join(format!(".{instance}.snapshot.{}.tmp", std::process::id()));
-    let written = fs::File::create(&tmp)
-        .and_then(|mut f| f.write_all(bytes).and_then(|()| f.sync_all()))
-        .map_err(err(&tmp))
-        .and_then(|()| fs::rename(&tmp, &final_path).map_err(err(&final_path)));
-    if let Err(e) = written {
-        let _ = fs::remove_file(&tmp);
-        return Err(e);
-    }
-    #[cfg(unix)]
-    fs::File::open(dir).and_then(|d| d.sync_all()).map_err(err(dir))?;
+    let file_name = format!("{instance}.{SUFFIX}");
+    atomic::write(dir, &file_name, bytes).map_err(|e| SnapshotError::Write {
+        path: e.path.display().to_string(),
+        source: e.source,
+    })?;
     Ok(final_path)
 }
 
@@ -289,7 +298,7 @@ pub fn read(dir: &Path, instance: &str) -> Result<Option<Saved>, SnapshotError> 
 
 /// Whether `saved` can resume the instance `config` describes; the reason
 /// when not.
-pub fn fits(saved: &Saved, config: &InstanceConfig) -> Result<(), String> {
+pub fn fits(saved: &Saved, config: &InstancePlan) -> Result<(), String> {
     if saved.identity != identity(config) {
         return Err("the instance's scene, reference, integrator or dt changed since it was saved".into());
     }

@@ -39,7 +39,8 @@ use serde::{Deserialize, Serialize};
 use tokio::sync::{mpsc, watch};
 use zenoh::sample::SampleKind;
 
-use crate::proto::{v1, Level};
+use crate::plan::Level;
+use crate::proto::{v1, WireLevel};
 use crate::service::client::{Client, ClientError, ClientOptions};
 use crate::service::keys;
 

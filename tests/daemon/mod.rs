@@ -11,7 +11,8 @@ use prost::Message;
 use tokio::sync::oneshot;
 use tokio::task::JoinHandle;
 
-use lodcloth::proto::{v1, Level};
+use lodcloth::plan::Level;
+use lodcloth::proto::{v1, WireLevel};
 use lodcloth::service::client::{Client, ClientError};
 use lodcloth::service::config::ServiceConfig;
 use lodcloth::service::{keys, ServiceError};

@@ -19,9 +19,9 @@ use lodcloth::points::simplify::SimplifyOptions;
 use lodcloth::points::transfer::{NormalUpdate, TransferOptions};
 use lodcloth::points::{io, normals, PointCloud};
 use lodcloth::sim::vec3::{dist, V3};
-use lodcloth::sim::SpringCoeffs;
+use lodcloth::sim::{Integrator, SpringCoeffs};
 
-use crate::{progress_bar, IntegratorArg};
+use crate::{integrator_arg, progress_bar};
 
 #[derive(Subcommand)]
 pub enum Points {
@@ -118,8 +118,8 @@ pub struct ModelArgs {
     /// Neighbours projected for each one-ring (10–20 in the paper).
     #[arg(long, default_value_t = 15)]
     k: usize,
-    #[arg(long, value_enum, default_value = "symplectic-euler")]
-    integrator: IntegratorArg,
+    #[arg(long, value_parser = integrator_arg, default_value = "symplectic_euler")]
+    integrator: Integrator,
     /// Time step (s); default 0.8 × the predicted stability limit.
     #[arg(long)]
     dt: Option<f64>,

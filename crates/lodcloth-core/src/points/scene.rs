@@ -32,7 +32,8 @@ use super::model::{ModelError, PointModel, Pull, SurfaceParams};
 use super::simplify::SimplifyOptions;
 use super::transfer::{NormalUpdate, TransferOptions};
 use super::{io, normals, PointCloud};
-use crate::cache::fnv1a64;
+use crate::hash::fnv1a64;
+use crate::names;
 use crate::sim::{Integrator, Material, SpringCoeffs, SpringKind};
 
 /// Why a surface scene could not be loaded.
@@ -231,13 +232,9 @@ impl SurfaceScene {
         if !(6..=40).contains(&raw.ring_k) {
             p.push(format!("ring_k: {} must be in 6..=40 (10–20 in the paper)", raw.ring_k));
         }
-        let integrator = Integrator::from_name(&raw.integrator);
-        if integrator.is_none() {
-            p.push(format!(
-                "integrator: '{}' is not one of explicit_euler, symplectic_euler, rk4, implicit_euler",
-                raw.integrator
-            ));
-        }
+        let integrator = names::parse::<Integrator>(&raw.integrator)
+            .map_err(|e| p.push(format!("integrator: {e}")))
+            .ok();
         if raw.duration * raw.frame_hz < 3.0 {
             p.push(format!(
                 "duration × frame_hz = {} frames; at least 3 are needed to measure an error",

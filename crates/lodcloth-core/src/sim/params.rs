@@ -105,9 +105,9 @@ impl Integrator {
         }
     }
 
-    /// Parse a [`Integrator::name`].
+    /// Parse a [`Integrator::name`] (see [`crate::names`]).
     pub fn from_name(name: &str) -> Option<Integrator> {
-        Integrator::ALL.into_iter().find(|i| i.name() == name)
+        crate::names::parse(name).ok()
     }
 
     /// Force evaluations per step (cost model for benchmarks and pacing).
@@ -116,6 +116,19 @@ impl Integrator {
             Integrator::Rk4 => 4,
             _ => 1,
         }
+    }
+}
+
+impl crate::names::Named for Integrator {
+    const ALL: &'static [Integrator] = &Integrator::ALL;
+    fn name(self) -> &'static str {
+        Integrator::name(self)
+    }
+}
+
+impl<'de> serde::Deserialize<'de> for Integrator {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Integrator, D::Error> {
+        crate::names::deserialize(d)
     }
 }
 

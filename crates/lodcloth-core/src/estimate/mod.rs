@@ -72,9 +72,16 @@ impl Method {
         }
     }
 
-    /// Parse a name.
+    /// Parse a [`Method::name`] (see [`crate::names`]).
     pub fn from_name(name: &str) -> Option<Method> {
-        Method::ALL.into_iter().find(|m| m.name() == name)
+        crate::names::parse(name).ok()
+    }
+}
+
+impl crate::names::Named for Method {
+    const ALL: &'static [Method] = &Method::ALL;
+    fn name(self) -> &'static str {
+        Method::name(self)
     }
 }
 

@@ -11,7 +11,8 @@ use prost::Message;
 
 use lodcloth::foxglove_bridge::{relay, RelayChannels, RelayOptions};
 use lodcloth::output::{Precision, TrajectoryWriter};
-use lodcloth::proto::{unpack_positions, v1, Level};
+use lodcloth::plan::Level;
+use lodcloth::proto::{unpack_positions, v1, WireLevel};
 use lodcloth::service::client::{Client, ClientOptions, ClientSecurity};
 use lodcloth::service::config::ServiceConfig;
 use lodcloth::service::keys;

@@ -8,14 +8,14 @@
 
 use std::time::Instant;
 
-use lodcloth::points::generate::{extreme_point, generate, Shape};
-use lodcloth::points::knn::Knn;
-use lodcloth::points::model::{PointModel, Pull, SurfaceParams};
-use lodcloth::points::normals;
-use lodcloth::points::simplify::SimplifyOptions;
-use lodcloth::points::transfer::{NormalUpdate, TransferOptions};
-use lodcloth::points::PointCloud;
-use lodcloth::sim::Integrator;
+use lodcloth_core::points::generate::{extreme_point, generate, Shape};
+use lodcloth_core::points::knn::Knn;
+use lodcloth_core::points::model::{PointModel, Pull, SurfaceParams};
+use lodcloth_core::points::normals;
+use lodcloth_core::points::simplify::SimplifyOptions;
+use lodcloth_core::points::transfer::{NormalUpdate, TransferOptions};
+use lodcloth_core::points::PointCloud;
+use lodcloth_core::sim::Integrator;
 
 /// Build a pulled sphere model and time `steps` steps: (build s, sim µs/step, transfer µs/step).
 fn time_model(

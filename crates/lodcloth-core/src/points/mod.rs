@@ -18,6 +18,7 @@
 //! - [`model`] — the pipeline assembled; [`estimate`] — per-size stiffness fit;
 //!   [`scene`] — surface scene files for the daemon's `surface` instances.
 
+pub mod cloud;
 pub mod estimate;
 pub mod generate;
 pub mod io;

@@ -144,12 +144,22 @@ pub enum MassConvention {
 }
 
 impl MassConvention {
+    /// Both conventions.
+    pub const ALL: [MassConvention; 2] = [MassConvention::Lumped, MassConvention::PerNode];
+
     /// Name in config files.
     pub fn name(self) -> &'static str {
         match self {
             MassConvention::Lumped => "lumped",
             MassConvention::PerNode => "per_node",
         }
+    }
+}
+
+impl crate::names::Named for MassConvention {
+    const ALL: &'static [MassConvention] = &MassConvention::ALL;
+    fn name(self) -> &'static str {
+        MassConvention::name(self)
     }
 }
 
@@ -170,30 +180,10 @@ pub struct RawSprings {
     pub bend: RawCoeffs,
 }
 
-#[derive(Debug, Clone, Copy, Deserialize, PartialEq, Eq)]
-#[serde(rename_all = "snake_case")]
-pub enum RawIntegrator {
-    ExplicitEuler,
-    SymplecticEuler,
-    Rk4,
-    ImplicitEuler,
-}
-
-impl From<RawIntegrator> for Integrator {
-    fn from(r: RawIntegrator) -> Integrator {
-        match r {
-            RawIntegrator::ExplicitEuler => Integrator::ExplicitEuler,
-            RawIntegrator::SymplecticEuler => Integrator::SymplecticEuler,
-            RawIntegrator::Rk4 => Integrator::Rk4,
-            RawIntegrator::ImplicitEuler => Integrator::ImplicitEuler,
-        }
-    }
-}
-
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct RawSimulation {
-    pub integrator: RawIntegrator,
+    pub integrator: Integrator,
     /// Time step (s).
     pub dt: f64,
     /// Length of a run (s).
@@ -425,7 +415,7 @@ impl Scene {
             message: e.to_string(),
         })?;
         let mut scene = Scene::validate(raw, origin)?;
-        scene.source_hash = crate::cache::fnv1a64(text.as_bytes());
+        scene.source_hash = crate::hash::fnv1a64(text.as_bytes());
         Ok(scene)
     }
 
@@ -580,7 +570,7 @@ impl Scene {
             mass: c.mass,
             params: SimParams {
                 dt: s.dt,
-                integrator: s.integrator.into(),
+                integrator: s.integrator,
                 material,
                 gravity: s.gravity,
                 drag: s.drag,

@@ -8,8 +8,8 @@
 //! `cargo bench --bench profile_step -- [integrator] [trials]`
 //! (integrator: symplectic_euler (default), explicit_euler, rk4, implicit_euler).
 
-use lodcloth::scene::Scene;
-use lodcloth::sim::Integrator;
+use lodcloth_core::scene::Scene;
+use lodcloth_core::sim::Integrator;
 
 fn main() {
     let mut args = std::env::args().skip(1).filter(|a| a != "--bench");
@@ -18,7 +18,7 @@ fn main() {
         .map(|s| Integrator::from_name(&s).expect("unknown integrator"))
         .unwrap_or(Integrator::SymplecticEuler);
     let trials: usize = args.next().map_or(5, |s| s.parse().expect("trials"));
-    let mut scene = Scene::load(std::path::Path::new("config/scenes/hanging.toml")).unwrap();
+    let mut scene = Scene::load(std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../config/scenes/hanging.toml"))).unwrap();
     scene.params.integrator = integrator;
     let n = 3000;
     let mut times = Vec::with_capacity(trials);

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
-use clap::{Parser, Subcommand, ValueEnum};
+use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 use tracing::info;
 
@@ -28,37 +28,23 @@ struct Cli {
     command: Command,
 }
 
-#[derive(Clone, Copy, ValueEnum)]
-pub(crate) enum IntegratorArg {
-    ExplicitEuler,
-    SymplecticEuler,
-    Rk4,
-    ImplicitEuler,
-}
-
-impl From<IntegratorArg> for Integrator {
-    fn from(a: IntegratorArg) -> Integrator {
-        match a {
-            IntegratorArg::ExplicitEuler => Integrator::ExplicitEuler,
-            IntegratorArg::SymplecticEuler => Integrator::SymplecticEuler,
-            IntegratorArg::Rk4 => Integrator::Rk4,
-            IntegratorArg::ImplicitEuler => Integrator::ImplicitEuler,
-        }
-    }
+/// Command-line integrator names: the config files' names, `-` allowed for `_`.
+pub(crate) fn integrator_arg(name: &str) -> Result<Integrator, lodcloth::names::UnknownName> {
+    lodcloth::names::parse_arg(name)
 }
 
 #[derive(Subcommand)]
 enum Command {
     /// Run the daemon: cloth instances stepping in real time, published on
     /// zenoh, switching levels on request (config/default.toml by default).
-    Serve(serve_cli::ServeArgs),
+    Serve(serve::ServeArgs),
     /// Run a zenoh router, for daemons and clients in client mode (across
     /// networks, or where peers cannot reach each other directly).
-    Router(serve_cli::RouterArgs),
+    Router(serve::RouterArgs),
     /// List the instances of every reachable daemon.
     List {
         #[command(flatten)]
-        connect: serve_cli::Connect,
+        connect: serve::Connect,
     },
     /// Live view of an instance's metrics.
     Watch {
@@ -67,14 +53,14 @@ enum Command {
         #[arg(long)]
         count: Option<u64>,
         #[command(flatten)]
-        connect: serve_cli::Connect,
+        connect: serve::Connect,
     },
     /// Switch an instance to another level (or the cheapest meeting --max-error).
     Switch {
         #[command(flatten)]
-        args: serve_cli::SwitchArgs,
+        args: serve::SwitchArgs,
         #[command(flatten)]
-        connect: serve_cli::Connect,
+        connect: serve::Connect,
     },
     /// Record an instance's published states to a trajectory file (.lct), or
     /// its Foxglove channels (coloured mesh, metrics) to an MCAP file.
@@ -91,7 +77,7 @@ enum Command {
         #[arg(long)]
         mcap: Option<PathBuf>,
         #[command(flatten)]
-        connect: serve_cli::Connect,
+        connect: serve::Connect,
     },
     /// Serve a live browser view of the daemon's instances (WebGL mesh
     /// coloured by error or strain, level switches, metrics charts).
@@ -100,7 +86,7 @@ enum Command {
         #[arg(long, env = "LODCLOTH_VIEW_LISTEN", default_value = "127.0.0.1:8080")]
         listen: std::net::SocketAddr,
         #[command(flatten)]
-        connect: serve_cli::Connect,
+        connect: serve::Connect,
     },
     /// Expose the instances on the Foxglove WebSocket protocol: a coloured
     /// `foxglove.SceneUpdate` mesh and the metrics per instance.
@@ -117,14 +103,14 @@ enum Command {
         #[arg(long, default_value_t = 30.0)]
         max_hz: f64,
         #[command(flatten)]
-        connect: serve_cli::Connect,
+        connect: serve::Connect,
     },
     /// Exit 0 when the daemon answers (every instance, or --instance).
     Health {
         #[arg(long)]
         instance: Option<String>,
         #[command(flatten)]
-        connect: serve_cli::Connect,
+        connect: serve::Connect,
     },
     /// Run a scene and write its trajectory (.lct), a per-frame CSV report, an
     /// energy chart (SVG) and a PNG of the final shape.
@@ -139,8 +125,8 @@ enum Command {
         #[arg(long)]
         ny: Option<usize>,
         /// Override the scene's integrator.
-        #[arg(long, value_enum)]
-        integrator: Option<IntegratorArg>,
+        #[arg(long, value_parser = integrator_arg)]
+        integrator: Option<Integrator>,
         /// Override the scene's time step (s).
         #[arg(long)]
         dt: Option<f64>,
@@ -187,11 +173,11 @@ enum Command {
     },
     /// Level-of-detail experiments: table1, pareto, lod-plan, switch-test.
     #[command(subcommand)]
-    Experiment(experiment_cli::Experiment),
+    Experiment(experiment::Experiment),
     /// Point-sampled surfaces: generate, simulate (simplified, moved back to
     /// every point), accuracy against simplification size.
     #[command(subcommand)]
-    Points(points_cli::Points),
+    Points(points::Points),
     /// Print the header and a summary of a trajectory file.
     Inspect {
         /// Trajectory file (.lct).
@@ -199,9 +185,9 @@ enum Command {
     },
 }
 
-mod experiment_cli;
-mod points_cli;
-mod serve_cli;
+mod experiment;
+mod points;
+mod serve;
 
 fn main() -> Result<()> {
     let cli = Cli::parse();
@@ -219,15 +205,15 @@ fn main() -> Result<()> {
             .init();
     }
     match cli.command {
-        Command::Serve(args) => serve_cli::serve(args),
-        Command::Router(args) => serve_cli::router(args),
-        Command::List { connect } => serve_cli::list(connect),
+        Command::Serve(args) => serve::serve(args),
+        Command::Router(args) => serve::router(args),
+        Command::List { connect } => serve::list(connect),
         Command::Watch {
             instance,
             count,
             connect,
-        } => serve_cli::watch(connect, instance, count),
-        Command::Switch { args, connect } => serve_cli::switch(connect, args),
+        } => serve::watch(connect, instance, count),
+        Command::Switch { args, connect } => serve::switch(connect, args),
         Command::Record {
             instance,
             seconds,
@@ -235,19 +221,19 @@ fn main() -> Result<()> {
             mcap,
             connect,
         } => match (out, mcap) {
-            (_, Some(mcap)) => serve_cli::record_mcap(connect, instance, seconds, mcap),
-            (Some(out), None) => serve_cli::record(connect, instance, seconds, out),
+            (_, Some(mcap)) => serve::record_mcap(connect, instance, seconds, mcap),
+            (Some(out), None) => serve::record(connect, instance, seconds, out),
             (None, None) => bail!("give --out FILE.lct or --mcap FILE.mcap"),
         },
-        Command::View { listen, connect } => serve_cli::view(connect, listen),
+        Command::View { listen, connect } => serve::view(connect, listen),
         Command::Foxglove {
             host,
             port,
             instance,
             max_hz,
             connect,
-        } => serve_cli::foxglove(connect, host, port, instance, max_hz),
-        Command::Health { instance, connect } => serve_cli::health(connect, instance),
+        } => serve::foxglove(connect, host, port, instance, max_hz),
+        Command::Health { instance, connect } => serve::health(connect, instance),
         Command::Simulate {
             scene,
             nx,
@@ -281,8 +267,8 @@ fn main() -> Result<()> {
             bisections,
             out,
         } => stability(&scene, sizes, factors, steps, bisections, &out),
-        Command::Experiment(e) => experiment_cli::run(e),
-        Command::Points(p) => points_cli::run(p),
+        Command::Experiment(e) => experiment::run(e),
+        Command::Points(p) => points::run(p),
         Command::Inspect { file } => inspect(&file),
     }
 }

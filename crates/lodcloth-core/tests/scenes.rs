@@ -9,7 +9,7 @@ use lodcloth::scene::{MassConvention, Scene, SceneError};
 
 /// Every `*.toml` in config/scenes/, sorted.
 fn shipped_scenes() -> Vec<PathBuf> {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/scenes");
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/scenes");
     let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
         .unwrap_or_else(|e| panic!("cannot list {}: {e}", dir.display()))
         .map(|e| e.expect("directory entry").path())

@@ -6,12 +6,12 @@
 //! convention, integrator, dt).
 //!
 //! # Crash safety
-//! A file is never written in place. [`CoefficientCache::put`] writes a unique
-//! temporary file in the same directory, `fsync`s it, renames it over the final
-//! name (atomic on POSIX file systems) and `fsync`s the directory. A reader
-//! therefore sees the old file or the new one, never a torn one, even if the
-//! writer is killed (`kill -9`) or the machine loses power. A crash leaves at
-//! most a `*.tmp` file behind, which [`CoefficientCache::open`] deletes.
+//! A file is never written in place: [`CoefficientCache::put`] replaces it
+//! through [`crate::atomic::write`] (unique temporary file, `fsync`, rename,
+//! `fsync` of the directory). A reader therefore sees the old file or the new
+//! one, never a torn one, even if the writer is killed (`kill -9`) or the
+//! machine loses power. A crash leaves at most a `*.tmp` file behind, which
+//! [`CoefficientCache::open`] deletes.
 //!
 //! # Trust
 //! Files can still be damaged by other means (disk errors, hand edits, copies),
@@ -55,13 +55,14 @@
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::fs;
-use std::io::{self, Write as _};
+use std::io;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicU64, Ordering};
-use std::time::{Duration, SystemTime, UNIX_EPOCH};
+use std::time::{SystemTime, UNIX_EPOCH};
 
 use serde::{Deserialize, Serialize};
 
+use crate::atomic::{self, FileError};
+use crate::hash::{fnv1a64, Fnv1a64};
 use crate::scene::MassConvention;
 use crate::sim::{Integrator, Material, SpringCoeffs, SpringKind};
 
@@ -75,69 +76,11 @@ const HEADER: &str =
 /// Start of the last line of every cache file; 16 lower-case hex digits follow.
 const CHECKSUM_PREFIX: &str = "# checksum = fnv1a64:";
 
-/// Temporary files end with this; [`CoefficientCache::open`] cleans them up.
-const TEMP_SUFFIX: &str = ".tmp";
-
-/// A temporary file this old is abandoned even if its writer still runs (a
-/// write takes milliseconds).
-const STALE_TEMP_AGE: Duration = Duration::from_secs(60);
-
 /// Longest scene name (in bytes) kept in the readable part of a file name;
 /// the digest, not the prefix, makes names unique.
 const MAX_SCENE_IN_NAME: usize = 40;
 /// Longest method, mass or integrator name kept in a file name.
 const MAX_FIELD_IN_NAME: usize = 24;
-
-/// Numbers temporary files within this process (with the pid, unique per host).
-static TEMP_COUNTER: AtomicU64 = AtomicU64::new(0);
-
-// ---------------------------------------------------------------- hashing
-
-/// FNV-1a, 64-bit (Fowler–Noll–Vo; offset basis 0xcbf29ce484222325, prime
-/// 0x100000001b3): for each byte, `h = (h ^ byte) · prime` mod 2⁶⁴.
-///
-/// Used for file-name digests, file checksums and scene-text hashes because it
-/// is fixed by its definition, unlike `std`'s `DefaultHasher`, which may change
-/// between Rust releases and would orphan every cache file. Not cryptographic:
-/// it guards against accidents, not adversaries.
-pub fn fnv1a64(bytes: &[u8]) -> u64 {
-    let mut h = Fnv1a64::new();
-    h.write(bytes);
-    h.finish()
-}
-
-/// Incremental [`fnv1a64`].
-#[derive(Debug, Clone, Copy)]
-struct Fnv1a64(u64);
-
-impl Fnv1a64 {
-    const OFFSET_BASIS: u64 = 0xcbf2_9ce4_8422_2325;
-    const PRIME: u64 = 0x0000_0100_0000_01b3;
-
-    fn new() -> Self {
-        Fnv1a64(Self::OFFSET_BASIS)
-    }
-
-    fn write(&mut self, bytes: &[u8]) {
-        for &b in bytes {
-            self.0 = (self.0 ^ u64::from(b)).wrapping_mul(Self::PRIME);
-        }
-    }
-
-    fn write_u64(&mut self, x: u64) {
-        self.write(&x.to_le_bytes());
-    }
-
-    /// Length (u64 little-endian) then bytes, so ("ab", "c") ≠ ("a", "bc").
-    fn write_str(&mut self, s: &str) {
-        self.write_u64(s.len() as u64);
-        self.write(s.as_bytes());
-    }
-
-    fn finish(self) -> u64 {
-        self.0
-    }
-}
 
 // ---------------------------------------------------------------- key and entry
 
@@ -408,6 +351,16 @@ pub enum CacheError {
     Invalid { file_name: String, reason: String },
 }
 
+impl From<FileError> for CacheError {
+    fn from(e: FileError) -> CacheError {
+        CacheError::Io {
+            op: e.op,
+            path: e.path,
+            source: e.source,
+        }
+    }
+}
+
 fn io_err<'a>(op: &'static str, path: &'a Path) -> impl FnOnce(io::Error) -> CacheError + 'a {
     move |source| CacheError::Io {
         op,
@@ -637,22 +590,7 @@ impl CoefficientCache {
             file_name: file_name.clone(),
             reason,
         })?;
-        let path = self.dir.join(&file_name);
-        let (tmp_path, mut file) = self.create_temp(&file_name)?;
-        let written = file
-            .write_all(text.as_bytes())
-            .and_then(|()| file.sync_all())
-            .map_err(io_err("cannot write", &tmp_path));
-        drop(file);
-        let renamed = written.and_then(|()| fs::rename(&tmp_path, &path).map_err(io_err("cannot rename into", &path)));
-        if let Err(e) = renamed {
-            // Best effort: the file is incomplete or orphaned either way, and
-            // `open` would remove it later.
-            let _ = fs::remove_file(&tmp_path);
-            return Err(e);
-        }
-        sync_dir(&self.dir)?;
-        Ok(path)
+        atomic::write(&self.dir, &file_name, text.as_bytes()).map_err(CacheError::from)
     }
 
     /// The cached entry for `key`, or `compute()`'s result, stored first.
@@ -699,111 +637,13 @@ impl CoefficientCache {
     /// logged and skipped; deleting a live writer's file by mistake only makes
     /// that writer's `put` fail, it never damages a cache file.
     pub fn remove_stale_temp_files(&self) -> Result<usize, CacheError> {
-        let entries = fs::read_dir(&self.dir).map_err(io_err("cannot list directory", &self.dir))?;
-        let now = SystemTime::now();
-        let mut removed = 0;
-        for entry in entries {
-            let entry = match entry {
-                Ok(e) => e,
-                Err(e) => {
-                    tracing::warn!(dir = %self.dir.display(), error = %e, "cannot list a cache directory entry");
-                    continue;
-                }
-            };
-            let name = entry.file_name();
-            let Some(name) = name.to_str() else { continue };
-            let Some(pid) = temp_file_pid(name) else { continue };
-            let path = entry.path();
-            let too_old = entry
-                .metadata()
-                .and_then(|m| m.modified())
-                .ok()
-                .and_then(|t| now.duration_since(t).ok())
-                .is_some_and(|age| age > STALE_TEMP_AGE);
-            if !(too_old || process_is_gone(pid)) {
-                continue;
-            }
-            match fs::remove_file(&path) {
-                Ok(()) => removed += 1,
-                // Another process cleaned it first.
-                Err(e) if e.kind() == io::ErrorKind::NotFound => {}
-                Err(e) => tracing::warn!(path = %path.display(), error = %e, "cannot remove stale cache temp file"),
-            }
-        }
-        Ok(removed)
+        Ok(atomic::remove_stale_temp_files(&self.dir, ".toml")?)
     }
-
-    /// Creates `.<file_name>.<pid>.<counter>.tmp`, exclusively (a name left by
-    /// an earlier process with a reused pid is skipped, never reused).
-    fn create_temp(&self, file_name: &str) -> Result<(PathBuf, fs::File), CacheError> {
-        let pid = std::process::id();
-        loop {
-            let n = TEMP_COUNTER.fetch_add(1, Ordering::Relaxed);
-            let path = self.dir.join(format!(".{file_name}.{pid}.{n}{TEMP_SUFFIX}"));
-            match fs::OpenOptions::new().write(true).create_new(true).open(&path) {
-                Ok(f) => return Ok((path, f)),
-                Err(e) if e.kind() == io::ErrorKind::AlreadyExists => continue,
-                Err(e) => return Err(io_err("cannot create", &path)(e)),
-            }
-        }
-    }
-}
-
-/// The writer's pid if `name` is one of our temporary files
-/// (`.<final name>.<pid>.<counter>.tmp`).
-fn temp_file_pid(name: &str) -> Option<u32> {
-    let stem = name.strip_prefix('.')?.strip_suffix(TEMP_SUFFIX)?;
-    let mut parts = stem.rsplitn(3, '.');
-    let counter = parts.next()?;
-    let pid = parts.next()?;
-    let final_name = parts.next()?;
-    if !final_name.ends_with(".toml") || counter.parse::<u64>().is_err() {
-        return None;
-    }
-    pid.parse().ok()
-}
-
-/// True only when we know `pid` no longer runs: on Linux, no /proc/<pid>
-/// (assumes the cache is not shared across pid namespaces; if it is, a live
-/// writer's temp file may go and its `put` fails, nothing worse). Elsewhere
-/// always false, so only the age rule applies.
-fn process_is_gone(pid: u32) -> bool {
-    if pid == std::process::id() {
-        return false;
-    }
-    if cfg!(target_os = "linux") && Path::new("/proc/self").exists() {
-        !Path::new("/proc").join(pid.to_string()).exists()
-    } else {
-        false
-    }
-}
-
-/// Makes a rename in `dir` durable (POSIX needs an fsync of the directory).
-#[cfg(unix)]
-fn sync_dir(dir: &Path) -> Result<(), CacheError> {
-    fs::File::open(dir)
-        .and_then(|d| d.sync_all())
-        .map_err(io_err("cannot sync directory", dir))
-}
-
-/// Windows cannot open directories as files; the rename itself is durable
-/// enough for a cache.
-#[cfg(not(unix))]
-fn sync_dir(_dir: &Path) -> Result<(), CacheError> {
-    Ok(())
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn fnv1a64_matches_the_published_test_vectors() {
-        // From the FNV reference test suite (Noll, fnv_test.c / IETF draft).
-        assert_eq!(fnv1a64(b""), 0xcbf2_9ce4_8422_2325);
-        assert_eq!(fnv1a64(b"a"), 0xaf63_dc4c_8601_ec8c);
-        assert_eq!(fnv1a64(b"foobar"), 0x8594_4171_f739_67e8);
-    }
 
     fn paper_key() -> CacheKey {
         CacheKey {
@@ -871,9 +711,9 @@ mod tests {
     #[test]
     fn temp_file_names_parse_back_to_their_pid() {
         let name = format!(".{}.4242.7.tmp", paper_key().file_name());
-        assert_eq!(temp_file_pid(&name), Some(4242));
-        assert_eq!(temp_file_pid("paper.toml"), None);
-        assert_eq!(temp_file_pid(".x.toml.abc.1.tmp"), None);
-        assert_eq!(temp_file_pid(".notes.4242.7.tmp"), None);
+        assert_eq!(atomic::temp_file_pid(&name, ".toml"), Some(4242));
+        assert_eq!(atomic::temp_file_pid("paper.toml", ".toml"), None);
+        assert_eq!(atomic::temp_file_pid(".x.toml.abc.1.tmp", ".toml"), None);
+        assert_eq!(atomic::temp_file_pid(".notes.4242.7.tmp", ".toml"), None);
     }
 }

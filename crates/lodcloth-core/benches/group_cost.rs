@@ -6,8 +6,8 @@
 use std::sync::Arc;
 use std::time::Instant;
 
-use lodcloth::scene::Scene;
-use lodcloth::sim::{Loads, Simulation, StabilityCheck, State, Topology};
+use lodcloth_core::scene::Scene;
+use lodcloth_core::sim::{Loads, Simulation, StabilityCheck, State, Topology};
 
 fn time_steps(topology: Topology, scene: &Scene) -> f64 {
     let topology = Arc::new(topology);
@@ -39,7 +39,7 @@ fn time_steps(topology: Topology, scene: &Scene) -> f64 {
 }
 
 fn main() {
-    let scene = Scene::load(std::path::Path::new("config/scenes/hanging.toml")).expect("scene");
+    let scene = Scene::load(std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../config/scenes/hanging.toml"))).expect("scene");
     let sim = scene.build().expect("builds");
     let full = (**sim.topology()).clone();
     let mut empty = full.clone();

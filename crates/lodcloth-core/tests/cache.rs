@@ -10,7 +10,8 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, SystemTime};
 
 use common::{material, Rng};
-use lodcloth::cache::{fnv1a64, CacheEntry, CacheError, CacheKey, CoefficientCache, Provenance};
+use lodcloth::cache::{CacheEntry, CacheError, CacheKey, CoefficientCache, Provenance};
+use lodcloth::hash::fnv1a64;
 use lodcloth::scene::MassConvention;
 use lodcloth::sim::{Integrator, Material};
 

@@ -10,10 +10,10 @@
 //! NaN arithmetic or no-op steps.
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
-use lodcloth::scene::Scene;
-use lodcloth::sim::{Integrator, StabilityCheck};
+use lodcloth_core::scene::Scene;
+use lodcloth_core::sim::{Integrator, StabilityCheck};
 
-const SCENE: &str = include_str!("../config/scenes/hanging.toml");
+const SCENE: &str = include_str!("../../../config/scenes/hanging.toml");
 
 fn bench_step(c: &mut Criterion) {
     let base = Scene::from_toml(SCENE, "hanging.toml").expect("shipped scene is valid");

@@ -11,17 +11,16 @@ use std::time::Instant;
 use crate::cache::{CacheEntry, CacheError, CacheKey, CoefficientCache, Provenance};
 use crate::estimate::inverse::{self, Distribution};
 use crate::estimate::{no_progress, FitOptions, LodProblem, Method, RecordSpec, Reference};
-use crate::experiments::lod::{level_dt, record_reference, stable_problem, Estimator, ExperimentError};
+use super::estimator::{level_dt, record_reference, stable_problem, Estimator, PlanError};
 use crate::lod::Correlation;
 use crate::points::estimate::{self as surface_fit, SurfaceFitOptions, SurfaceReference};
 use crate::points::model::PointModel;
 use crate::points::scene::SurfaceScene;
-use crate::proto::Level;
 use crate::scene::{MassConvention, Scene};
-use crate::service::config::{EstimationConfig, InstanceConfig, InstanceKind};
+use super::{EstimationPlan, InstanceKind, InstancePlan, Level};
 use crate::sim::{Material, SimError, Simulation, StabilityCheck, State, Topology};
 
-use super::CloudMap;
+use crate::points::cloud::CloudMap;
 
 /// Why a level could not be prepared.
 #[derive(Debug, Clone, thiserror::Error)]
@@ -115,8 +114,8 @@ pub struct Start {
 /// Prepares the levels of one instance; remembers what it prepared.
 #[derive(Debug)]
 pub struct Preparer {
-    config: Arc<InstanceConfig>,
-    estimation: EstimationConfig,
+    plan: Arc<InstancePlan>,
+    estimation: EstimationPlan,
     estimator: Estimator,
     reference: Mutex<Option<Arc<Reference>>>,
     surface_reference: Mutex<Option<Arc<SurfaceReference>>>,
@@ -127,13 +126,13 @@ pub struct Preparer {
 }
 
 impl Preparer {
-    pub fn new(config: Arc<InstanceConfig>, estimation: EstimationConfig, cache: Option<CoefficientCache>) -> Preparer {
+    pub fn new(plan: Arc<InstancePlan>, estimation: EstimationPlan, cache: Option<CoefficientCache>) -> Preparer {
         let tag = format!(
             "daemon;ref={};ms={};es={}",
             estimation.spec.frames, estimation.spec.metric_stride, estimation.spec.estimate_stride
         );
         Preparer {
-            config,
+            plan,
             estimation,
             estimator: Estimator { cache, tag },
             reference: Mutex::new(None),
@@ -143,8 +142,8 @@ impl Preparer {
         }
     }
 
-    pub fn config(&self) -> &Arc<InstanceConfig> {
-        &self.config
+    pub fn plan(&self) -> &Arc<InstancePlan> {
+        &self.plan
     }
 
     /// Already prepared, without waiting.
@@ -170,7 +169,7 @@ impl Preparer {
         if let Some(r) = slot.as_ref() {
             return Ok(r.clone());
         }
-        let name = self.config.name.clone();
+        let name = self.plan.name.clone();
         let (reference, _) = record_reference(scene, self.estimation.spec, &mut |line| {
             tracing::info!(instance = %name, "{line}");
         })
@@ -179,7 +178,7 @@ impl Preparer {
             message: e.to_string(),
         })?;
         tracing::info!(
-            instance = %self.config.name,
+            instance = %self.plan.name,
             frames = reference.frames.len(),
             o_max = reference.o_max,
             "reference recorded"
@@ -189,18 +188,18 @@ impl Preparer {
     }
 
     /// The cloth scene with the instance's integrator.
-    fn cloth_scene(scene: &Scene, config: &InstanceConfig) -> Scene {
+    fn cloth_scene(scene: &Scene, plan: &InstancePlan) -> Scene {
         let mut scene = scene.clone();
-        scene.params.integrator = config.integrator;
+        scene.params.integrator = plan.integrator;
         scene
     }
 
     /// Prepare `level` with `method` (blocking; cached after the first time).
     pub fn prepare(&self, level: Level, method: Method) -> Result<Arc<Prepared>, PrepareError> {
-        if !self.config.levels.contains(&level) {
+        if !self.plan.levels.contains(&level) {
             return Err(PrepareError::NotAllowed {
                 level,
-                allowed: allowed(&self.config.levels),
+                allowed: allowed(&self.plan.levels),
             });
         }
         if let Some(p) = self.get(level, method) {
@@ -210,15 +209,15 @@ impl Preparer {
         if let Some(p) = self.get(level, method) {
             return Ok(p);
         }
-        let prepared = match (&self.config.kind, level) {
+        let prepared = match (&self.plan.kind, level) {
             (InstanceKind::Cloth(scene), Level::Grid { nx, ny }) => {
-                self.prepare_cloth(&Self::cloth_scene(scene, &self.config), level, nx, ny, method)?
+                self.prepare_cloth(&Self::cloth_scene(scene, &self.plan), level, nx, ny, method)?
             }
             (InstanceKind::Surface(scene), Level::Points(n)) => self.prepare_surface(scene, level, n, method)?,
             _ => {
                 return Err(PrepareError::NotAllowed {
                     level,
-                    allowed: allowed(&self.config.levels),
+                    allowed: allowed(&self.plan.levels),
                 })
             }
         };
@@ -237,14 +236,14 @@ impl Preparer {
     ) -> Result<Prepared, PrepareError> {
         let started = Instant::now();
         let reference = self.reference(scene)?;
-        let failed = |e: ExperimentError| PrepareError::Failed {
+        let failed = |e: PlanError| PrepareError::Failed {
             level,
             method,
             message: e.to_string(),
         };
         let mass = MassConvention::Lumped;
-        let integrator = self.config.integrator;
-        let dt = match self.config.dt {
+        let integrator = self.plan.integrator;
+        let dt = match self.plan.dt {
             Some(dt) => dt,
             None => {
                 level_dt(scene, &reference, nx, ny, mass, integrator, reference.material, 0.75)
@@ -263,7 +262,7 @@ impl Preparer {
         };
         let estimated = self.estimator.estimate(&problem, method, &fit).map_err(failed)?;
         let material = estimated.material;
-        let (problem, limit) = if self.config.dt.is_some() {
+        let (problem, limit) = if self.plan.dt.is_some() {
             let limit = problem.simulation(material).map_err(|e| failed(e.into()))?.dt_limit();
             if dt > limit {
                 return Err(PrepareError::Unstable {
@@ -289,7 +288,7 @@ impl Preparer {
             });
         }
         tracing::info!(
-            instance = %self.config.name,
+            instance = %self.plan.name,
             %level,
             %method,
             dt = problem.dt,
@@ -321,7 +320,7 @@ impl Preparer {
             let reference = SurfaceReference::record(&mut model, scene.frames(), scene.interval())
                 .map_err(|e| reference_failed(scene, e.to_string()))?;
             tracing::info!(
-                instance = %self.config.name,
+                instance = %self.plan.name,
                 points = scene.points(),
                 frames = reference.frames.len(),
                 o_max = reference.o_max,
@@ -335,7 +334,7 @@ impl Preparer {
     /// The model simulating every point of the cloud.
     fn all_points(&self, scene: &SurfaceScene) -> Result<PointModel, PrepareError> {
         scene
-            .model(scene.points(), self.config.integrator, None, &mut |_, _| {})
+            .model(scene.points(), self.plan.integrator, None, &mut |_, _| {})
             .map_err(|e| reference_failed(scene, e.to_string()))
     }
 
@@ -353,7 +352,7 @@ impl Preparer {
         let failed = |message: String| PrepareError::Failed { level, method, message };
         let reference = self.surface_reference(scene)?;
         let mut model = scene
-            .model(points, self.config.integrator, None, &mut |_, _| {})
+            .model(points, self.plan.integrator, None, &mut |_, _| {})
             .map_err(|e| failed(e.to_string()))?;
         let frames = reference.frames.len();
         let (material, seconds, cached) = match method {
@@ -364,7 +363,7 @@ impl Preparer {
                 // The estimated springs may be stiffer than the scene's:
                 // rebuild the level with its own stable dt.
                 model = scene
-                    .model(points, self.config.integrator, Some(&estimated.0), &mut |_, _| {})
+                    .model(points, self.plan.integrator, Some(&estimated.0), &mut |_, _| {})
                     .map_err(|e| failed(e.to_string()))?;
                 estimated
             }
@@ -391,7 +390,7 @@ impl Preparer {
             });
         }
         tracing::info!(
-            instance = %self.config.name,
+            instance = %self.plan.name,
             %level,
             %method,
             dt,
@@ -442,7 +441,7 @@ impl Preparer {
             let t = Instant::now();
             let f = surface_fit::fit(model, reference, &options, &mut |_| {}).map_err(|e| failed(e.to_string()))?;
             tracing::info!(
-                instance = %self.config.name,
+                instance = %self.plan.name,
                 %level,
                 stretch_scale = f.stretch_scale,
                 bend_scale = f.bend_scale,
@@ -533,7 +532,7 @@ impl Preparer {
             let reference = Reference::record(model.sim, spec, &mut |_, _| {})
                 .map_err(|e| reference_failed(scene, e.to_string()))?;
             tracing::info!(
-                instance = %self.config.name,
+                instance = %self.plan.name,
                 samples = reference.samples.len(),
                 seconds = started.elapsed().as_secs_f64(),
                 "surface estimation samples recorded"
@@ -594,7 +593,7 @@ impl Preparer {
             )),
             Err(Failure::Fit(e)) => Err(e),
             Err(Failure::Cache(e)) => {
-                tracing::warn!(instance = %self.config.name, %level, "coefficient cache: {e}; using the fit uncached");
+                tracing::warn!(instance = %self.plan.name, %level, "coefficient cache: {e}; using the fit uncached");
                 match computed {
                     Some((material, s)) => Ok((material, s, false)),
                     None => compute().map(|(m, s)| (m, s, false)),
@@ -608,21 +607,21 @@ impl Preparer {
     /// seconds); lets an instance step at once while its estimate is
     /// prepared.
     pub fn quick_start(&self) -> Result<Start, PrepareError> {
-        let level = self.config.start;
+        let level = self.plan.start;
         let failed = |message: String| PrepareError::Failed {
             level,
             method: Method::Same,
             message,
         };
-        match (&self.config.kind, level) {
+        match (&self.plan.kind, level) {
             (InstanceKind::Cloth(scene), Level::Grid { nx, ny }) => {
-                let scene = Self::cloth_scene(scene, &self.config);
+                let scene = Self::cloth_scene(scene, &self.plan);
                 let (sim, dt) = self.quick_cloth(&scene, nx, ny).map_err(failed)?;
                 Ok(Start { sim, dt, cloud: None })
             }
             (InstanceKind::Surface(scene), Level::Points(n)) => {
                 let model = scene
-                    .model(n, self.config.integrator, None, &mut |_, _| {})
+                    .model(n, self.plan.integrator, None, &mut |_, _| {})
                     .map_err(|e| failed(e.to_string()))?;
                 let cloud = CloudMap::of(&model);
                 let dt = model.sim.params().dt;
@@ -634,7 +633,7 @@ impl Preparer {
             }
             _ => Err(PrepareError::NotAllowed {
                 level,
-                allowed: allowed(&self.config.levels),
+                allowed: allowed(&self.plan.levels),
             }),
         }
     }
@@ -649,7 +648,7 @@ impl Preparer {
         material: Material,
         dt: f64,
     ) -> Option<Result<Simulation, PrepareError>> {
-        let (InstanceKind::Cloth(scene), Level::Grid { nx, ny }) = (&self.config.kind, level) else {
+        let (InstanceKind::Cloth(scene), Level::Grid { nx, ny }) = (&self.plan.kind, level) else {
             return None;
         };
         let failed = |message: String| PrepareError::Failed {
@@ -657,13 +656,13 @@ impl Preparer {
             method: Method::Same,
             message,
         };
-        if !self.config.levels.contains(&level) {
+        if !self.plan.levels.contains(&level) {
             return Some(Err(PrepareError::NotAllowed {
                 level,
-                allowed: allowed(&self.config.levels),
+                allowed: allowed(&self.plan.levels),
             }));
         }
-        let scene = Self::cloth_scene(scene, &self.config);
+        let scene = Self::cloth_scene(scene, &self.plan);
         Some(
             self.cloth_at(&scene, nx, ny, material, Some(dt))
                 .map(|(sim, _)| sim)
@@ -673,7 +672,7 @@ impl Preparer {
 
     /// The quick start: the scene's own coefficients at the configured dt.
     fn quick_cloth(&self, scene: &Scene, nx: usize, ny: usize) -> Result<(Simulation, f64), String> {
-        self.cloth_at(scene, nx, ny, scene.params.material, self.config.dt)
+        self.cloth_at(scene, nx, ny, scene.params.material, self.plan.dt)
     }
 
     /// A cloth level at rest with lumped masses and `material`; at `dt`, or

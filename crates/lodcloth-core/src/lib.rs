@@ -1,0 +1,47 @@
+//! lodcloth's pure core: everything that computes, nothing that serves.
+//!
+//! This crate depends on no async runtime, bus, web or plotting crate, so the
+//! compiler keeps it pure; its tests and step benchmark build without zenoh.
+//! Nothing here starts a thread of its own (the `fit` estimator and the
+//! experiments use rayon's pool), reads a clock to pace anything or allocates
+//! per step.
+//!
+//! # Layout
+//! Dependencies point one way: `plan → {cache, estimate, points} → {lod,
+//! scene} → sim`, with `hash` and `atomic` below everything that writes or
+//! checks files.
+//!
+//! - [`sim`] — the mass-spring cloth: topology (springs by type in a fixed
+//!   order), state (flat arrays), forces (Sung 2018 eq. 1), integrators
+//!   (explicit, symplectic and implicit Euler, RK4), strain control,
+//!   stability prediction.
+//! - [`scene`] — scene files (TOML): cloth size and resolution, material,
+//!   pins, forces over time, wind; validated into ready-to-run simulations at
+//!   any resolution.
+//! - [`lod`] — barycentric correlation between resolutions, state transfer.
+//! - [`estimate`] — coefficient estimation (same, BCD, GKD, lsq, fit),
+//!   reference recording and the error metric (Sung 2018 eq. 9).
+//! - [`points`] — point-sampled surfaces: I/O, normals, simplification,
+//!   springs on tangent planes, MLS transfer back to every point.
+//! - [`cache`] — on-disk cache of estimated coefficients, one checksummed
+//!   TOML file per key.
+//! - [`plan`] — what an instance is in domain types ([`plan::InstancePlan`],
+//!   [`plan::Level`]) and how one of its levels is made ready: reference,
+//!   stable dt, estimate through the cache, predicted error. The daemon's
+//!   engine and the experiments both plan levels through it.
+//! - [`hash`] — FNV-1a, the one hash of file names, checksums and digests.
+//! - [`atomic`] — the one atomic file replacement (cache entries, snapshots).
+//! - [`names`] — the one parser of integrator, method and mass names.
+
+#![warn(missing_docs)]
+
+pub mod atomic;
+pub mod cache;
+pub mod estimate;
+pub mod hash;
+pub mod lod;
+pub mod names;
+pub mod plan;
+pub mod points;
+pub mod scene;
+pub mod sim;

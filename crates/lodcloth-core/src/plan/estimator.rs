@@ -1,0 +1,245 @@
+//! Planning a level: recording the reference, choosing a stable dt, and
+//! estimating coefficients through the on-disk cache. Shared by the daemon's
+//! [`Preparer`](super::Preparer) and the experiments, so both run a level
+//! the same way.
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use crate::cache::{CacheEntry, CacheError, CacheKey, CoefficientCache, Provenance};
+use crate::estimate::{
+    no_progress, Details, EstimateError, FitOptions, LodProblem, Method, RecordSpec, Reference, ReferenceError,
+};
+use crate::scene::{MassConvention, Scene, SceneError};
+use crate::sim::{Integrator, Material, StabilityCheck};
+
+/// Why a level could not be planned: its scene, reference, estimate or cache failed.
+#[derive(Debug, thiserror::Error)]
+pub enum PlanError {
+    #[error(transparent)]
+    Scene(#[from] SceneError),
+    #[error("{scene}: {source}")]
+    Reference { scene: String, source: ReferenceError },
+    #[error(transparent)]
+    Estimate(#[from] EstimateError),
+    #[error(transparent)]
+    Cache(#[from] CacheError),
+    #[error("{0}")]
+    Invalid(String),
+}
+
+/// Runs estimators, through the on-disk coefficient cache when there is one.
+#[derive(Debug, Clone, Default)]
+pub struct Estimator {
+    pub cache: Option<CoefficientCache>,
+    /// Everything besides the cache key's fields that changes an estimate
+    /// (record spec, fit settings), folded into the key's method string.
+    pub tag: String,
+}
+
+/// What [`Estimator::estimate`] returns.
+#[derive(Debug, Clone)]
+pub struct Estimated {
+    pub material: Material,
+    pub notes: String,
+    /// Wall seconds spent estimating (0 on a cache hit).
+    pub seconds: f64,
+    pub cached: bool,
+}
+
+impl Estimator {
+    /// Estimate with `method`, or read it from the cache.
+    pub fn estimate(
+        &self,
+        problem: &LodProblem,
+        method: Method,
+        fit: &FitOptions,
+    ) -> Result<Estimated, PlanError> {
+        let compute = || -> Result<Estimated, PlanError> {
+            let t = Instant::now();
+            let est = problem.estimate(method, fit, &mut no_progress)?;
+            Ok(Estimated {
+                material: est.material,
+                notes: notes(&est.details),
+                seconds: t.elapsed().as_secs_f64(),
+                cached: false,
+            })
+        };
+        let Some(cache) = self.cache.as_ref().filter(|_| method != Method::Same) else {
+            return compute();
+        };
+        let train = fit.train_range(problem.frames());
+        let key = CacheKey {
+            scene: problem.scene.name.clone(),
+            scene_hash: problem.scene.source_hash,
+            reference: (problem.scene.nx, problem.scene.ny),
+            target: (problem.nx, problem.ny),
+            method: format!(
+                "{method}[{};train={}..{};frames={};iter={}]",
+                self.tag, train.start, train.end, fit.max_frames, fit.max_iterations
+            ),
+            mass: problem.mass.name().to_string(),
+            integrator: problem.integrator.name().to_string(),
+            dt: problem.dt,
+        };
+        let mut fresh = None;
+        let (entry, provenance) = cache.get_or_compute(&key, || -> Result<CacheEntry, PlanError> {
+            let e = compute()?;
+            let mut entry = CacheEntry::new(key.clone(), e.material);
+            entry.notes.insert("estimate_seconds".into(), e.seconds);
+            fresh = Some(e);
+            Ok(entry)
+        })?;
+        Ok(match (provenance, fresh) {
+            (Provenance::Hit, _) | (_, None) => Estimated {
+                material: entry.material,
+                notes: format!(
+                    "cached ({:.1} s when computed)",
+                    entry.notes.get("estimate_seconds").copied().unwrap_or(f64::NAN)
+                ),
+                seconds: 0.0,
+                cached: true,
+            },
+            (_, Some(e)) => e,
+        })
+    }
+}
+
+/// Record the reference run of `scene` at its own resolution.
+pub fn record_reference(
+    scene: &Scene,
+    spec: RecordSpec,
+    log: &mut dyn FnMut(String),
+) -> Result<(Arc<Reference>, f64), PlanError> {
+    let mut s = scene.clone();
+    s.stability = StabilityCheck::Enforce;
+    let sim = s.build()?;
+    let start = Instant::now();
+    let mut last = Instant::now();
+    let name = scene.name.clone();
+    let reference = Reference::record(sim, spec, &mut |done, total| {
+        if last.elapsed().as_secs_f64() > 5.0 {
+            last = Instant::now();
+            log(format!("{name}: reference {done}/{total} steps"));
+        }
+    })
+    .map_err(|source| PlanError::Reference {
+        scene: scene.name.clone(),
+        source,
+    })?;
+    let wall = start.elapsed().as_secs_f64();
+    let simulated = spec.frames as f64 * reference.dt;
+    Ok((Arc::new(reference), wall / simulated))
+}
+
+/// The largest dt ≤ `margin` × the predicted stability limit of `material` at
+/// level n×n that divides the reference's metric frame interval.
+pub fn level_dt(
+    scene: &Scene,
+    reference: &Arc<Reference>,
+    nx: usize,
+    ny: usize,
+    mass: MassConvention,
+    integrator: Integrator,
+    material: Material,
+    margin: f64,
+) -> Result<(f64, f64), PlanError> {
+    let interval = reference.dt * reference.spec.metric_stride as f64;
+    let probe = LodProblem::new(scene, reference.clone(), nx, ny, mass, integrator, interval)?;
+    let limit = probe.simulation(material)?.dt_limit();
+    let k = (interval / (margin * limit)).ceil().max(1.0);
+    Ok((interval / k, limit))
+}
+
+/// Level n×n of `scene` as the daemon and `lod-plan` run it: lumped masses,
+/// the scene's integrator, dt at ≤ 0.75 of the `same` model's stability limit.
+pub fn default_problem(scene: &Scene, reference: &Arc<Reference>, level: usize) -> Result<LodProblem, PlanError> {
+    let integrator = scene.params.integrator;
+    let mass = MassConvention::Lumped;
+    let (dt, _) = level_dt(
+        scene,
+        reference,
+        level,
+        level,
+        mass,
+        integrator,
+        reference.material,
+        0.75,
+    )?;
+    Ok(LodProblem::new(
+        scene,
+        reference.clone(),
+        level,
+        level,
+        mass,
+        integrator,
+        dt,
+    )?)
+}
+
+/// `problem` itself when `material` runs within 0.8 of its predicted
+/// stability limit at `problem.dt`, else the same level at the largest dt
+/// that does; with the model's limit. Every scored model obeys this bound.
+pub fn stable_problem(problem: &LodProblem, material: Material) -> Result<(LodProblem, f64), PlanError> {
+    let limit = problem.simulation(material)?.dt_limit();
+    if problem.dt <= 0.8 * limit {
+        return Ok((problem.clone(), limit));
+    }
+    let (nx, ny) = (problem.nx, problem.ny);
+    let (dt, limit) = level_dt(
+        &problem.scene,
+        &problem.reference,
+        nx,
+        ny,
+        problem.mass,
+        problem.integrator,
+        material,
+        0.8,
+    )?;
+    let q = LodProblem::new(
+        &problem.scene,
+        problem.reference.clone(),
+        nx,
+        ny,
+        problem.mass,
+        problem.integrator,
+        dt,
+    )?;
+    Ok((q, limit))
+}
+
+/// One-line diagnostics of an estimate.
+pub fn notes(details: &Details) -> String {
+    match details {
+        Details::Same => String::new(),
+        Details::Inverse(e) => {
+            let r = &e.rejections;
+            let considered: u64 = r.considered.iter().sum();
+            let rejected: u64 = r.near_rest.iter().sum::<u64>() + r.negative_k.iter().sum::<u64>();
+            let fallbacks = e.fallback_k.iter().chain(&e.fallback_c).filter(|&&f| f).count();
+            format!(
+                "rejected K samples {rejected}/{considered} (near rest {}, negative {}); C: no rel. velocity {}, negative {}; fallbacks {fallbacks}",
+                r.near_rest.iter().sum::<u64>(),
+                r.negative_k.iter().sum::<u64>(),
+                r.no_relative_velocity.iter().sum::<u64>(),
+                r.negative_c.iter().sum::<u64>()
+            )
+        }
+        Details::Lsq(e) => format!(
+            "condition {:.2e}, relative residual {:.3}, clamped {}",
+            e.condition,
+            e.relative_residual,
+            e.clamped.iter().filter(|&&c| c).count()
+        ),
+        Details::Fit(f) => format!(
+            "start {} (train rms {:.3}%), train rms {:.3}% after {} iterations, {} runs, {}",
+            f.start,
+            100.0 * f.start_rms,
+            100.0 * f.rms,
+            f.iterations,
+            f.evaluations,
+            f.stop
+        ),
+    }
+}
+

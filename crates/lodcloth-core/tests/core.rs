@@ -1,0 +1,23 @@
+//! The core's tests: simulation, estimation, scenes and the coefficient
+//! cache, built and linked without zenoh. One test binary, so the release
+//! build links (thin LTO) the crate once rather than once per file.
+//!
+//! `cargo test --release -p lodcloth-core --test core` (one file: `--test core energy::`).
+
+// The files name the crate `lodcloth`, as the root package re-exports it.
+extern crate lodcloth_core as lodcloth;
+
+mod common;
+
+mod cache;
+mod conservation;
+mod convergence;
+mod energy;
+mod equilibrium;
+mod estimation;
+mod kernel;
+mod oscillator;
+mod scenes;
+mod stability;
+mod strain_control;
+mod symmetry_determinism;
