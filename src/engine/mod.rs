@@ -241,12 +241,19 @@ impl InstanceHandle {
     }
 }
 
-/// Engine settings.
+/// How the engine paces its instances (validated from the config's
+/// `[engine]` section by the service).
 #[derive(Debug, Clone, Copy)]
 pub struct EngineSettings {
+    /// Stepping threads (at most one per instance is used).
     pub threads: usize,
+    /// Steps an instance may take in one pass to catch up with the wall
+    /// clock; a pass that needs more counts an overrun.
     pub max_substeps: u32,
+    /// Seconds an instance may fall behind the wall clock before its
+    /// backlog is dropped (a lag reset).
     pub max_lag: f64,
+    /// Metrics published per second per instance.
     pub metrics_hz: f64,
 }
 

@@ -11,6 +11,7 @@ use std::sync::Arc;
 use super::security;
 use crate::estimate::{Method, RecordSpec};
 use crate::points::scene::SurfaceScene;
+use crate::engine::EngineSettings;
 use crate::names;
 use crate::plan::{EstimationPlan, InstanceKind, InstancePlan, Level};
 use crate::scene::Scene;
@@ -270,19 +271,10 @@ pub struct ServiceConfig {
     pub prefix: String,
     pub cache: PathBuf,
     pub zenoh: RawZenoh,
-    pub engine: EngineConfig,
+    pub engine: EngineSettings,
     pub estimation: EstimationPlan,
     pub instances: Vec<InstancePlan>,
     pub snapshots: Option<RawSnapshots>,
-}
-
-/// Validated engine settings.
-#[derive(Debug, Clone, Copy)]
-pub struct EngineConfig {
-    pub threads: usize,
-    pub max_substeps: u32,
-    pub max_lag: f64,
-    pub metrics_hz: f64,
 }
 
 /// Smallest grid side of a level.
@@ -469,7 +461,7 @@ impl ServiceConfig {
             cache: raw.cache,
             snapshots: raw.snapshots,
             zenoh: raw.zenoh,
-            engine: EngineConfig {
+            engine: EngineSettings {
                 threads,
                 max_substeps: e.max_substeps,
                 max_lag: e.max_lag,

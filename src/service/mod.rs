@@ -156,15 +156,7 @@ pub async fn serve(
         });
         preparers.push(preparer);
     }
-    let engine = Engine::start(
-        setups,
-        EngineSettings {
-            threads: config.engine.threads,
-            max_substeps: config.engine.max_substeps,
-            max_lag: config.engine.max_lag,
-            metrics_hz: config.engine.metrics_hz,
-        },
-    )?;
+    let engine = Engine::start(setups, config.engine)?;
     let (closing_tx, closing) = watch::channel(false);
     let mut instances = BTreeMap::new();
     for (handle, preparer) in engine.handles().iter().zip(&preparers) {
