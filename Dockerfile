@@ -29,6 +29,7 @@ COPY Cargo.toml Cargo.lock build.rs ./
 COPY proto/ proto/
 COPY benches/ benches/
 COPY src/ src/
+COPY crates/ crates/
 
 # The registry and target dir live in cache mounts (not in the layer), so the
 # binary is copied out of the cached target.

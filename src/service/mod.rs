@@ -38,7 +38,7 @@ use zenoh::Session;
 
 use crate::cache::CoefficientCache;
 use crate::engine::{
-    Command, Engine, EngineSettings, InstanceHandle, InstanceSetup, MetricsFrame, Snapshot, StateFrame,
+    Command, Engine, InstanceHandle, InstanceSetup, MetricsFrame, Snapshot, StateFrame,
 };
 use crate::estimate::Method;
 use crate::plan::{InstancePlan, Level, PrepareError, Prepared, Preparer};

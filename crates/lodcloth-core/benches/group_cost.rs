@@ -2,7 +2,7 @@
 //! step with only that group (plus the fixed per-node work, measured with no
 //! springs and subtracted). Diagnoses which spring direction is slow.
 //!
-//! `cargo bench --bench group_cost`
+//! `cargo bench -p lodcloth-core --bench group_cost`
 use std::sync::Arc;
 use std::time::Instant;
 

@@ -4,7 +4,7 @@
 //! Pentium IV figures; the same for a 100k-point sphere; and the cost of the
 //! set-up stages (normals, simplification, springs, transfer weights).
 //!
-//! `cargo bench --bench points_bench -- [--quick]`
+//! `cargo bench -p lodcloth-core --bench points_bench -- [--quick]`
 
 use std::time::Instant;
 

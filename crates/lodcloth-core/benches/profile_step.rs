@@ -5,7 +5,7 @@
 //! time (Linux `/proc/thread-self/schedstat`; it excludes time the thread was
 //! preempted by other processes, so it is the steadier number there).
 //!
-//! `cargo bench --bench profile_step -- [integrator] [trials]`
+//! `cargo bench -p lodcloth-core --bench profile_step -- [integrator] [trials]`
 //! (integrator: symplectic_euler (default), explicit_euler, rk4, implicit_euler).
 
 use lodcloth_core::scene::Scene;
