@@ -16,14 +16,24 @@ use crate::sim::{Integrator, Material, StabilityCheck};
 /// Why a level could not be planned: its scene, reference, estimate or cache failed.
 #[derive(Debug, thiserror::Error)]
 pub enum PlanError {
+    /// The scene could not be built at a level.
     #[error(transparent)]
     Scene(#[from] SceneError),
+    /// The reference run of `scene` failed (diverged or could not start).
     #[error("{scene}: {source}")]
-    Reference { scene: String, source: ReferenceError },
+    Reference {
+        /// The scene's name.
+        scene: String,
+        /// Why the recording failed.
+        source: ReferenceError,
+    },
+    /// An estimator failed.
     #[error(transparent)]
     Estimate(#[from] EstimateError),
+    /// The coefficient cache could not be read or written.
     #[error(transparent)]
     Cache(#[from] CacheError),
+    /// The request itself is impossible (e.g. no held-out frames).
     #[error("{0}")]
     Invalid(String),
 }
@@ -31,6 +41,7 @@ pub enum PlanError {
 /// Runs estimators, through the on-disk coefficient cache when there is one.
 #[derive(Debug, Clone, Default)]
 pub struct Estimator {
+    /// Where estimates are kept between runs (`None`: always compute).
     pub cache: Option<CoefficientCache>,
     /// Everything besides the cache key's fields that changes an estimate
     /// (record spec, fit settings), folded into the key's method string.
@@ -40,10 +51,13 @@ pub struct Estimator {
 /// What [`Estimator::estimate`] returns.
 #[derive(Debug, Clone)]
 pub struct Estimated {
+    /// The estimated coefficients (K, C per spring type).
     pub material: Material,
+    /// One-line diagnostics of the estimate ([`notes`]), or where it came from.
     pub notes: String,
     /// Wall seconds spent estimating (0 on a cache hit).
     pub seconds: f64,
+    /// Read from the cache rather than computed.
     pub cached: bool,
 }
 

@@ -15,9 +15,14 @@ use super::Level;
 /// How the daemon estimates a level: the reference recording and the fit budget.
 #[derive(Debug, Clone, Copy)]
 pub struct EstimationPlan {
+    /// How the reference run is recorded (frames, metric and estimate strides).
     pub spec: RecordSpec,
+    /// Most frames the `fit` estimator re-simulates per evaluation.
     pub fit_frames: usize,
+    /// Most iterations of the `fit` estimator.
     pub fit_iterations: u32,
+    /// Prepare every allowed level in the background after start, so later
+    /// switches answer from memory.
     pub precompute: bool,
 }
 
@@ -34,15 +39,26 @@ pub enum InstanceKind {
 /// resolution, the levels it may run and how it starts.
 #[derive(Debug, Clone)]
 pub struct InstancePlan {
+    /// The instance's name: one key-expression chunk, unique in the daemon.
     pub name: String,
+    /// What it simulates: a cloth scene or a point-sampled surface.
     pub kind: InstanceKind,
+    /// The levels it may run (a switch to any other is refused).
     pub levels: Vec<Level>,
+    /// The level it starts at (one of `levels`).
     pub start: Level,
+    /// The estimation method of its levels unless a switch names another.
     pub method: Method,
+    /// The integrator of every level and of the reference.
     pub integrator: Integrator,
+    /// A fixed time step (s) for every level; `None`: each level's own
+    /// stable dt, dividing the reference's frame interval.
     pub dt: Option<f64>,
+    /// States published per second.
     pub publish_hz: f64,
+    /// Run the reference beside the level and publish the live error.
     pub shadow_reference: bool,
+    /// Start the scene over when its duration has run.
     pub looping: bool,
 }
 
@@ -63,6 +79,7 @@ impl InstancePlan {
         }
     }
 
+    /// The scene's name (from its file).
     pub fn scene_name(&self) -> &str {
         match &self.kind {
             InstanceKind::Cloth(scene) => &scene.name,
@@ -70,6 +87,7 @@ impl InstancePlan {
         }
     }
 
+    /// The scene's one-line description (from its file).
     pub fn description(&self) -> &str {
         match &self.kind {
             InstanceKind::Cloth(scene) => &scene.description,

@@ -10,7 +10,14 @@ use std::str::FromStr;
 /// bare integer for a point count.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Level {
-    Grid { nx: usize, ny: usize },
+    /// A grid cloth of `nx × ny` nodes.
+    Grid {
+        /// Nodes along the cloth's width.
+        nx: usize,
+        /// Nodes along the cloth's height.
+        ny: usize,
+    },
+    /// A point-sampled surface simulated on this many of its cloud's points.
     Points(usize),
 }
 

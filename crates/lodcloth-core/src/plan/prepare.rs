@@ -25,33 +25,57 @@ use crate::points::cloud::CloudMap;
 /// Why a level could not be prepared.
 #[derive(Debug, Clone, thiserror::Error)]
 pub enum PrepareError {
+    /// The level is not one the instance may run.
     #[error("level {level} is not one of the allowed levels {allowed}")]
-    NotAllowed { level: Level, allowed: String },
+    NotAllowed {
+        /// The level asked for.
+        level: Level,
+        /// The allowed levels, as [`allowed`] writes them.
+        allowed: String,
+    },
+    /// The level's coefficients are predicted unstable at the dt it must run.
     #[error(
         "level {level} with {method} coefficients is unstable at dt = {dt:e} s (predicted limit {limit:e} s); \
          choose another level or method, or lower the instance's dt"
     )]
     Unstable {
+        /// The level asked for.
         level: Level,
+        /// The method whose coefficients are unstable.
         method: Method,
+        /// The time step it would run at (s).
         dt: f64,
+        /// The predicted stability limit (s).
         limit: f64,
     },
+    /// Estimation or building the level failed.
     #[error("preparing level {level} with {method}: {message}")]
     Failed {
+        /// The level asked for.
         level: Level,
+        /// The method asked for.
         method: Method,
+        /// What failed.
         message: String,
     },
+    /// The instance's reference run could not be recorded.
     #[error("recording the reference of {scene}: {message}")]
-    Reference { scene: String, message: String },
+    Reference {
+        /// The scene's name.
+        scene: String,
+        /// What failed.
+        message: String,
+    },
 }
 
 /// A level ready to switch to.
 #[derive(Debug)]
 pub struct Prepared {
+    /// The level.
     pub level: Level,
+    /// The method its coefficients come from.
     pub method: Method,
+    /// Its coefficients (K, C per spring type).
     pub material: Material,
     /// The level's time step (s).
     pub dt: f64,
@@ -63,7 +87,9 @@ pub struct Prepared {
     pub o_max: f64,
     /// Wall seconds the estimate took (0 on a cache hit).
     pub estimate_seconds: f64,
+    /// The coefficients came from the on-disk cache.
     pub cached: bool,
+    /// What the level was measured against (and how to rebuild it).
     pub basis: Basis,
 }
 
@@ -75,7 +101,9 @@ pub enum Basis {
     /// A surface level: its model (the fitted material applied, at rest)
     /// and the all-points reference.
     Surface {
+        /// The level's point model, the fitted material applied, at rest.
         model: Box<PointModel>,
+        /// The reference run that simulates every point of the cloud.
         reference: Arc<SurfaceReference>,
     },
 }
@@ -105,7 +133,9 @@ impl Prepared {
 
 /// What an instance starts stepping with, before any estimate.
 pub struct Start {
+    /// The start level's simulation, at rest, with the scene's coefficients.
     pub sim: Simulation,
+    /// Its time step (s).
     pub dt: f64,
     /// Surfaces: how the simulated points move the cloud.
     pub cloud: Option<CloudMap>,
@@ -126,6 +156,8 @@ pub struct Preparer {
 }
 
 impl Preparer {
+    /// A preparer for `plan`'s levels, estimating as `estimation` says and
+    /// through `cache` when there is one. Records nothing until asked.
     pub fn new(plan: Arc<InstancePlan>, estimation: EstimationPlan, cache: Option<CoefficientCache>) -> Preparer {
         let tag = format!(
             "daemon;ref={};ms={};es={}",
@@ -142,6 +174,7 @@ impl Preparer {
         }
     }
 
+    /// The instance this preparer prepares levels of.
     pub fn plan(&self) -> &Arc<InstancePlan> {
         &self.plan
     }
