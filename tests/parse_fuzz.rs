@@ -16,9 +16,9 @@
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, OnceLock};
 
+use lodcloth::plan::{InstanceKind, PrepareError, Preparer};
 use lodcloth::points::{io, PointCloud};
 use lodcloth::scene::{Scene, SceneError};
-use lodcloth::plan::{InstanceKind, PrepareError, Preparer};
 use lodcloth::service::config::{ConfigError, ServiceConfig};
 use lodcloth::sim::{SimError, StabilityCheck};
 use ply_rs_bw::ply::Encoding;

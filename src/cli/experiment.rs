@@ -16,8 +16,8 @@ use lodcloth::estimate::{FitOptions, Method, RecordSpec, Reference};
 use lodcloth::experiments::lod::{
     generalisation, lod_plan, pareto, switch_test, table1_scene, Table1Options, Table1Row, TABLE1_VARIANTS,
 };
-use lodcloth::plan::{default_problem, record_reference, Estimator};
 use lodcloth::output::{error_map_svg, line_chart_svg, ClothPanel, Series, PALETTE};
+use lodcloth::plan::{default_problem, record_reference, Estimator};
 use lodcloth::scene::{MassConvention, Scene};
 use lodcloth::sim::Integrator;
 

@@ -250,7 +250,7 @@ fn main() -> Result<()> {
             scene,
             nx,
             ny,
-            integrator: integrator.map(Into::into),
+            integrator,
             dt,
             duration,
             out,

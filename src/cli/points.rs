@@ -284,7 +284,7 @@ fn build(
         bend: a.bend,
         gravity: a.gravity,
         drag: a.drag,
-        integrator: a.integrator.into(),
+        integrator: a.integrator,
         dt: a.dt,
         safety: 0.8,
     };

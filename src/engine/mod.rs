@@ -32,8 +32,6 @@ use crate::sim::vec3::V3;
 use crate::sim::{Material, Simulation, State, StepReport, Topology};
 use shadow::Shadow;
 
-
-
 /// A snapshot of an instance's cloth, as the engine hands it to the bus.
 #[derive(Debug, Clone)]
 pub struct StateFrame {
@@ -960,7 +958,6 @@ fn advance_deadline(last: Instant, every: Duration, now: Instant) -> Instant {
     }
 }
 
-/// Longest a stepping thread sleeps before looking at its commands again.
 /// Simulated time between divergence checkpoints (s).
 const CHECKPOINT_INTERVAL: f64 = 0.5;
 /// Simulated time without a divergence after which divergences count from
@@ -971,6 +968,7 @@ const DIVERGED_STRAIN: f64 = 10.0;
 /// Divergences within a clean interval before the instance is halted.
 pub const MAX_CONSECUTIVE_DIVERGENCES: u32 = 3;
 
+/// Longest a stepping thread sleeps before looking at its commands again.
 const MAX_IDLE: Duration = Duration::from_millis(5);
 
 fn worker(mut runners: Vec<Runner>, stop: Arc<AtomicBool>, _settings: EngineSettings) {

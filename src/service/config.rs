@@ -9,11 +9,11 @@ use serde::Deserialize;
 use std::sync::Arc;
 
 use super::security;
-use crate::estimate::{Method, RecordSpec};
-use crate::points::scene::SurfaceScene;
 use crate::engine::EngineSettings;
+use crate::estimate::{Method, RecordSpec};
 use crate::names;
 use crate::plan::{EstimationPlan, InstanceKind, InstancePlan, Level};
+use crate::points::scene::SurfaceScene;
 use crate::scene::Scene;
 use crate::sim::Integrator;
 

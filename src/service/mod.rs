@@ -12,9 +12,12 @@
 //! instance keeps stepping.
 //!
 //! With `[snapshots]`, every instance's state is written at an interval and
-//! at shutdown; at start an instance with a snapshot that fits its config is
-//! held (no steps, no states) until its level is prepared, then resumes
-//! where it was (frame, episode, time, level, coefficients).
+//! at shutdown; at start an instance with a snapshot that fits its config
+//! resumes where it was (frame, episode, time, level, coefficients). A cloth
+//! whose snapshot carries its coefficients and dt resumes at once and gets
+//! its prepared level (predicted error, shadow reference) attached when the
+//! background preparation finishes; other snapshots (surfaces, files without
+//! coefficients) hold the instance until its level is prepared.
 
 pub mod client;
 pub mod config;
@@ -37,9 +40,7 @@ use zenoh::query::Query;
 use zenoh::Session;
 
 use crate::cache::CoefficientCache;
-use crate::engine::{
-    Command, Engine, InstanceHandle, InstanceSetup, MetricsFrame, Snapshot, StateFrame,
-};
+use crate::engine::{Command, Engine, InstanceHandle, InstanceSetup, MetricsFrame, Snapshot, StateFrame};
 use crate::estimate::Method;
 use crate::plan::{InstancePlan, Level, PrepareError, Prepared, Preparer};
 use crate::points::cloud::CloudMap;
@@ -129,6 +130,15 @@ pub async fn serve(
             None
         }
     };
+    if let Some(snap) = &config.snapshots {
+        // Temporary files of saves a crash interrupted (never of this
+        // process: its saves have not started).
+        match snapshot::sweep(&snap.dir) {
+            Ok(0) => {}
+            Ok(n) => tracing::info!(removed = n, dir = %snap.dir.display(), "stale snapshot temporary files removed"),
+            Err(e) => tracing::warn!("snapshot directory: {e}"),
+        }
+    }
     let mut setups = Vec::new();
     let mut preparers = Vec::new();
     let mut resumes = BTreeMap::new();

@@ -26,11 +26,11 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use crate::atomic;
-use crate::hash::fnv1a64;
 use crate::engine::{Coefficients, Snapshot};
 use crate::estimate::Method;
-use crate::plan::Level;
+use crate::hash::fnv1a64;
 use crate::names;
+use crate::plan::Level;
 use crate::plan::{InstanceKind, InstancePlan};
 use crate::sim::{Material, SpringCoeffs, State};
 

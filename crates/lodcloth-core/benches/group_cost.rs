@@ -39,7 +39,11 @@ fn time_steps(topology: Topology, scene: &Scene) -> f64 {
 }
 
 fn main() {
-    let scene = Scene::load(std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../config/scenes/hanging.toml"))).expect("scene");
+    let scene = Scene::load(std::path::Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../config/scenes/hanging.toml"
+    )))
+    .expect("scene");
     let sim = scene.build().expect("builds");
     let full = (**sim.topology()).clone();
     let mut empty = full.clone();

@@ -18,7 +18,11 @@ fn main() {
         .map(|s| Integrator::from_name(&s).expect("unknown integrator"))
         .unwrap_or(Integrator::SymplecticEuler);
     let trials: usize = args.next().map_or(5, |s| s.parse().expect("trials"));
-    let mut scene = Scene::load(std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../config/scenes/hanging.toml"))).unwrap();
+    let mut scene = Scene::load(std::path::Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../config/scenes/hanging.toml"
+    )))
+    .unwrap();
     scene.params.integrator = integrator;
     let n = 3000;
     let mut times = Vec::with_capacity(trials);

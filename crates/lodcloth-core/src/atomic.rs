@@ -102,7 +102,9 @@ pub fn remove_stale_temp_files(dir: &Path, final_suffix: &str) -> Result<usize, 
         };
         let name = entry.file_name();
         let Some(name) = name.to_str() else { continue };
-        let Some(pid) = temp_file_pid(name, final_suffix) else { continue };
+        let Some(pid) = temp_file_pid(name, final_suffix) else {
+            continue;
+        };
         let path = entry.path();
         let too_old = entry
             .metadata()
@@ -198,7 +200,9 @@ mod tests {
         let dir = tempfile::tempdir().expect("temp dir");
         // pid 0 is never a process of ours (it is the scheduler), so /proc has no entry.
         let dead = dir.path().join(".x.snapshot.0.3.tmp");
-        let live = dir.path().join(format!(".x.snapshot.{}.999999.tmp", std::process::id()));
+        let live = dir
+            .path()
+            .join(format!(".x.snapshot.{}.999999.tmp", std::process::id()));
         let other = dir.path().join(".x.toml.0.3.tmp");
         for p in [&dead, &live, &other] {
             fs::write(p, b"partial").expect("write");

@@ -52,6 +52,10 @@
 //! The checksum covers every byte before its line. Floats are written in
 //! Rust's shortest round-trip form, so every `f64` reads back bit for bit.
 
+// Public items predating the core crate are not all documented yet; the
+// crate-wide `missing_docs` lint applies to everything else (issue 18).
+#![allow(missing_docs)]
+
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::fs;

@@ -28,6 +28,10 @@
 //! Mapping a fine state to a coarse one gives coarse positions equal to the
 //! "coherent positions" of the error metric: the switch causes no jump there.
 
+// Public items predating the core crate are not all documented yet; the
+// crate-wide `missing_docs` lint applies to everything else (issue 18).
+#![allow(missing_docs)]
+
 use crate::sim::{GridShape, State, Topology};
 
 /// Errors of correlating two cloths.

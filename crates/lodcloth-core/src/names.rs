@@ -32,10 +32,14 @@ pub fn choices<T: Named>() -> String {
 
 /// The choice named `name` exactly.
 pub fn parse<T: Named>(name: &str) -> Result<T, UnknownName> {
-    T::ALL.iter().copied().find(|t| t.name() == name).ok_or_else(|| UnknownName {
-        given: name.to_string(),
-        choices: choices::<T>(),
-    })
+    T::ALL
+        .iter()
+        .copied()
+        .find(|t| t.name() == name)
+        .ok_or_else(|| UnknownName {
+            given: name.to_string(),
+            choices: choices::<T>(),
+        })
 }
 
 /// [`parse`] for the command line, which also accepts `-` for `_`

@@ -9,6 +9,10 @@
 //! detail. Forces are totals in newtons split over the selected nodes by
 //! their area, so the same physical load acts at every resolution.
 
+// Public items predating the core crate are not all documented yet; the
+// crate-wide `missing_docs` lint applies to everything else (issue 18).
+#![allow(missing_docs)]
+
 use std::path::Path;
 use std::sync::Arc;
 

@@ -133,7 +133,11 @@ fn cloth_pinned_at_both_top_corners_stays_mirror_symmetric_under_strain_limiting
 
 #[test]
 fn hanging_scene_stays_mirror_symmetric_at_12x12() {
-    let mut scene = Scene::load(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../config/scenes/hanging.toml"))).expect("shipped scene loads");
+    let mut scene = Scene::load(Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../config/scenes/hanging.toml"
+    )))
+    .expect("shipped scene loads");
     let probe = scene.build_at(12, 12).expect("builds");
     scene.params.dt = 0.5 * probe.dt_limit();
     assert_stays_symmetric(
@@ -157,7 +161,11 @@ fn bits(state: &State) -> Vec<u64> {
 fn the_same_input_run_twice_gives_bit_identical_states() {
     let mut cases: Vec<(String, Simulation)> = Vec::new();
     for integrator in lodcloth::sim::Integrator::ALL {
-        let mut scene = Scene::load(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../config/scenes/paper-2-corner.toml"))).expect("shipped scene loads");
+        let mut scene = Scene::load(Path::new(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../../config/scenes/paper-2-corner.toml"
+        )))
+        .expect("shipped scene loads");
         scene.params.integrator = integrator;
         scene.stability = StabilityCheck::Force;
         cases.push((
@@ -192,7 +200,11 @@ fn the_same_input_run_twice_gives_bit_identical_states() {
 
 #[test]
 fn simulations_built_twice_from_the_same_scene_are_bit_identical() {
-    let scene = Scene::load(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../config/scenes/paper-3-left-edge.toml"))).expect("shipped scene loads");
+    let scene = Scene::load(Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../config/scenes/paper-3-left-edge.toml"
+    )))
+    .expect("shipped scene loads");
     let mut scene = scene.clone();
     scene.params.dt = 1e-3;
     scene.params.integrator = Integrator::ImplicitEuler;

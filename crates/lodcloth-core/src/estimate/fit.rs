@@ -20,6 +20,10 @@
 //! Held-out data: the fit only ever simulates up to its last training frame;
 //! callers score the result on other frames (or other scenes).
 
+// Public items predating the core crate are not all documented yet; the
+// crate-wide `missing_docs` lint applies to everything else (issue 18).
+#![allow(missing_docs)]
+
 use std::ops::Range;
 
 use nalgebra::{Matrix6, Vector6};

@@ -14,6 +14,10 @@
 //! - `lsq`: one global least-squares fit of the six coefficients ([`inverse`]);
 //! - `fit`: minimise the simulated displacement error directly ([`fit`]).
 
+// Public items predating the core crate are not all documented yet; the
+// crate-wide `missing_docs` lint applies to everything else (issue 18).
+#![allow(missing_docs)]
+
 pub mod fit;
 pub mod inverse;
 pub mod metric;

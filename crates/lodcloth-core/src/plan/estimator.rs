@@ -63,12 +63,7 @@ pub struct Estimated {
 
 impl Estimator {
     /// Estimate with `method`, or read it from the cache.
-    pub fn estimate(
-        &self,
-        problem: &LodProblem,
-        method: Method,
-        fit: &FitOptions,
-    ) -> Result<Estimated, PlanError> {
+    pub fn estimate(&self, problem: &LodProblem, method: Method, fit: &FitOptions) -> Result<Estimated, PlanError> {
         let compute = || -> Result<Estimated, PlanError> {
             let t = Instant::now();
             let est = problem.estimate(method, fit, &mut no_progress)?;
@@ -256,4 +251,3 @@ pub fn notes(details: &Details) -> String {
         ),
     }
 }
-

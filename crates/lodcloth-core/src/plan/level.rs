@@ -98,7 +98,6 @@ impl<'de> serde::Deserialize<'de> for Level {
     }
 }
 
-
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -8,16 +8,16 @@ use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
+use super::estimator::{level_dt, record_reference, stable_problem, Estimator, PlanError};
+use super::{EstimationPlan, InstanceKind, InstancePlan, Level};
 use crate::cache::{CacheEntry, CacheError, CacheKey, CoefficientCache, Provenance};
 use crate::estimate::inverse::{self, Distribution};
 use crate::estimate::{no_progress, FitOptions, LodProblem, Method, RecordSpec, Reference};
-use super::estimator::{level_dt, record_reference, stable_problem, Estimator, PlanError};
 use crate::lod::Correlation;
 use crate::points::estimate::{self as surface_fit, SurfaceFitOptions, SurfaceReference};
 use crate::points::model::PointModel;
 use crate::points::scene::SurfaceScene;
 use crate::scene::{MassConvention, Scene};
-use super::{EstimationPlan, InstanceKind, InstancePlan, Level};
 use crate::sim::{Material, SimError, Simulation, StabilityCheck, State, Topology};
 
 use crate::points::cloud::CloudMap;

@@ -2,6 +2,10 @@
 //! transfer from the simulated points to every cloud point, and the carry of
 //! a state from one level of a cloud to another at a switch.
 
+// Public items predating the core crate are not all documented yet; the
+// crate-wide `missing_docs` lint applies to everything else (issue 18).
+#![allow(missing_docs)]
+
 use std::sync::Arc;
 
 use crate::points::model::PointModel;
@@ -69,4 +73,3 @@ impl CloudMap {
         }
     }
 }
-

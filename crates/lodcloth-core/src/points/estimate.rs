@@ -13,6 +13,10 @@
 //! would exceed `max_dt_fraction` of the stability limit are rejected, so a
 //! fit never produces an unstable model. Pure: no I/O, no threads.
 
+// Public items predating the core crate are not all documented yet; the
+// crate-wide `missing_docs` lint applies to everything else (issue 18).
+#![allow(missing_docs)]
+
 use std::sync::Arc;
 
 use super::model::PointModel;

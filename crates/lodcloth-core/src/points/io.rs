@@ -3,6 +3,10 @@
 //! `x y z nx ny nz` per line, `#` comments). Every failure names the file
 //! and the line, vertex or property at fault.
 
+// Public items predating the core crate are not all documented yet; the
+// crate-wide `missing_docs` lint applies to everything else (issue 18).
+#![allow(missing_docs)]
+
 use std::io::{BufRead, BufReader, Write};
 use std::path::{Path, PathBuf};
 

@@ -2,6 +2,10 @@
 //! its simplification, the mass-spring surface on the survivors as an
 //! ordinary [`Simulation`], and the transfer back to every original point.
 
+// Public items predating the core crate are not all documented yet; the
+// crate-wide `missing_docs` lint applies to everything else (issue 18).
+#![allow(missing_docs)]
+
 use std::sync::Arc;
 
 use super::simplify::{simplify, Simplification, SimplifyError, SimplifyOptions};

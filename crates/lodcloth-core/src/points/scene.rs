@@ -21,6 +21,10 @@
 //! validates every value and reports each problem with its field; the cloud
 //! gets oriented covariance normals when its file has none.
 
+// Public items predating the core crate are not all documented yet; the
+// crate-wide `missing_docs` lint applies to everything else (issue 18).
+#![allow(missing_docs)]
+
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 

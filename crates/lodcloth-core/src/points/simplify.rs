@@ -9,6 +9,10 @@
 //! A removal that would break it (the points the candidate covers have no
 //! other survivor that close) is refused and the candidate is kept.
 
+// Public items predating the core crate are not all documented yet; the
+// crate-wide `missing_docs` lint applies to everything else (issue 18).
+#![allow(missing_docs)]
+
 use std::cmp::Reverse;
 use std::collections::BinaryHeap;
 

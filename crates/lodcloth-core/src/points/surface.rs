@@ -13,6 +13,10 @@
 //! stiffened twice). The triangles are the union of all rings' triangles,
 //! each kept once, oriented as the first ring that had it.
 
+// Public items predating the core crate are not all documented yet; the
+// crate-wide `missing_docs` lint applies to everything else (issue 18).
+#![allow(missing_docs)]
+
 use std::collections::{HashMap, HashSet};
 
 use super::knn::Knn;

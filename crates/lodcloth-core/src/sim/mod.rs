@@ -4,6 +4,10 @@
 //! and returns a [`StepReport`]. Numerical trouble comes back as data
 //! (`report.finite == false`), never as a panic or an error.
 
+// Public items predating the core crate are not all documented yet; the
+// crate-wide `missing_docs` lint applies to everything else (issue 18).
+#![allow(missing_docs)]
+
 mod forces;
 mod implicit;
 mod loads;
