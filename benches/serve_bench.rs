@@ -13,11 +13,12 @@ use prost::Message;
 use lodcloth::engine::{Engine, EngineSettings, InstanceSetup, StateFrame};
 use lodcloth::estimate::Method;
 use lodcloth::plan::Level;
+use lodcloth::proto::state_message;
 use lodcloth::proto::{v1, WireLevel};
 use lodcloth::scene::Scene;
 use lodcloth::service::client::Client;
 use lodcloth::service::config::ServiceConfig;
-use lodcloth::service::{keys, state_message};
+use lodcloth::service::keys;
 use lodcloth::sim::{Integrator, Simulation};
 
 const DT: f64 = 1e-3;

@@ -8,6 +8,9 @@ pub mod v1 {
     include!(concat!(env!("OUT_DIR"), "/lodcloth.v1.rs"));
 }
 
+use std::time::UNIX_EPOCH;
+
+use crate::engine::{MetricsFrame, StateFrame};
 use crate::plan::Level;
 use crate::sim::{Material, SpringCoeffs};
 
@@ -57,6 +60,51 @@ impl WireLevel for Level {
                 "level sets both a grid ({nx}x{ny}) and a point count ({n}); set one"
             )),
         }
+    }
+}
+
+/// `State` on the wire.
+pub fn state_message(instance: &str, f: &StateFrame) -> v1::State {
+    v1::State {
+        instance: instance.to_string(),
+        frame: f.frame,
+        time: f.time,
+        level: Some(f.level.to_wire()),
+        coefficient_version: f.coefficient_version,
+        positions: pack_positions(&f.positions),
+        episode: f.episode,
+        stepped_unix_nanos: f.stepped.duration_since(UNIX_EPOCH).map_or(0, |d| d.as_nanos() as u64),
+        transition: f.transition,
+        simulation_positions: pack_positions(&f.simulation_positions),
+        normals: pack_positions(&f.normals),
+        reference_positions: pack_positions(&f.reference_positions),
+    }
+}
+
+/// `Metrics` on the wire.
+pub fn metrics_message(instance: &str, m: &MetricsFrame) -> v1::Metrics {
+    v1::Metrics {
+        instance: instance.to_string(),
+        frame: m.frame,
+        time: m.time,
+        level: Some(m.level.to_wire()),
+        method: m.method.to_string(),
+        predicted_error: m.predicted_error,
+        live_error: m.live_error,
+        step_cost_us: m.step_cost_us,
+        real_time_factor: m.real_time_factor,
+        overruns: m.overruns,
+        kinetic_energy: m.kinetic_energy,
+        potential_energy: m.potential_energy,
+        max_strain: m.max_strain,
+        coefficient_version: m.coefficient_version,
+        paused: m.paused,
+        dt: m.dt,
+        steps: m.frame,
+        lag_resets: m.lag_resets,
+        divergences: m.divergences,
+        rollbacks: m.rollbacks,
+        halted: m.halted.as_deref().unwrap_or_default().to_string(),
     }
 }
 

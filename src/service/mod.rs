@@ -40,7 +40,7 @@ use zenoh::query::Query;
 use zenoh::Session;
 
 use crate::cache::CoefficientCache;
-use crate::engine::{Command, Engine, InstanceHandle, InstanceSetup, MetricsFrame, Snapshot, StateFrame};
+use crate::engine::{Command, Engine, InstanceHandle, InstanceSetup, Snapshot, StateFrame};
 use crate::estimate::Method;
 use crate::plan::{InstancePlan, Level, PrepareError, Prepared, Preparer};
 use crate::points::cloud::CloudMap;
@@ -594,7 +594,9 @@ async fn publish_states(
             continue;
         }
         buf.clear();
-        state_message(&handle.name, &frame).encode(&mut buf).expect("Vec grows");
+        proto::state_message(&handle.name, &frame)
+            .encode(&mut buf)
+            .expect("Vec grows");
         if let Err(e) = publisher.put(buf.clone()).await {
             tracing::warn!(instance = %handle.name, "publishing a state: {e}");
         }
@@ -616,57 +618,12 @@ async fn publish_metrics(
                     break;
                 }
                 let Some(m) = metrics.borrow_and_update().clone() else { continue };
-                let bytes = metrics_message(&handle.name, &m).encode_to_vec();
+                let bytes = proto::metrics_message(&handle.name, &m).encode_to_vec();
                 if let Err(e) = publisher.put(bytes).await {
                     tracing::warn!(instance = %handle.name, "publishing metrics: {e}");
                 }
             }
         }
-    }
-}
-
-/// `State` on the wire.
-pub fn state_message(instance: &str, f: &StateFrame) -> v1::State {
-    v1::State {
-        instance: instance.to_string(),
-        frame: f.frame,
-        time: f.time,
-        level: Some(f.level.to_wire()),
-        coefficient_version: f.coefficient_version,
-        positions: proto::pack_positions(&f.positions),
-        episode: f.episode,
-        stepped_unix_nanos: f.stepped.duration_since(UNIX_EPOCH).map_or(0, |d| d.as_nanos() as u64),
-        transition: f.transition,
-        simulation_positions: proto::pack_positions(&f.simulation_positions),
-        normals: proto::pack_positions(&f.normals),
-        reference_positions: proto::pack_positions(&f.reference_positions),
-    }
-}
-
-/// `Metrics` on the wire.
-pub fn metrics_message(instance: &str, m: &MetricsFrame) -> v1::Metrics {
-    v1::Metrics {
-        instance: instance.to_string(),
-        frame: m.frame,
-        time: m.time,
-        level: Some(m.level.to_wire()),
-        method: m.method.to_string(),
-        predicted_error: m.predicted_error,
-        live_error: m.live_error,
-        step_cost_us: m.step_cost_us,
-        real_time_factor: m.real_time_factor,
-        overruns: m.overruns,
-        kinetic_energy: m.kinetic_energy,
-        potential_energy: m.potential_energy,
-        max_strain: m.max_strain,
-        coefficient_version: m.coefficient_version,
-        paused: m.paused,
-        dt: m.dt,
-        steps: m.frame,
-        lag_resets: m.lag_resets,
-        divergences: m.divergences,
-        rollbacks: m.rollbacks,
-        halted: m.halted.as_deref().unwrap_or_default().to_string(),
     }
 }
 
