@@ -21,10 +21,6 @@
 //! validates every value and reports each problem with its field; the cloud
 //! gets oriented covariance normals when its file has none.
 
-// Public items predating the core crate are not all documented yet; the
-// crate-wide `missing_docs` lint applies to everything else (issue 18).
-#![allow(missing_docs)]
-
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
@@ -43,21 +39,52 @@ use crate::sim::{Integrator, Material, SpringCoeffs, SpringKind};
 /// Why a surface scene could not be loaded.
 #[derive(Debug, thiserror::Error)]
 pub enum SurfaceSceneError {
+    /// The scene file, or the point-cloud file it names, could not be read
+    /// (a scene file that is not UTF-8 lands here too).
     #[error("cannot read surface scene {path}: {source}")]
-    Io { path: String, source: std::io::Error },
+    Io {
+        /// The unreadable file's path, as given.
+        path: String,
+        /// What the operating system reported.
+        source: std::io::Error,
+    },
+    /// The TOML is malformed or has unknown or mistyped fields (the message
+    /// names the line and column, and the key).
     #[error("surface scene {origin}: {message}")]
-    Parse { origin: String, message: String },
+    Parse {
+        /// The scene file's path, or the name the caller gave the text.
+        origin: String,
+        /// What is wrong and where, from the TOML parser.
+        message: String,
+    },
+    /// The values parsed but are invalid. Checks of single fields report
+    /// every problem at once; the checks that depend on the cloud (count or
+    /// noise given for a file, too few points, a pull index beyond the
+    /// cloud) follow them and report one problem each.
     #[error("surface scene {origin} is invalid:\n  - {}", problems.join("\n  - "))]
-    Invalid { origin: String, problems: Vec<String> },
+    Invalid {
+        /// The scene file's path, or the name the caller gave the text.
+        origin: String,
+        /// One line per problem, each naming its field (e.g. `ring_k: …`).
+        problems: Vec<String>,
+    },
+    /// The point-cloud file was read but is not a valid .ply or .xyz cloud.
     #[error("surface scene {origin}: {source}")]
-    Cloud { origin: String, source: io::PointsIoError },
+    Cloud {
+        /// The scene file's path, or the name the caller gave the text.
+        origin: String,
+        /// The point-cloud reader's reason.
+        source: io::PointsIoError,
+    },
 }
 
 /// A surface scene file exactly as parsed.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct RawSurfaceScene {
+    /// Short name of the scene, for listings and messages.
     pub name: String,
+    /// Free text for listings; default empty.
     #[serde(default)]
     pub description: String,
     /// `sphere`, `hat`, `patch` or a point-cloud file (.ply, .xyz).
@@ -70,11 +97,15 @@ pub struct RawSurfaceScene {
     /// Generated shapes: normal jitter as a multiple of the spacing (drops normals).
     #[serde(default)]
     pub noise: f64,
+    /// Generated shapes: seed of the noise's random numbers, so a noisy
+    /// shape is the same on every load; default 1 (no effect without noise).
     #[serde(default = "default_seed")]
     pub seed: u64,
     /// Neighbours projected for each one-ring (10–20 in the paper).
     #[serde(default = "default_ring_k")]
     pub ring_k: usize,
+    /// Time integrator: `explicit_euler`, `symplectic_euler` (the default),
+    /// `rk4` or `implicit_euler`.
     #[serde(default = "default_integrator")]
     pub integrator: String,
     /// Areal density (kg/m²).
@@ -92,7 +123,10 @@ pub struct RawSurfaceScene {
     /// m/s², z up.
     #[serde(default)]
     pub gravity: [f64; 3],
+    /// Pin the simulated points whose z is at or below this height (m);
+    /// nothing is pinned when absent.
     pub pin_below: Option<f64>,
+    /// `[[pulls]]`: user springs pulling single points; default none.
     #[serde(default)]
     pub pulls: Vec<RawPull>,
     /// Recompute normals by covariance (the paper) instead of the MLS gradient.
@@ -115,8 +149,11 @@ pub struct RawPull {
     pub point: PullPoint,
     /// Target relative to the point's rest position (m).
     pub offset: [f64; 3],
+    /// Spring constant k_r (N/m), finite and ≥ 0; default 20.
     #[serde(default = "default_pull_k")]
     pub stiffness: f64,
+    /// Damping of the pulled point's velocity (N·s/m), finite and ≥ 0;
+    /// default 0.
     #[serde(default)]
     pub damping: f64,
     /// Release time (s); held for ever when absent.
@@ -127,7 +164,9 @@ pub struct RawPull {
 #[derive(Debug, Clone, Deserialize)]
 #[serde(untagged)]
 pub enum PullPoint {
+    /// A point's index in the cloud; must be below the cloud's size.
     Index(usize),
+    /// `top` (the point with the largest z) or `bottom` (the smallest z).
     Named(String),
 }
 
@@ -168,16 +207,31 @@ fn default_pull_k() -> f64 {
 /// A validated surface scene with its cloud loaded (normals included).
 #[derive(Debug, Clone)]
 pub struct SurfaceScene {
+    /// Short name of the scene (the file's `name`), for listings and messages.
     pub name: String,
+    /// Free text for listings; empty when the file has none.
     pub description: String,
+    /// The full point cloud, with normals (estimated by covariance and
+    /// oriented when the file has none).
     pub cloud: Arc<PointCloud>,
     /// Physics; `dt` is chosen per level (`safety` × its limit, dividing the frame interval).
     pub params: SurfaceParams,
+    /// Neighbours projected for each one-ring, in 6..=40 (default 15).
     pub ring_k: usize,
+    /// Simulated points with z at or below this height (m) are pinned;
+    /// `None` pins nothing.
     pub pin_below: Option<f64>,
+    /// User springs, each on a point index of the full cloud.
     pub pulls: Vec<Pull>,
+    /// How the simulated motion is carried back to every cloud point (MLS);
+    /// normals by the MLS gradient, or by covariance when the file sets
+    /// `covariance_normals`.
     pub transfer: TransferOptions,
+    /// Scene length (s), positive: the reference is recorded over it and the
+    /// daemon loops at it.
     pub duration: f64,
+    /// Reference frames per second (Hz), positive; the error is measured at
+    /// these instants.
     pub frame_hz: f64,
     /// FNV-1a of the scene text and the cloud file's bytes (cache keys).
     pub source_hash: u64,

@@ -1,0 +1,130 @@
+//! Scene files: a TOML description of a cloth experiment that can be built at
+//! any resolution. Two stages (as in ripgrep's config): [`RawScene`] is exactly
+//! what serde parsed (unknown fields rejected), [`Scene`] is the validated,
+//! ready-to-use form; validation reports every problem with its field path.
+//!
+//! Node sets are given independently of resolution (edges, corners, regions
+//! in material coordinates u, v ∈ [0, 1], or node indices at the scene's own
+//! resolution mapped to the nearest node), so one scene drives every level of
+//! detail. Forces are totals in newtons split over the selected nodes by
+//! their area, so the same physical load acts at every resolution.
+//!
+//! # Layout
+//! - `mod.rs` — the validated [`Scene`], reading it from a file or text.
+//! - `raw.rs` — the serde types as read from TOML ([`RawScene`] and its parts).
+//! - `validate.rs` — raw → validated ([`Scene::validate`]), every problem
+//!   reported with its field path.
+//! - `selector.rs` — node sets ([`Selector`], [`Edge`]) and their resolution
+//!   to node indices.
+//! - `build.rs` — a [`Simulation`](crate::sim::Simulation) at any resolution
+//!   ([`Scene::build_at`]): masses, pins, loads.
+//! - `error.rs` — [`SceneError`] and the wording of its causes.
+
+use std::path::Path;
+
+use crate::sim::{GridShape, Orientation, PinPath, Profile, SimParams, StabilityCheck, Wind};
+
+mod build;
+mod error;
+mod raw;
+mod selector;
+mod validate;
+
+pub use error::SceneError;
+pub use raw::{
+    MassConvention, RawAdjustment, RawCloth, RawCoeffs, RawForce, RawLimit, RawOrientation, RawPin, RawPinPath,
+    RawProfile, RawRegion, RawScene, RawSelector, RawSimulation, RawSprings, RawStrain, RawWind,
+};
+pub use selector::{Edge, Selector};
+
+/// A validated pin: its node set, its path, and its field path (`pins[i]`)
+/// for messages at a resolution where it selects no node.
+type ScenePin = (Selector, PinPath, String);
+
+/// A validated force: its node set, total force (N) at profile value 1, time
+/// profile, and its field path (`forces[i]`) for messages.
+type SceneForce = (Selector, [f64; 3], Profile, String);
+
+/// A validated scene, ready to build at any resolution.
+#[derive(Debug, Clone)]
+pub struct Scene {
+    /// Where it came from (the file path, or the name the caller gave the
+    /// text, e.g. `"<string>"`), for messages.
+    pub origin: String,
+    /// Short name of the scene (the file's `name`), for listings and messages.
+    pub name: String,
+    /// Free text for listings (the file's `description`); empty when absent.
+    pub description: String,
+    /// Cloth width along i (m); positive.
+    pub width: f64,
+    /// Cloth height along j (m); positive. Row 0 is the top edge.
+    pub height: f64,
+    /// Reference resolution: nodes per row (2 to 4096); `nodes = [[i, j], …]`
+    /// selectors index this grid.
+    pub nx: usize,
+    /// Nodes per column at the reference resolution (2 to 4096).
+    pub ny: usize,
+    /// How the rest shape lies in space (y up); horizontal by default.
+    pub orientation: Orientation,
+    /// Mass per area of cloth (kg/m²); positive.
+    pub areal_density: f64,
+    /// How node masses follow from the areal density at each resolution.
+    pub mass: MassConvention,
+    /// Integrator, dt, material, gravity, drag, strain control.
+    pub params: SimParams,
+    /// Run length (s).
+    pub duration: f64,
+    /// Whether building refuses a dt beyond the predicted stability limit
+    /// (`Enforce`, the default) or accepts it (`Force`, set by
+    /// `simulation.force_unstable = true`).
+    pub stability: StabilityCheck,
+    /// FNV-1a 64 of the scene's TOML text (0 when built from parsed values):
+    /// caches of derived results (estimated coefficients) key on it, so an
+    /// edited scene never reuses them.
+    pub source_hash: u64,
+    pins: Vec<ScenePin>,
+    forces: Vec<SceneForce>,
+    wind: Option<Wind>,
+}
+
+impl Scene {
+    /// Read and validate a scene file.
+    pub fn load(path: &Path) -> Result<Scene, SceneError> {
+        let bytes = std::fs::read(path).map_err(|source| SceneError::Io {
+            path: path.display().to_string(),
+            source,
+        })?;
+        let origin = path.display().to_string();
+        let text = std::str::from_utf8(&bytes).map_err(|e| SceneError::Parse {
+            origin: origin.clone(),
+            message: error::utf8_problem(&bytes, e),
+        })?;
+        Scene::from_toml(text, &origin)
+    }
+
+    /// Parse and validate scene text; `origin` names it in messages.
+    pub fn from_toml(text: &str, origin: &str) -> Result<Scene, SceneError> {
+        let raw: RawScene = toml::from_str(text).map_err(|e| SceneError::Parse {
+            origin: origin.to_string(),
+            message: e.to_string(),
+        })?;
+        let mut scene = Scene::validate(raw, origin)?;
+        scene.source_hash = crate::hash::fnv1a64(text.as_bytes());
+        Ok(scene)
+    }
+
+    /// Grid shape at resolution `nx × ny`.
+    pub fn shape(&self, nx: usize, ny: usize) -> GridShape {
+        GridShape {
+            nx,
+            ny,
+            width: self.width,
+            height: self.height,
+        }
+    }
+
+    /// Steps in a run of [`Scene::duration`].
+    pub fn steps(&self) -> u64 {
+        (self.duration / self.params.dt).round() as u64
+    }
+}

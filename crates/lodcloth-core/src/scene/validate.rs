@@ -1,0 +1,420 @@
+//! Validation: a [`RawScene`] becomes a [`Scene`], or every problem is
+//! reported at once, each with its field path (`springs.shear.k: …`).
+//!
+//! Sections are checked in a fixed order — cloth, springs, simulation,
+//! strain, pins, forces, wind — and within a section field by field, so the
+//! list of problems reads like the file. Each check records a problem and
+//! carries on with the value as given, so one mistake never hides another.
+
+use super::raw::{
+    RawCloth, RawCoeffs, RawForce, RawLimit, RawOrientation, RawPin, RawPinPath, RawProfile, RawScene, RawSelector,
+    RawSimulation, RawSprings, RawStrain, RawWind,
+};
+use super::selector::{Edge, Selector};
+use super::{Scene, SceneError, SceneForce, ScenePin};
+use crate::sim::{
+    CgSettings, GridShape, Material, Orientation, PinPath, Profile, SimParams, SpringCoeffs, SpringKind,
+    StabilityCheck, StiffnessAdjustment, StrainLimit, Wind,
+};
+
+impl Scene {
+    /// Validate a parsed scene, listing every problem with its path.
+    pub fn validate(raw: RawScene, origin: &str) -> Result<Scene, SceneError> {
+        let mut p = Problems::default();
+        let c = &raw.cloth;
+        p.cloth(c);
+        let material = p.material(&raw.springs);
+        let s = &raw.simulation;
+        let cg = p.simulation(s);
+        let (stiffness_adjustment, strain_limit) = p.strain(&raw.strain);
+        let reference = reference_shape(c);
+        let pins = p.pins(&raw.pins, &reference);
+        let forces = p.forces(&raw.forces, &reference);
+        let wind = raw.wind.as_ref().map(|w| p.wind(w));
+
+        if !p.0.is_empty() {
+            return Err(SceneError::Invalid {
+                origin: origin.to_string(),
+                problems: p.0,
+            });
+        }
+        Ok(Scene {
+            origin: origin.to_string(),
+            name: raw.name,
+            description: raw.description,
+            width: c.width,
+            height: c.height,
+            nx: c.nx,
+            ny: c.ny,
+            orientation: match c.orientation {
+                RawOrientation::Horizontal => Orientation::Horizontal,
+                RawOrientation::Vertical => Orientation::Vertical,
+            },
+            areal_density: c.areal_density,
+            mass: c.mass,
+            params: SimParams {
+                dt: s.dt,
+                integrator: s.integrator,
+                material,
+                gravity: s.gravity,
+                drag: s.drag,
+                stiffness_adjustment,
+                strain_limit,
+                cg,
+            },
+            duration: s.duration,
+            stability: if s.force_unstable {
+                StabilityCheck::Force
+            } else {
+                StabilityCheck::Enforce
+            },
+            source_hash: 0,
+            pins,
+            forces,
+            wind,
+        })
+    }
+}
+
+/// The grid that `nodes = [[i, j], …]` selectors index: the scene's own
+/// resolution, at least 2 × 2 so a too-small `cloth.nx`/`ny` (already a
+/// problem of its own) does not also break every node list.
+fn reference_shape(c: &RawCloth) -> GridShape {
+    GridShape {
+        nx: c.nx.max(2),
+        ny: c.ny.max(2),
+        width: c.width,
+        height: c.height,
+    }
+}
+
+/// Problems found while validating, each with its field path.
+#[derive(Default)]
+pub(super) struct Problems(pub(super) Vec<String>);
+
+// Sections of the file, in the order `Scene::validate` checks them.
+impl Problems {
+    /// `[cloth]`: size, areal density and reference resolution.
+    fn cloth(&mut self, c: &RawCloth) {
+        self.positive("cloth.width", c.width);
+        self.positive("cloth.height", c.height);
+        self.positive("cloth.areal_density", c.areal_density);
+        self.grid_size("cloth", c.nx, c.ny);
+    }
+
+    /// `[springs]`: K and C of each kind, structural, shear, bend.
+    fn material(&mut self, r: &RawSprings) -> Material {
+        let mut coeffs = |name: &str, r: RawCoeffs| {
+            self.non_negative(&format!("springs.{name}.k"), r.k);
+            self.non_negative(&format!("springs.{name}.c"), r.c);
+            SpringCoeffs { k: r.k, c: r.c }
+        };
+        Material {
+            springs: [
+                coeffs("structural", r.structural),
+                coeffs("shear", r.shear),
+                coeffs("bend", r.bend),
+            ],
+        }
+    }
+
+    /// `[simulation]`: dt against the run length, gravity, drag and the CG
+    /// settings (the only derived value; the rest is used as given).
+    fn simulation(&mut self, s: &RawSimulation) -> CgSettings {
+        self.positive("simulation.dt", s.dt);
+        self.positive("simulation.duration", s.duration);
+        if s.dt.is_finite() && s.duration.is_finite() && s.dt > s.duration {
+            self.push(format!(
+                "simulation.dt: {} s is longer than the whole run ({} s)",
+                s.dt, s.duration
+            ));
+        }
+        for (i, g) in s.gravity.iter().enumerate() {
+            self.finite(&format!("simulation.gravity[{i}]"), *g);
+        }
+        self.non_negative("simulation.drag", s.drag);
+        let mut cg = CgSettings::default();
+        if let Some(t) = s.cg_tolerance {
+            self.positive("simulation.cg_tolerance", t);
+            cg.tolerance = t;
+        }
+        if let Some(m) = s.cg_max_iterations {
+            if m == 0 {
+                self.push("simulation.cg_max_iterations: must be at least 1".into());
+            }
+            cg.max_iterations = m;
+        }
+        cg
+    }
+
+    /// `[strain]`: the stiffness adjustment, then the strain limit.
+    fn strain(&mut self, r: &RawStrain) -> (Option<StiffnessAdjustment>, Option<StrainLimit>) {
+        let stiffness_adjustment = r.stiffness_adjustment.as_ref().map(|a| {
+            self.non_negative("strain.stiffness_adjustment.allowed", a.allowed);
+            StiffnessAdjustment { allowed: a.allowed }
+        });
+        let strain_limit = r.limit.as_ref().map(|l| self.strain_limit(l));
+        (stiffness_adjustment, strain_limit)
+    }
+
+    /// `[strain.limit]`, with [`StrainLimit::default`] for what is not given.
+    fn strain_limit(&mut self, l: &RawLimit) -> StrainLimit {
+        let mut out = StrainLimit {
+            max_strain: l.max_strain,
+            ..StrainLimit::default()
+        };
+        self.non_negative("strain.limit.max_strain", l.max_strain);
+        if let Some(t) = l.tolerance {
+            self.non_negative("strain.limit.tolerance", t);
+            out.tolerance = t;
+        }
+        if let Some(m) = l.max_iterations {
+            if m == 0 {
+                self.push("strain.limit.max_iterations: must be at least 1 (0 sweeps never limit)".into());
+            }
+            out.max_iterations = m;
+        }
+        if let Some(kinds) = &l.kinds {
+            if kinds.is_empty() {
+                self.push("strain.limit.kinds: an empty list limits no spring; remove [strain.limit] instead".into());
+            }
+            out.kinds = [false; 3];
+            for (i, k) in kinds.iter().enumerate() {
+                match SpringKind::ALL.iter().find(|s| s.name() == k) {
+                    Some(s) => out.kinds[s.index()] = true,
+                    None => self.push(format!(
+                        "strain.limit.kinds[{i}]: unknown spring kind {k:?} (expected structural, shear or bend)"
+                    )),
+                }
+            }
+        }
+        out
+    }
+
+    /// `[[pins]]`: each pin's node set, then its path.
+    fn pins(&mut self, pins: &[RawPin], reference: &GridShape) -> Vec<ScenePin> {
+        pins.iter()
+            .enumerate()
+            .map(|(i, pin)| {
+                let path = format!("pins[{i}]");
+                let sel = self.selector(&format!("{path}.nodes"), &pin.nodes, reference);
+                let pp = self.pin_path(&format!("{path}.path"), pin.path);
+                (sel, pp, path)
+            })
+            .collect()
+    }
+
+    /// `[[forces]]`: each force's node set, total, then profile.
+    fn forces(&mut self, forces: &[RawForce], reference: &GridShape) -> Vec<SceneForce> {
+        forces
+            .iter()
+            .enumerate()
+            .map(|(i, f)| {
+                let path = format!("forces[{i}]");
+                let sel = self.selector(&format!("{path}.nodes"), &f.nodes, reference);
+                for (c, x) in f.total.iter().enumerate() {
+                    self.finite(&format!("{path}.total[{c}]"), *x);
+                }
+                let prof = self.profile(&format!("{path}.profile"), f.profile);
+                (sel, f.total, prof, path)
+            })
+            .collect()
+    }
+
+    /// `[wind]`: velocity, air density, drag coefficient, then profile.
+    fn wind(&mut self, w: &RawWind) -> Wind {
+        for (c, x) in w.velocity.iter().enumerate() {
+            self.finite(&format!("wind.velocity[{c}]"), *x);
+        }
+        self.non_negative("wind.air_density", w.air_density);
+        self.non_negative("wind.drag_coefficient", w.drag_coefficient);
+        Wind {
+            velocity: w.velocity,
+            profile: self.profile("wind.profile", w.profile),
+            air_density: w.air_density,
+            drag_coefficient: w.drag_coefficient,
+        }
+    }
+}
+
+// Checks of single values and of the nested forms (profiles, pin paths,
+// selectors) the sections share.
+impl Problems {
+    fn push(&mut self, s: String) {
+        self.0.push(s);
+    }
+    fn finite(&mut self, path: &str, x: f64) {
+        if !x.is_finite() {
+            self.push(format!("{path}: must be a finite number, got {x}"));
+        }
+    }
+    fn positive(&mut self, path: &str, x: f64) {
+        if !(x.is_finite() && x > 0.0) {
+            self.push(format!("{path}: must be positive and finite, got {x}"));
+        }
+    }
+    fn non_negative(&mut self, path: &str, x: f64) {
+        if !(x.is_finite() && x >= 0.0) {
+            self.push(format!("{path}: must be finite and ≥ 0, got {x}"));
+        }
+    }
+    /// Nodes per side in 2..=4096; also checks a resolution to build at.
+    pub(super) fn grid_size(&mut self, path: &str, nx: usize, ny: usize) {
+        for (name, n) in [("nx", nx), ("ny", ny)] {
+            if n < 2 {
+                self.push(format!("{path}.{name}: {n} nodes per side is below the minimum of 2"));
+            } else if n > 4096 {
+                self.push(format!(
+                    "{path}.{name}: {n} nodes per side is above the maximum of 4096"
+                ));
+            }
+        }
+    }
+    /// A finite [low, high] with low ≤ high.
+    fn interval(&mut self, path: &str, r: [f64; 2]) {
+        if !(r[0].is_finite() && r[1].is_finite() && r[0] <= r[1]) {
+            self.push(format!("{path}: must be [low, high] with low ≤ high, got {r:?}"));
+        }
+    }
+    /// A time profile: every time finite, a ramp's end after its start.
+    fn profile(&mut self, path: &str, r: RawProfile) -> Profile {
+        match r {
+            RawProfile::Constant => Profile::Constant,
+            RawProfile::Ramp { start, end } => {
+                self.finite(&format!("{path}.start"), start);
+                // An infinite end would hold the profile at 0 for ever.
+                if !end.is_finite() {
+                    self.finite(&format!("{path}.end"), end);
+                } else if !(end > start) {
+                    self.push(format!("{path}.end: must be after start ({start}), got {end}"));
+                }
+                Profile::Ramp { start, end }
+            }
+            RawProfile::Pulse { start, duration } => {
+                self.finite(&format!("{path}.start"), start);
+                self.positive(&format!("{path}.duration"), duration);
+                Profile::Pulse { start, duration }
+            }
+            RawProfile::Sine {
+                frequency,
+                phase,
+                amplitude,
+                offset,
+            } => {
+                self.non_negative(&format!("{path}.frequency"), frequency);
+                self.finite(&format!("{path}.phase"), phase);
+                self.finite(&format!("{path}.amplitude"), amplitude);
+                self.finite(&format!("{path}.offset"), offset);
+                Profile::Sine {
+                    frequency,
+                    phase,
+                    amplitude,
+                    offset,
+                }
+            }
+        }
+    }
+    /// A pin path: finite components, a linear path's end not before its start.
+    fn pin_path(&mut self, path: &str, r: RawPinPath) -> PinPath {
+        match r {
+            RawPinPath::Fixed => PinPath::Fixed,
+            RawPinPath::Linear { velocity, start, end } => {
+                for (c, x) in velocity.iter().enumerate() {
+                    self.finite(&format!("{path}.velocity[{c}]"), *x);
+                }
+                self.finite(&format!("{path}.start"), start);
+                if !(end >= start) {
+                    self.push(format!("{path}.end: must not be before start ({start}), got {end}"));
+                }
+                PinPath::Linear { velocity, start, end }
+            }
+            RawPinPath::Sine { amplitude, frequency } => {
+                for (c, x) in amplitude.iter().enumerate() {
+                    self.finite(&format!("{path}.amplitude[{c}]"), *x);
+                }
+                self.non_negative(&format!("{path}.frequency"), frequency);
+                PinPath::Sine { amplitude, frequency }
+            }
+        }
+    }
+    /// A node set given in exactly one way, with known edge and corner names
+    /// and node indices inside the `reference` grid. After a problem it
+    /// stands in `Selector::All`, which is never used: the scene is refused.
+    fn selector(&mut self, path: &str, r: &RawSelector, reference: &GridShape) -> Selector {
+        let given = [
+            r.edge.is_some(),
+            r.corner.is_some(),
+            r.region.is_some(),
+            r.nodes.is_some(),
+            r.all.is_some(),
+        ];
+        if given.iter().filter(|g| **g).count() != 1 {
+            self.push(format!("{path}: give exactly one of edge, corner, region, nodes, all"));
+            return Selector::All;
+        }
+        let edge = |s: &str| match s {
+            "top" => Some(Edge::Top),
+            "bottom" => Some(Edge::Bottom),
+            "left" => Some(Edge::Left),
+            "right" => Some(Edge::Right),
+            _ => None,
+        };
+        if let Some(e) = &r.edge {
+            return match edge(e) {
+                Some(e) => Selector::Edge(e),
+                None => {
+                    self.push(format!(
+                        "{path}.edge: unknown edge {e:?} (expected top, bottom, left or right)"
+                    ));
+                    Selector::All
+                }
+            };
+        }
+        if let Some(c) = &r.corner {
+            let parts: Vec<_> = c.split('-').collect();
+            return match (
+                parts.as_slice(),
+                parts.first().and_then(|a| edge(a)),
+                parts.get(1).and_then(|b| edge(b)),
+            ) {
+                ([_, _], Some(a @ (Edge::Top | Edge::Bottom)), Some(b @ (Edge::Left | Edge::Right))) => {
+                    Selector::Corner(a, b)
+                }
+                _ => {
+                    self.push(format!(
+                        "{path}.corner: unknown corner {c:?} (expected top-left, top-right, bottom-left or bottom-right)"
+                    ));
+                    Selector::All
+                }
+            };
+        }
+        if let Some(reg) = &r.region {
+            self.interval(&format!("{path}.region.u"), reg.u);
+            self.interval(&format!("{path}.region.v"), reg.v);
+            return Selector::Region { u: reg.u, v: reg.v };
+        }
+        if let Some(nodes) = &r.nodes {
+            if nodes.is_empty() {
+                self.push(format!("{path}.nodes: empty list"));
+            }
+            let mut pts = Vec::new();
+            for (k, &[i, j]) in nodes.iter().enumerate() {
+                if i >= reference.nx || j >= reference.ny {
+                    self.push(format!(
+                        "{path}.nodes[{k}]: [{i}, {j}] is outside the {}×{} grid",
+                        reference.nx, reference.ny
+                    ));
+                } else {
+                    pts.push(reference.uv(i, j));
+                }
+            }
+            return Selector::Points(pts);
+        }
+        if r.all == Some(false) {
+            self.push(format!(
+                "{path}.all: false selects nothing; remove the pin/force instead"
+            ));
+        }
+        Selector::All
+    }
+}
