@@ -246,11 +246,37 @@ async fn main() {
     let minutes = arg("--minutes", 10.0);
     let phase = arg("--phase-seconds", 15.0);
     let dir = tempfile::tempdir().expect("temp dir");
+    let (daemon, endpoint) = start_daemon(dir.path());
+    let pid = daemon.0.id();
+    let c = client(std::slice::from_ref(&endpoint)).await;
+    let info = wait_info(&c, "a").await;
+    println!(
+        "daemon: instance a ({}, {} states/s); machine: {} cores",
+        daemon::level_of(&daemon::collect_states(&c, "a", 0.2).await[0]),
+        info.publish_hz,
+        std::thread::available_parallelism().map_or(0, |n| n.get())
+    );
+
+    let single = baseline(&endpoint, &c, phase).await;
+    let mut sessions = load(&c, &endpoint, &info, (subscribers, fast_processes), phase, single).await;
+    let keep = sessions.len().min(10);
+    for s in sessions.drain(keep..) {
+        let _ = s.session.close().await;
+    }
+    if minutes > 0.0 {
+        soak(&c, pid, minutes).await;
+    }
+    drop(daemon);
+}
+
+/// `lodcloth serve` in its own process on a free loopback port (zenoh's
+/// low-latency transport with `SOAK_LOWLATENCY=1`), and its endpoint.
+fn start_daemon(dir: &std::path::Path) -> (Child, String) {
     let port = daemon::free_port();
-    let config = dir.path().join("soak.toml");
-    let mut text = daemon::config_text(port, dir.path(), ("a", "b"));
+    let config = dir.join("soak.toml");
+    let mut text = daemon::config_text(port, dir, ("a", "b"));
     if lowlatency() {
-        let json5 = dir.path().join("zenoh.json5");
+        let json5 = dir.join("zenoh.json5");
         std::fs::write(
             &json5,
             "{ transport: { unicast: { lowlatency: true, qos: { enabled: false } } } }",
@@ -277,32 +303,43 @@ async fn main() {
             .spawn()
             .unwrap_or_else(|e| panic!("{}: {e} (cargo build --release first)", lodcloth.display())),
     );
-    let pid = daemon.0.id();
     let endpoint = format!("tcp/127.0.0.1:{port}");
-    let c = client(std::slice::from_ref(&endpoint)).await;
-    let info = wait_info(&c, "a").await;
-    println!(
-        "daemon: instance a ({}, {} states/s); machine: {} cores",
-        daemon::level_of(&daemon::collect_states(&c, "a", 0.2).await[0]),
-        info.publish_hz,
-        std::thread::available_parallelism().map_or(0, |n| n.get())
-    );
+    (daemon, endpoint)
+}
 
-    // 1. Baseline: one subscriber.
+/// Phase 1: one subscriber's latency p50/p99 (ms) and the real-time
+/// factor over `phase` seconds.
+async fn baseline(endpoint: &str, c: &Client, phase: f64) -> (f64, f64, f64) {
     let one = Arc::new(Tally::default());
-    let single = subscribe(endpoint.clone(), "a", Duration::ZERO, one.clone()).await;
+    let single = subscribe(endpoint.to_string(), "a", Duration::ZERO, one.clone()).await;
     tokio::time::sleep(Duration::from_secs(1)).await;
     one.latencies.lock().expect("l").clear();
-    let (rtf1, _) = real_time_factor(&c, "a", phase).await;
+    let (rtf1, _) = real_time_factor(c, "a", phase).await;
     let (p50_1, p99_1) = percentiles(one.latencies.lock().expect("l").clone());
     let _ = single.session.close().await;
 
-    // 2. Load: many sessions, a tenth slow (in a child process, so their
+    (rtf1, p50_1, p99_1)
+}
+
+/// Phase 2: `subscribers` sessions (a tenth slow, in a child process; the
+/// fast ones here or in `fast_processes` children) for `phase` seconds;
+/// prints the load table against the `single`-subscriber baseline and
+/// returns this process's sessions.
+async fn load(
+    c: &Client,
+    endpoint: &str,
+    info: &v1::InstanceInfo,
+    (subscribers, fast_processes): (usize, usize),
+    phase: f64,
+    (rtf1, p50_1, p99_1): (f64, f64, f64),
+) -> Vec<Client> {
+    let exe = std::env::current_exe().expect("exe");
+    // Many sessions, a tenth slow (in a child process, so their
     // blocked handlers back up their own links, not this process).
     let n_slow = subscribers / 10;
     let mut slow_child = Child(
         std::process::Command::new(&exe)
-            .args(["--slow-child", &endpoint, "--slow", &n_slow.to_string()])
+            .args(["--slow-child", endpoint, "--slow", &n_slow.to_string()])
             .stdout(std::process::Stdio::piped())
             .spawn()
             .expect("slow subscribers"),
@@ -313,7 +350,7 @@ async fn main() {
         .map(|p| {
             let k = n_fast / fast_processes + usize::from(p < n_fast % fast_processes);
             let mut child = std::process::Command::new(&exe)
-                .args(["--fast-child", &endpoint, "--fast", &k.to_string()])
+                .args(["--fast-child", endpoint, "--fast", &k.to_string()])
                 .stdout(std::process::Stdio::piped())
                 .spawn()
                 .expect("fast subscribers");
@@ -331,7 +368,7 @@ async fn main() {
     let mut sessions = Vec::new();
     for _ in 0..if fast_processes > 0 { 0 } else { n_fast } {
         let t = Arc::new(Tally::default());
-        sessions.push(subscribe(endpoint.clone(), "a", Duration::ZERO, t.clone()).await);
+        sessions.push(subscribe(endpoint.to_string(), "a", Duration::ZERO, t.clone()).await);
         tallies.push((false, t));
     }
     // Child processes open their sessions one after another: give them
@@ -347,7 +384,7 @@ async fn main() {
         t.received.store(0, Ordering::Relaxed);
     }
     let window = (now_nanos(), Instant::now());
-    let (rtf_n, overruns) = real_time_factor(&c, "a", phase).await;
+    let (rtf_n, overruns) = real_time_factor(c, "a", phase).await;
     let window = (window.0, window.0 + window.1.elapsed().as_nanos() as u64);
     let mut fast: Vec<f64> = tallies
         .iter()
@@ -404,15 +441,12 @@ async fn main() {
         p50_n / p50_1,
         p99_n / p99_1
     );
-    let keep = sessions.len().min(10);
-    for s in sessions.drain(keep..) {
-        let _ = s.session.close().await;
-    }
+    sessions
+}
 
-    // 3. Soak: memory over time with switches and bad requests going on.
-    if minutes <= 0.0 {
-        return;
-    }
+/// Phase 3: `minutes` of a switch and a bad request every second; the
+/// daemon's resident memory sampled every 5 s into `out/soak/`.
+async fn soak(c: &Client, pid: u32, minutes: f64) {
     let started = Instant::now();
     let end = started + Duration::from_secs_f64(60.0 * minutes);
     let mut samples: Vec<(f64, f64)> = Vec::new();
@@ -444,7 +478,7 @@ async fn main() {
         tokio::time::sleep(Duration::from_secs(1)).await;
     }
     let simulated = {
-        let m = real_time_factor(&c, "a", 1.5).await;
+        let m = real_time_factor(c, "a", 1.5).await;
         m.0 * 60.0 * minutes
     };
     std::fs::create_dir_all("out/soak").expect("out/soak");
@@ -476,7 +510,6 @@ async fn main() {
         first.map_or(f64::NAN, |s| s.1),
         last.map_or(f64::NAN, |s| s.1),
     );
-    drop(daemon);
 }
 
 /// Read what a killed child wrote.

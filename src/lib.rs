@@ -33,7 +33,7 @@
 //! `docs/architecture.md` walks through how a state and a switch request
 //! flow through these layers.
 
-pub use lodcloth_core::{atomic, cache, estimate, hash, lod, names, plan, points, scene, sim};
+pub use lodcloth_core::{atomic, cache, estimate, hash, lod, names, plan, points, problems, scene, sim};
 
 pub mod engine;
 pub mod experiments;

@@ -392,14 +392,14 @@ dt = -1.0
         "zenoh.listen[0]: 'carrier-pigeon'",
         "engine.max_substeps",
         "estimation.estimate_stride: 2000 is longer than estimation.reference_steps (1000)",
-        "instances[0].name: 'instances'",
+        "instances[0].name: must be 1–64 letters, digits, '-' or '_' and not one of [\"instances\", \"alive\"], got 'instances'",
         "instances[0].scene:",
         "instances[0].levels[0]: 1x1",
         "instances[0].levels[2]: 8x8 is listed twice",
         "instances[0].start: 9x9",
         "instances[0].method: 'guess'",
         "instances[0].integrator: 'leapfrog'",
-        "instances[0].dt: -1",
+        "instances[0].dt: must be positive and finite, got -1",
     ] {
         assert!(err.contains(needle), "missing '{needle}' in:\n{err}");
     }

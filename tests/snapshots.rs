@@ -262,5 +262,5 @@ fn snapshot_settings_are_checked_by_path() {
     }
     let ok = ServiceConfig::from_toml(&(base + "[snapshots]\ndir = \"s\"\n"), "test.toml").expect("defaults");
     let s = ok.snapshots.expect("snapshots");
-    assert_eq!((s.interval, s.resume), (30.0, true));
+    assert_eq!((s.interval, s.resume), (Some(std::time::Duration::from_secs(30)), true));
 }

@@ -364,6 +364,16 @@ fn write_table1(
     scenes: &[Scene],
     common: &Common,
 ) -> Result<()> {
+    fs::write(out.join("table1.csv"), table1_csv(rows)).context("writing table1.csv")?;
+    let labels: Vec<String> = TABLE1_VARIANTS.iter().map(|v| v.label()).collect();
+    let mut md = table1_by_level(rows, &labels, levels, scenes, common);
+    md.push_str(&table1_by_scene(rows, ref_costs));
+    fs::write(out.join("table1.md"), md).context("writing table1.md")?;
+    table1_chart(out, rows, &labels, levels)
+}
+
+/// Every row of Table 1, one line each.
+fn table1_csv(rows: &[Table1Row]) -> String {
     let mut csv = String::from(
         "scene,level,nodes,reduction,variant,method,mass,k_structural,k_shear,k_bend,c_structural,c_shear,c_bend,dt,dt_over_limit,mean,held_out_mean,p95,max,first_quarter,last_quarter,worst_time,worst_frame_mean,estimate_s,cost_s_per_s,diverged,notes\n",
     );
@@ -401,22 +411,33 @@ fn write_table1(
             r.notes.replace('"', "'")
         );
     }
-    fs::write(out.join("table1.csv"), csv).context("writing table1.csv")?;
+    csv
+}
 
-    let labels: Vec<String> = TABLE1_VARIANTS.iter().map(|v| v.label()).collect();
+/// The mean over scenes of `f` for one level and variant.
+fn mean_of(rows: &[Table1Row], level: usize, label: &str, f: impl Fn(&Table1Row) -> f64) -> f64 {
+    let v: Vec<f64> = rows
+        .iter()
+        .filter(|r| r.level == level && r.variant.label() == label)
+        .map(f)
+        .collect();
+    v.iter().sum::<f64>() / v.len().max(1) as f64
+}
+
+/// Table 1 as the paper prints it: per level, each variant's mean over the
+/// scenes (all frames, then held-out), beside the paper's numbers.
+fn table1_by_level(
+    rows: &[Table1Row],
+    labels: &[String],
+    levels: &[usize],
+    scenes: &[Scene],
+    common: &Common,
+) -> String {
     let scenes_done: Vec<&str> = scenes
         .iter()
         .map(|s| s.name.as_str())
         .filter(|n| rows.iter().any(|r| r.scene == *n))
         .collect();
-    let mean_of = |level: usize, label: &str, f: &dyn Fn(&Table1Row) -> f64| -> f64 {
-        let v: Vec<f64> = rows
-            .iter()
-            .filter(|r| r.level == level && r.variant.label() == label)
-            .map(f)
-            .collect();
-        v.iter().sum::<f64>() / v.len().max(1) as f64
-    };
     let mut md = String::new();
     let _ = writeln!(
         md,
@@ -446,7 +467,7 @@ fn write_table1(
             let cells: Vec<String> = labels
                 .iter()
                 .map(|l| {
-                    let v = mean_of(level, l, &|r| if held { r.held_out_mean } else { r.all.mean });
+                    let v = mean_of(rows, level, l, |r| if held { r.held_out_mean } else { r.all.mean });
                     format!("{:.2}", 100.0 * v)
                 })
                 .collect();
@@ -463,6 +484,13 @@ fn write_table1(
         }
         let _ = writeln!(md);
     }
+    md
+}
+
+/// Per scene and level: fit against the paper's GKD, its tail, drift and
+/// cost; then each reference's cost.
+fn table1_by_scene(rows: &[Table1Row], ref_costs: &[(String, f64)]) -> String {
+    let mut md = String::new();
     let _ = writeln!(md, "### Per scene (all frames / held-out), fit and the paper's GKD\n");
     let _ = writeln!(md, "| scene | coarse | gkd/per-node | fit/lumped | fit p95 | fit last/first quarter | estimation s (fit) | cost s/s (fit) |");
     let _ = writeln!(md, "|---|---|---|---|---|---|---|---|");
@@ -496,8 +524,11 @@ fn write_table1(
     for (name, c) in ref_costs {
         let _ = writeln!(md, "- {name}: {c:.3}");
     }
-    fs::write(out.join("table1.md"), md).context("writing table1.md")?;
+    md
+}
 
+/// Held-out mean error against node reduction, one line per variant.
+fn table1_chart(out: &Path, rows: &[Table1Row], labels: &[String], levels: &[usize]) -> Result<()> {
     let series: Vec<Series<'_>> = labels
         .iter()
         .enumerate()
@@ -508,7 +539,7 @@ fn write_table1(
                 .filter(|&&lv| rows.iter().any(|r| r.level == lv))
                 .map(|&lv| {
                     let red = rows.iter().find(|r| r.level == lv).map_or(0.0, |r| r.reduction);
-                    (100.0 * red, 100.0 * mean_of(lv, l, &|r| r.held_out_mean))
+                    (100.0 * red, 100.0 * mean_of(rows, lv, l, |r| r.held_out_mean))
                 })
                 .collect(),
             markers: false,

@@ -11,7 +11,9 @@ use clap::{Args, Subcommand, ValueEnum};
 use tracing::info;
 
 use lodcloth::output::{line_chart_svg, render_points_png, Series, PALETTE};
-use lodcloth::points::estimate::{fit, rescaled, restart, score, SurfaceFitOptions, SurfaceReference};
+use lodcloth::points::estimate::{
+    fit, rescaled, restart, score, SurfaceFit, SurfaceFitOptions, SurfaceReference, SurfaceScore,
+};
 use lodcloth::points::generate::{extreme_point, generate, Shape};
 use lodcloth::points::knn::Knn;
 use lodcloth::points::model::{PointModel, Pull, SurfaceParams};
@@ -558,17 +560,7 @@ fn accuracy(a: &ModelArgs, sizes: &[usize], seconds: f64, fps: f64, with_fit: bo
         );
         let mut fit_cols = "0,0,0,1,1,0".to_string();
         if with_fit {
-            let t = Instant::now();
-            let half = frames / 2;
-            let options = SurfaceFitOptions {
-                train: 0..half,
-                ..SurfaceFitOptions::default()
-            };
-            let fitted = fit(&mut model, &reference, &options, &mut |_| {})?;
-            let fit_seconds = t.elapsed().as_secs_f64();
-            let sim = rescaled(&model, fitted.stretch_scale, fitted.bend_scale, f64::INFINITY)?.expect("no bound");
-            let all = score(&mut model, sim.clone(), &reference, 0..frames)?;
-            let held = score(&mut model, sim, &reference, half..frames)?;
+            let (fitted, all, held, fit_seconds) = fit_and_score(&mut model, &reference, frames)?;
             row += &format!(
                 " {:.2}% ({:.2}%) | {:.2}% | {:.2}, {:.2} | {fit_seconds:.1} |",
                 100.0 * all.mean,
@@ -592,44 +584,83 @@ fn accuracy(a: &ModelArgs, sizes: &[usize], seconds: f64, fps: f64, with_fit: bo
         println!("{row}");
     }
     csv.flush()?;
-    let series = |same: Vec<(f64, f64)>, fitted: Vec<(f64, f64)>| {
-        let mut v = vec![Series {
-            name: "same coefficients",
-            points: same,
-            markers: true,
-            color: PALETTE[0],
-        }];
-        if !fitted.is_empty() {
-            v.push(Series {
-                name: "fitted stretch and bend stiffness",
-                points: fitted,
-                markers: true,
-                color: PALETTE[1],
-            });
-        }
-        v
-    };
-    line_chart_svg(
-        &out.join("error_vs_size.svg"),
-        &format!("{} points: error of the simplified simulation", cloud.len()),
-        "simulation points",
-        "mean displacement error (% of max displacement)",
-        &series(same_by_size, fit_by_size),
-        true,
-        true,
-    )?;
-    line_chart_svg(
-        &out.join("error_vs_cost.svg"),
-        &format!("{} points: speed against accuracy", cloud.len()),
-        "wall ms per simulated second (cloud moved every frame)",
-        "mean displacement error (%)",
-        &series(same_by_cost, fit_by_cost),
-        true,
-        true,
-    )?;
+    let points = cloud.len();
+    accuracy_chart(out, "error_vs_size.svg", points, Axis::Size, same_by_size, fit_by_size)?;
+    accuracy_chart(out, "error_vs_cost.svg", points, Axis::Cost, same_by_cost, fit_by_cost)?;
     println!(
         "wrote accuracy.csv, error_vs_size.svg, error_vs_cost.svg in {}",
         out.display()
     );
+    Ok(())
+}
+
+/// Fit a simplified model's stretch and bend stiffness on the first half
+/// of the run; its fit and how it scores on every frame and on the held-out
+/// half, and the fit's wall time (s).
+fn fit_and_score(
+    model: &mut PointModel,
+    reference: &SurfaceReference,
+    frames: usize,
+) -> Result<(SurfaceFit, SurfaceScore, SurfaceScore, f64)> {
+    let t = Instant::now();
+    let half = frames / 2;
+    let options = SurfaceFitOptions {
+        train: 0..half,
+        ..SurfaceFitOptions::default()
+    };
+    let fitted = fit(model, reference, &options, &mut |_| {})?;
+    let fit_seconds = t.elapsed().as_secs_f64();
+    let sim = rescaled(model, fitted.stretch_scale, fitted.bend_scale, f64::INFINITY)?.expect("no bound");
+    let all = score(model, sim.clone(), reference, 0..frames)?;
+    let held = score(model, sim, reference, half..frames)?;
+    Ok((fitted, all, held, fit_seconds))
+}
+
+/// The horizontal axis of an accuracy chart.
+#[derive(Clone, Copy)]
+enum Axis {
+    /// Simulated points.
+    Size,
+    /// Wall ms per simulated second.
+    Cost,
+}
+
+/// Mean error of the simplified simulations against size or cost, with
+/// and without fitted stiffness.
+fn accuracy_chart(
+    out: &Path,
+    file: &str,
+    points: usize,
+    axis: Axis,
+    same: Vec<(f64, f64)>,
+    fitted: Vec<(f64, f64)>,
+) -> Result<()> {
+    let mut series = vec![Series {
+        name: "same coefficients",
+        points: same,
+        markers: true,
+        color: PALETTE[0],
+    }];
+    if !fitted.is_empty() {
+        series.push(Series {
+            name: "fitted stretch and bend stiffness",
+            points: fitted,
+            markers: true,
+            color: PALETTE[1],
+        });
+    }
+    let (title, x_label, y_label) = match axis {
+        Axis::Size => (
+            format!("{points} points: error of the simplified simulation"),
+            "simulation points",
+            "mean displacement error (% of max displacement)",
+        ),
+        Axis::Cost => (
+            format!("{points} points: speed against accuracy"),
+            "wall ms per simulated second (cloud moved every frame)",
+            "mean displacement error (%)",
+        ),
+    };
+    line_chart_svg(&out.join(file), &title, x_label, y_label, &series, true, true)?;
     Ok(())
 }

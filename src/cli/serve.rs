@@ -165,16 +165,9 @@ async fn shutdown_signal() {
 
 pub fn serve(args: ServeArgs) -> Result<()> {
     let mut config = ServiceConfig::load(&args.config)?;
-    if !args.listen.is_empty() {
-        config.zenoh.listen = Some(args.listen);
-    }
-    if !args.connect.is_empty() {
-        config.zenoh.connect = Some(args.connect);
-    }
-    if args.mode.is_some() {
-        config.zenoh.mode = args.mode;
-    }
-    config.check_zenoh("command line")?;
+    config
+        .zenoh
+        .override_with(args.listen, args.connect, args.mode, "command line")?;
     runtime()?.block_on(lodcloth::service::run(config, shutdown_signal()))?;
     Ok(())
 }

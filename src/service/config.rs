@@ -14,6 +14,7 @@ use crate::estimate::{Method, RecordSpec};
 use crate::names;
 use crate::plan::{EstimationPlan, InstanceKind, InstancePlan, Level};
 use crate::points::scene::SurfaceScene;
+use crate::problems::Problems;
 use crate::scene::Scene;
 use crate::sim::Integrator;
 
@@ -270,11 +271,66 @@ fn default_kind() -> String {
 pub struct ServiceConfig {
     pub prefix: String,
     pub cache: PathBuf,
-    pub zenoh: RawZenoh,
+    pub zenoh: ZenohSettings,
     pub engine: EngineSettings,
     pub estimation: EstimationPlan,
     pub instances: Vec<InstancePlan>,
-    pub snapshots: Option<RawSnapshots>,
+    pub snapshots: Option<Snapshots>,
+}
+
+/// `[zenoh]`, validated: made only by [`ServiceConfig::validate`] and
+/// changed only through [`ZenohSettings::override_with`], which checks
+/// again, so it always holds a section that passed validation.
+#[derive(Debug, Clone)]
+pub struct ZenohSettings(RawZenoh);
+
+impl ZenohSettings {
+    /// The section's values (validated).
+    pub fn values(&self) -> &RawZenoh {
+        &self.0
+    }
+
+    /// The command line's endpoints and mode in place of the file's (an
+    /// empty list or `None` keeps the file's), checked again; `origin`
+    /// names them in errors. On error nothing changes.
+    pub fn override_with(
+        &mut self,
+        listen: Vec<String>,
+        connect: Vec<String>,
+        mode: Option<String>,
+        origin: &str,
+    ) -> Result<(), ConfigError> {
+        let mut z = self.0.clone();
+        if !listen.is_empty() {
+            z.listen = Some(listen);
+        }
+        if !connect.is_empty() {
+            z.connect = Some(connect);
+        }
+        if mode.is_some() {
+            z.mode = mode;
+        }
+        let problems = zenoh_problems(&z);
+        if !problems.is_empty() {
+            return Err(ConfigError::Invalid {
+                origin: origin.to_string(),
+                problems,
+            });
+        }
+        self.0 = z;
+        Ok(())
+    }
+}
+
+/// `[snapshots]`, validated.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Snapshots {
+    /// Directory of the snapshot files (`<instance>.snapshot`).
+    pub dir: PathBuf,
+    /// Time between periodic snapshots; `None`: only at shutdown.
+    pub interval: Option<std::time::Duration>,
+    /// Resume from the snapshots at start; false only writes them.
+    pub resume: bool,
 }
 
 /// Smallest grid side of a level.
@@ -314,143 +370,27 @@ impl ServiceConfig {
 
     /// Validate, listing every problem with its path.
     pub fn validate(raw: RawConfig, origin: &str) -> Result<ServiceConfig, ConfigError> {
-        let mut p: Vec<String> = Vec::new();
-        if raw.prefix.is_empty()
-            || !raw
-                .prefix
-                .split('/')
-                .all(|c| !c.is_empty() && c.chars().all(|ch| ch.is_ascii_alphanumeric() || "-_.".contains(ch)))
-        {
-            p.push(format!(
-                "prefix: '{}' must be one or more '/'-separated chunks of letters, digits, '-', '_' or '.'",
-                raw.prefix
-            ));
-        }
+        let mut p = Problems::new();
+        check_prefix(&mut p, &raw.prefix);
         p.extend(zenoh_problems(&raw.zenoh));
-        let e = &raw.engine;
-        if e.max_substeps == 0 {
-            p.push("engine.max_substeps: must be at least 1".into());
-        }
-        if !(e.max_lag > 0.0 && e.max_lag.is_finite()) {
-            p.push(format!("engine.max_lag: {} must be positive and finite", e.max_lag));
-        }
-        for (name, hz) in [("engine.metrics_hz", e.metrics_hz), ("engine.publish_hz", e.publish_hz)] {
-            if !(hz > 0.0 && hz <= 1000.0) {
-                p.push(format!("{name}: {hz} must be in (0, 1000] messages per second"));
-            }
-        }
-        let s = &raw.estimation;
-        // In u128: three frames of a huge stride overflow u64 (and wrapped,
-        // would pass).
-        let three_frames = 3 * u128::from(s.metric_stride.max(1));
-        if u128::from(s.reference_steps) < three_frames {
-            p.push(format!(
-                "estimation.reference_steps: {} must cover at least 3 metric frames ({three_frames} steps)",
-                s.reference_steps,
-            ));
-        }
-        if s.metric_stride == 0 {
-            p.push("estimation.metric_stride: must be at least 1".into());
-        }
-        if s.estimate_stride < 2 {
-            p.push("estimation.estimate_stride: must be at least 2".into());
-        } else if s.estimate_stride > s.reference_steps {
-            p.push(format!(
-                "estimation.estimate_stride: {} is longer than estimation.reference_steps ({}): no estimation \
-                 sample would be recorded",
-                s.estimate_stride, s.reference_steps
-            ));
-        }
-        if s.fit_frames < 2 {
-            p.push("estimation.fit_frames: must be at least 2".into());
-        }
+        check_engine(&mut p, &raw.engine);
+        check_estimation(&mut p, &raw.estimation);
         if raw.instances.is_empty() {
             p.push("instances: at least one instance is needed".into());
         }
         if let Some(snap) = &raw.snapshots {
-            if snap.dir.as_os_str().is_empty() {
-                p.push("snapshots.dir: must name a directory".into());
-            }
-            if !(snap.interval >= 0.0 && snap.interval <= 86_400.0) {
-                p.push(format!(
-                    "snapshots.interval: {} must be in [0, 86400] seconds (0: only at shutdown)",
-                    snap.interval
-                ));
-            }
+            check_snapshots(&mut p, snap);
         }
-        let mut instances = Vec::new();
-        for (i, r) in raw.instances.iter().enumerate() {
-            let at = format!("instances[{i}]");
-            if !valid_instance_name(&r.name) {
-                p.push(format!(
-                    "{at}.name: '{}' must be 1–64 letters, digits, '-' or '_' and not one of {RESERVED:?}",
-                    r.name
-                ));
-            }
-            if raw.instances[..i].iter().any(|o| o.name == r.name) {
-                p.push(format!("{at}.name: '{}' is used by an earlier instance", r.name));
-            }
-            let method = names::parse::<Method>(&r.method)
-                .map_err(|e| p.push(format!("{at}.method: {e}")))
-                .ok();
-            let integrator = r.integrator.as_deref().and_then(|name| {
-                names::parse::<Integrator>(name)
-                    .map_err(|e| p.push(format!("{at}.integrator: {e}")))
-                    .ok()
-            });
-            if let Some(dt) = r.dt {
-                if !(dt > 0.0 && dt.is_finite()) {
-                    p.push(format!("{at}.dt: {dt} must be positive and finite"));
-                }
-            }
-            if let Some(hz) = r.publish_hz {
-                if !(hz > 0.0 && hz <= 1000.0) {
-                    p.push(format!(
-                        "{at}.publish_hz: {hz} must be in (0, 1000] messages per second"
-                    ));
-                }
-            }
-            if r.levels.is_empty() {
-                p.push(format!("{at}.levels: at least one level is needed"));
-            }
-            for (j, l) in r.levels.iter().enumerate() {
-                if r.levels[..j].contains(l) {
-                    p.push(format!("{at}.levels[{j}]: {l} is listed twice"));
-                }
-            }
-            if !r.levels.contains(&r.start) {
-                p.push(format!("{at}.start: {} is not one of the instance's levels", r.start));
-            }
-            let kind = match r.kind.as_str() {
-                "cloth" => cloth_instance(r, &at, &mut p),
-                "surface" => surface_instance(r, &at, &mut p),
-                other => {
-                    p.push(format!("{at}.kind: '{other}' is not one of cloth, surface"));
-                    None
-                }
-            };
-            let (Some((kind, scene_integrator)), Some(method)) = (kind, method) else {
-                continue;
-            };
-            instances.push(InstancePlan {
-                name: r.name.clone(),
-                kind,
-                levels: r.levels.clone(),
-                start: r.start,
-                method,
-                integrator: integrator.unwrap_or(scene_integrator),
-                dt: r.dt,
-                publish_hz: r.publish_hz.unwrap_or(e.publish_hz),
-                shadow_reference: r.shadow_reference,
-                looping: r.looping,
-            });
-        }
-        if !p.is_empty() {
+        let instances: Vec<InstancePlan> = (0..raw.instances.len())
+            .filter_map(|i| instance(&mut p, &raw.instances, i, raw.engine.publish_hz))
+            .collect();
+        if let Err(problems) = p.finish() {
             return Err(ConfigError::Invalid {
                 origin: origin.to_string(),
-                problems: p,
+                problems,
             });
         }
+        let (e, s) = (&raw.engine, &raw.estimation);
         let threads = if e.threads == 0 {
             std::thread::available_parallelism().map_or(1, |n| n.get())
         } else {
@@ -459,8 +399,12 @@ impl ServiceConfig {
         Ok(ServiceConfig {
             prefix: raw.prefix,
             cache: raw.cache,
-            snapshots: raw.snapshots,
-            zenoh: raw.zenoh,
+            snapshots: raw.snapshots.map(|s| Snapshots {
+                dir: s.dir,
+                interval: (s.interval > 0.0).then(|| std::time::Duration::from_secs_f64(s.interval)),
+                resume: s.resume,
+            }),
+            zenoh: ZenohSettings(raw.zenoh),
             engine: EngineSettings {
                 threads,
                 max_substeps: e.max_substeps,
@@ -482,22 +426,9 @@ impl ServiceConfig {
         })
     }
 
-    /// Check the zenoh section again after command-line overrides.
-    pub fn check_zenoh(&self, origin: &str) -> Result<(), ConfigError> {
-        let problems = zenoh_problems(&self.zenoh);
-        if problems.is_empty() {
-            Ok(())
-        } else {
-            Err(ConfigError::Invalid {
-                origin: origin.to_string(),
-                problems,
-            })
-        }
-    }
-
     /// The zenoh session config: the JSON5 file if any, then the overrides.
     pub fn zenoh_config(&self) -> Result<zenoh::Config, ConfigError> {
-        let z = &self.zenoh;
+        let z = &self.zenoh.0;
         let origin = z
             .config_file
             .as_ref()
@@ -546,8 +477,126 @@ impl ServiceConfig {
     }
 }
 
+/// `prefix`: one or more key-expression chunks.
+fn check_prefix(p: &mut Problems, prefix: &str) {
+    let chunk_ok = |c: &str| !c.is_empty() && c.chars().all(|ch| ch.is_ascii_alphanumeric() || "-_.".contains(ch));
+    if prefix.is_empty() || !prefix.split('/').all(chunk_ok) {
+        p.push(format!(
+            "prefix: must be one or more '/'-separated chunks of letters, digits, '-', '_' or '.', got '{prefix}'"
+        ));
+    }
+}
+
+/// `[engine]`: pacing and rates.
+fn check_engine(p: &mut Problems, e: &RawEngine) {
+    p.at_least("engine.max_substeps", e.max_substeps, 1);
+    p.positive("engine.max_lag", e.max_lag);
+    p.in_open_closed("engine.metrics_hz", e.metrics_hz, 0.0, 1000.0, "messages per second");
+    p.in_open_closed("engine.publish_hz", e.publish_hz, 0.0, 1000.0, "messages per second");
+}
+
+/// `[estimation]`: the reference recording and the fit.
+fn check_estimation(p: &mut Problems, s: &RawEstimation) {
+    // In u128: three frames of a huge stride overflow u64 (and wrapped,
+    // would pass).
+    let three_frames = 3 * u128::from(s.metric_stride.max(1));
+    if u128::from(s.reference_steps) < three_frames {
+        p.push(format!(
+            "estimation.reference_steps: {} must cover at least 3 metric frames ({three_frames} steps)",
+            s.reference_steps,
+        ));
+    }
+    p.at_least("estimation.metric_stride", s.metric_stride, 1);
+    if s.estimate_stride < 2 {
+        p.at_least("estimation.estimate_stride", s.estimate_stride, 2);
+    } else if s.estimate_stride > s.reference_steps {
+        p.push(format!(
+            "estimation.estimate_stride: {} is longer than estimation.reference_steps ({}): no estimation \
+             sample would be recorded",
+            s.estimate_stride, s.reference_steps
+        ));
+    }
+    p.at_least("estimation.fit_frames", s.fit_frames, 2);
+}
+
+/// `[snapshots]`: a directory and an interval.
+fn check_snapshots(p: &mut Problems, snap: &RawSnapshots) {
+    if snap.dir.as_os_str().is_empty() {
+        p.push("snapshots.dir: must name a directory".into());
+    }
+    p.in_closed(
+        "snapshots.interval",
+        snap.interval,
+        0.0,
+        86_400.0,
+        "seconds (0: only at shutdown)",
+    );
+}
+
+/// `instances[i]`: its plan, or `None` (with its problems recorded) when
+/// it is invalid.
+fn instance(p: &mut Problems, all: &[RawInstance], i: usize, default_publish_hz: f64) -> Option<InstancePlan> {
+    let r = &all[i];
+    let at = format!("instances[{i}]");
+    if !valid_instance_name(&r.name) {
+        p.push(format!(
+            "{at}.name: must be 1–64 letters, digits, '-' or '_' and not one of {RESERVED:?}, got '{}'",
+            r.name
+        ));
+    }
+    if all[..i].iter().any(|o| o.name == r.name) {
+        p.push(format!("{at}.name: '{}' is used by an earlier instance", r.name));
+    }
+    let method = names::parse::<Method>(&r.method)
+        .map_err(|e| p.push(format!("{at}.method: {e}")))
+        .ok();
+    let integrator = r.integrator.as_deref().and_then(|name| {
+        names::parse::<Integrator>(name)
+            .map_err(|e| p.push(format!("{at}.integrator: {e}")))
+            .ok()
+    });
+    if let Some(dt) = r.dt {
+        p.positive(&format!("{at}.dt"), dt);
+    }
+    if let Some(hz) = r.publish_hz {
+        p.in_open_closed(&format!("{at}.publish_hz"), hz, 0.0, 1000.0, "messages per second");
+    }
+    if r.levels.is_empty() {
+        p.push(format!("{at}.levels: at least one level is needed"));
+    }
+    for (j, l) in r.levels.iter().enumerate() {
+        if r.levels[..j].contains(l) {
+            p.push(format!("{at}.levels[{j}]: {l} is listed twice"));
+        }
+    }
+    if !r.levels.contains(&r.start) {
+        p.push(format!("{at}.start: {} is not one of the instance's levels", r.start));
+    }
+    let kind = match r.kind.as_str() {
+        "cloth" => cloth_instance(r, &at, p),
+        "surface" => surface_instance(r, &at, p),
+        other => {
+            p.push(format!("{at}.kind: '{other}' is not one of cloth, surface"));
+            None
+        }
+    };
+    let ((kind, scene_integrator), method) = (kind?, method?);
+    Some(InstancePlan {
+        name: r.name.clone(),
+        kind,
+        levels: r.levels.clone(),
+        start: r.start,
+        method,
+        integrator: integrator.unwrap_or(scene_integrator),
+        dt: r.dt,
+        publish_hz: r.publish_hz.unwrap_or(default_publish_hz),
+        shadow_reference: r.shadow_reference,
+        looping: r.looping,
+    })
+}
+
 /// The cloth side of an instance: grid levels within the reference.
-fn cloth_instance(r: &RawInstance, at: &str, p: &mut Vec<String>) -> Option<(InstanceKind, Integrator)> {
+fn cloth_instance(r: &RawInstance, at: &str, p: &mut Problems) -> Option<(InstanceKind, Integrator)> {
     let side_ok = |nx: usize, ny: usize| (MIN_SIDE..=MAX_SIDE).contains(&nx) && (MIN_SIDE..=MAX_SIDE).contains(&ny);
     for (j, l) in r.levels.iter().enumerate() {
         match l.grid() {
@@ -596,7 +645,7 @@ fn cloth_instance(r: &RawInstance, at: &str, p: &mut Vec<String>) -> Option<(Ins
 }
 
 /// The surface side of an instance: point-count levels within the cloud.
-fn surface_instance(r: &RawInstance, at: &str, p: &mut Vec<String>) -> Option<(InstanceKind, Integrator)> {
+fn surface_instance(r: &RawInstance, at: &str, p: &mut Problems) -> Option<(InstanceKind, Integrator)> {
     if r.reference.is_some() {
         p.push(format!(
             "{at}.reference: a surface's reference simulates every point of its cloud; remove this field"

@@ -43,5 +43,6 @@ pub mod lod;
 pub mod names;
 pub mod plan;
 pub mod points;
+pub mod problems;
 pub mod scene;
 pub mod sim;

@@ -151,53 +151,155 @@ fn cost(r: &[f64]) -> f64 {
     r.iter().map(|x| x * x).sum()
 }
 
+impl<'a> Objective<'a> {
+    /// The residuals of `options.max_frames` training frames, evenly
+    /// spread over the training range, against the reference mapped onto
+    /// the level.
+    fn new(problem: &'a LodProblem, options: &FitOptions, train: &Range<usize>) -> Objective<'a> {
+        let count = options.max_frames.clamp(1, train.len());
+        let frames: Vec<usize> = (0..count)
+            .map(|i| train.start + ((i + 1) * train.len()) / count - 1)
+            .collect();
+        let n = problem.topology().n_nodes;
+        let targets = frames
+            .iter()
+            .map(|&f| {
+                let mut m = vec![0.0; 3 * n];
+                problem.correlation().map(&problem.reference.frames[f], &mut m);
+                m
+            })
+            .collect();
+        Objective {
+            problem,
+            frames,
+            targets,
+            margin: options.stability_margin,
+            weight: 1.0 / ((count * n) as f64).sqrt(),
+        }
+    }
+
+    /// Normal equations JᵀJ and Jᵀr at `theta` (log-coefficients), the
+    /// Jacobian by finite differences of step `h`, one column per
+    /// coefficient in parallel (a column whose both steps are infeasible
+    /// stays zero).
+    fn normal_equations(
+        &self,
+        theta: &Vector6<f64>,
+        r: &[f64],
+        material_at: &(impl Fn(&Vector6<f64>) -> Material + Sync),
+        h: f64,
+    ) -> (Matrix6<f64>, Vector6<f64>) {
+        let cols: Vec<Option<Vec<f64>>> = (0..6)
+            .into_par_iter()
+            .map(|j| {
+                for step in [h, -h] {
+                    let mut t = *theta;
+                    t[j] += step;
+                    if let Some(rj) = self.residuals(&material_at(&t)) {
+                        return Some(rj.iter().zip(r).map(|(a, b)| (a - b) / step).collect());
+                    }
+                }
+                None
+            })
+            .collect();
+        let mut jtj = Matrix6::<f64>::zeros();
+        let mut jtr = Vector6::<f64>::zeros();
+        for a in 0..6 {
+            let Some(ca) = &cols[a] else { continue };
+            jtr[a] = ca.iter().zip(r).map(|(x, y)| x * y).sum();
+            for b in a..6 {
+                let Some(cb) = &cols[b] else { continue };
+                let v: f64 = ca.iter().zip(cb).map(|(x, y)| x * y).sum();
+                jtj[(a, b)] = v;
+                jtj[(b, a)] = v;
+            }
+        }
+        (jtj, jtr)
+    }
+}
+
+/// Where the fit may start: the given coefficients, or the cheap methods
+/// (`same`, GKD, least squares).
+fn start_candidates(
+    problem: &LodProblem,
+    options: &FitOptions,
+) -> Result<Vec<(&'static str, Material)>, EstimateError> {
+    let mut candidates: Vec<(&'static str, Material)> = Vec::new();
+    if let Some(m) = options.start {
+        candidates.push(("given", m));
+        return Ok(candidates);
+    }
+    candidates.push(("same", problem.reference.material));
+    let mut sim = problem.simulation(problem.reference.material)?;
+    let mut quiet = |_: Progress| {};
+    let obs = inverse::observe(&problem.reference, problem.correlation(), &mut sim, &mut quiet);
+    let gkd = inverse::inverse_estimate(
+        &problem.reference,
+        problem.correlation(),
+        problem.topology(),
+        &obs,
+        Distribution::Gkd,
+        &mut quiet,
+    );
+    candidates.push(("gkd", gkd.material));
+    let lsq = inverse::lsq_estimate(&problem.reference.material, problem.topology(), &obs, &mut quiet);
+    candidates.push(("lsq", lsq.material));
+    Ok(candidates)
+}
+
+/// One accepted Levenberg–Marquardt step: the damping it was taken with,
+/// the new log-coefficients, their cost and residuals.
+type Accepted = (f64, Vector6<f64>, f64, Vec<f64>);
+
+/// Levenberg–Marquardt damping from `mu` upward (two trials at a time, in
+/// parallel) until a step lowers `cost_now`; `None` when none does before
+/// the damping reaches 10⁸. `mu` is left where the search stopped.
+fn damped_step(
+    objective: &Objective<'_>,
+    (jtj, jtr): (Matrix6<f64>, Vector6<f64>),
+    theta: &Vector6<f64>,
+    cost_now: f64,
+    mu: &mut f64,
+    material_at: &(impl Fn(&Vector6<f64>) -> Material + Sync),
+    evaluations: &mut usize,
+) -> Option<Accepted> {
+    while *mu < 1e8 {
+        let trials: Vec<(f64, Vector6<f64>, Option<Vec<f64>>)> = [*mu, 10.0 * *mu]
+            .into_par_iter()
+            .map(|m| {
+                let mut a = jtj;
+                for i in 0..6 {
+                    a[(i, i)] += m * jtj[(i, i)].max(1e-12) + 1e-15;
+                }
+                let delta = a.cholesky().map_or(Vector6::zeros(), |ch| ch.solve(&(-jtr)));
+                // At most a factor e per coefficient per iteration.
+                let delta = delta.map(|d| d.clamp(-1.0, 1.0));
+                let t = theta + delta;
+                (m, t, objective.residuals(&material_at(&t)))
+            })
+            .collect();
+        *evaluations += 2;
+        let best = trials
+            .into_iter()
+            .filter_map(|(m, t, r)| r.map(|r| (m, t, cost(&r), r)))
+            .min_by(|a, b| a.2.total_cmp(&b.2));
+        match best {
+            Some(accepted) if accepted.2 < cost_now => return Some(accepted),
+            _ => *mu *= 100.0,
+        }
+    }
+    None
+}
+
 /// Fit the coarse coefficients of `problem` (see the module docs).
 pub fn fit(problem: &LodProblem, options: &FitOptions, progress: ProgressFn<'_>) -> Result<FitReport, EstimateError> {
     let train = options.train_range(problem.frames());
     problem.check_range(&train)?;
-    let count = options.max_frames.clamp(1, train.len());
-    let frames: Vec<usize> = (0..count)
-        .map(|i| train.start + ((i + 1) * train.len()) / count - 1)
-        .collect();
-    let n = problem.topology().n_nodes;
-    let targets = frames
-        .iter()
-        .map(|&f| {
-            let mut m = vec![0.0; 3 * n];
-            problem.correlation().map(&problem.reference.frames[f], &mut m);
-            m
-        })
-        .collect();
-    let objective = Objective {
-        problem,
-        frames,
-        targets,
-        margin: options.stability_margin,
-        weight: 1.0 / ((count * n) as f64).sqrt(),
-    };
+    let objective = Objective::new(problem, options, &train);
     let mut evaluations = 0;
 
     // Start: the best feasible of the cheap methods (or the given one).
-    let mut candidates: Vec<(&'static str, Material)> = Vec::new();
-    if let Some(m) = options.start {
-        candidates.push(("given", m));
-    } else {
-        candidates.push(("same", problem.reference.material));
-        let mut sim = problem.simulation(problem.reference.material)?;
-        let mut quiet = |_: Progress| {};
-        let obs = inverse::observe(&problem.reference, problem.correlation(), &mut sim, &mut quiet);
-        let gkd = inverse::inverse_estimate(
-            &problem.reference,
-            problem.correlation(),
-            problem.topology(),
-            &obs,
-            Distribution::Gkd,
-            &mut quiet,
-        );
-        candidates.push(("gkd", gkd.material));
-        let lsq = inverse::lsq_estimate(&problem.reference.material, problem.topology(), &obs, &mut quiet);
-        candidates.push(("lsq", lsq.material));
-    }
+    let candidates = start_candidates(problem, options)?;
     let scored: Vec<Option<Vec<f64>>> = candidates.par_iter().map(|(_, m)| objective.residuals(m)).collect();
     evaluations += candidates.len();
     let candidate_rms: Vec<(&'static str, f64)> = candidates
@@ -236,7 +338,6 @@ pub fn fit(problem: &LodProblem, options: &FitOptions, progress: ProgressFn<'_>)
     let mut history = Vec::new();
     let mut stop = "iteration limit";
     let mut iterations = 0;
-    let h = options.fd_step;
     for it in 0..options.max_iterations {
         iterations = it + 1;
         progress(Progress {
@@ -244,76 +345,21 @@ pub fn fit(problem: &LodProblem, options: &FitOptions, progress: ProgressFn<'_>)
             done: it as u64,
             total: options.max_iterations as u64,
         });
-        // Jacobian, one column per coefficient, in parallel.
-        let cols: Vec<Option<Vec<f64>>> = (0..6)
-            .into_par_iter()
-            .map(|j| {
-                for step in [h, -h] {
-                    let mut t = theta;
-                    t[j] += step;
-                    if let Some(rj) = objective.residuals(&material_at(&t)) {
-                        return Some(rj.iter().zip(&r).map(|(a, b)| (a - b) / step).collect());
-                    }
-                }
-                None
-            })
-            .collect();
+        let normal = objective.normal_equations(&theta, &r, &material_at, options.fd_step);
         evaluations += 6;
-        let mut jtj = Matrix6::<f64>::zeros();
-        let mut jtr = Vector6::<f64>::zeros();
-        for a in 0..6 {
-            let Some(ca) = &cols[a] else { continue };
-            jtr[a] = ca.iter().zip(&r).map(|(x, y)| x * y).sum();
-            for b in a..6 {
-                let Some(cb) = &cols[b] else { continue };
-                let v: f64 = ca.iter().zip(cb).map(|(x, y)| x * y).sum();
-                jtj[(a, b)] = v;
-                jtj[(b, a)] = v;
-            }
-        }
-        let mut accepted = false;
-        while mu < 1e8 {
-            let trials: Vec<(f64, Vector6<f64>, Option<Vec<f64>>)> = [mu, 10.0 * mu]
-                .into_par_iter()
-                .map(|m| {
-                    let mut a = jtj;
-                    for i in 0..6 {
-                        a[(i, i)] += m * jtj[(i, i)].max(1e-12) + 1e-15;
-                    }
-                    let delta = a.cholesky().map_or(Vector6::zeros(), |ch| ch.solve(&(-jtr)));
-                    // At most a factor e per coefficient per iteration.
-                    let delta = delta.map(|d| d.clamp(-1.0, 1.0));
-                    let t = theta + delta;
-                    (m, t, objective.residuals(&material_at(&t)))
-                })
-                .collect();
-            evaluations += 2;
-            let best = trials
-                .into_iter()
-                .filter_map(|(m, t, r)| r.map(|r| (m, t, cost(&r), r)))
-                .min_by(|a, b| a.2.total_cmp(&b.2));
-            match best {
-                Some((m, t, ct, rt)) if ct < c => {
-                    let gain = (c - ct) / c;
-                    theta = t;
-                    r = rt;
-                    c = ct;
-                    mu = (m / 3.0).max(1e-7);
-                    accepted = true;
-                    history.push(c.sqrt());
-                    if gain < options.tolerance {
-                        stop = "converged (relative gain below tolerance)";
-                    }
-                    break;
-                }
-                _ => mu *= 100.0,
-            }
-        }
-        if !accepted {
+        let Some((m, t, ct, rt)) = damped_step(&objective, normal, &theta, c, &mut mu, &material_at, &mut evaluations)
+        else {
             stop = "converged (no step lowers the cost)";
             break;
-        }
-        if stop.starts_with("converged") {
+        };
+        let gain = (c - ct) / c;
+        theta = t;
+        r = rt;
+        c = ct;
+        mu = (m / 3.0).max(1e-7);
+        history.push(c.sqrt());
+        if gain < options.tolerance {
+            stop = "converged (relative gain below tolerance)";
             break;
         }
     }

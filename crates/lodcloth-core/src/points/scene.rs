@@ -34,6 +34,7 @@ use super::transfer::{NormalUpdate, TransferOptions};
 use super::{io, normals, PointCloud};
 use crate::hash::fnv1a64;
 use crate::names;
+use crate::problems::Problems;
 use crate::sim::{Integrator, Material, SpringCoeffs, SpringKind};
 
 /// Why a surface scene could not be loaded.
@@ -259,16 +260,15 @@ impl SurfaceScene {
 
     /// Check every field (all problems at once), then load or generate the cloud.
     pub fn validate(raw: RawSurfaceScene, origin: &str, text_hash: u64) -> Result<SurfaceScene, SurfaceSceneError> {
-        let mut p = Vec::new();
-        let mut positive = |name: &str, v: f64| {
-            if !(v > 0.0 && v.is_finite()) {
-                p.push(format!("{name}: {v} must be positive and finite"));
-            }
-        };
-        positive("density", raw.density);
-        positive("duration", raw.duration);
-        positive("frame_hz", raw.frame_hz);
-        positive("size", raw.size);
+        let mut p = Problems::new();
+        for (name, v) in [
+            ("density", raw.density),
+            ("duration", raw.duration),
+            ("frame_hz", raw.frame_hz),
+            ("size", raw.size),
+        ] {
+            p.positive(name, v);
+        }
         for (name, v) in [
             ("stretch[0] (K)", raw.stretch[0]),
             ("stretch[1] (C)", raw.stretch[1]),
@@ -277,42 +277,40 @@ impl SurfaceScene {
             ("drag", raw.drag),
             ("noise", raw.noise),
         ] {
-            if !(v >= 0.0 && v.is_finite()) {
-                p.push(format!("{name}: {v} must be finite and ≥ 0"));
-            }
+            p.non_negative(name, v);
         }
-        if raw.gravity.iter().any(|g| !g.is_finite()) {
-            p.push(format!("gravity: {:?} must be finite", raw.gravity));
+        for (i, g) in raw.gravity.iter().enumerate() {
+            p.finite(&format!("gravity[{i}]"), *g);
         }
-        if raw.pin_below.is_some_and(|z| !z.is_finite()) {
-            p.push("pin_below: must be finite".into());
+        if let Some(z) = raw.pin_below {
+            p.finite("pin_below", z);
         }
         if !(6..=40).contains(&raw.ring_k) {
-            p.push(format!("ring_k: {} must be in 6..=40 (10–20 in the paper)", raw.ring_k));
+            p.push(format!(
+                "ring_k: must be in 6..=40 (10–20 in the paper), got {}",
+                raw.ring_k
+            ));
         }
         let integrator = names::parse::<Integrator>(&raw.integrator)
             .map_err(|e| p.push(format!("integrator: {e}")))
             .ok();
         if raw.duration * raw.frame_hz < 3.0 {
             p.push(format!(
-                "duration × frame_hz = {} frames; at least 3 are needed to measure an error",
+                "duration: duration × frame_hz must give at least 3 frames to measure an error, got {}",
                 raw.duration * raw.frame_hz
             ));
         }
-        if raw.count.is_some_and(|c| c < 4) {
-            p.push("count: a surface needs at least 4 points".into());
+        if let Some(count) = raw.count {
+            p.at_least("count", count, 4);
         }
         for (i, pull) in raw.pulls.iter().enumerate() {
-            if pull.offset.iter().any(|v| !v.is_finite()) {
-                p.push(format!("pulls[{i}].offset: must be finite"));
+            for (k, v) in pull.offset.iter().enumerate() {
+                p.finite(&format!("pulls[{i}].offset[{k}]"), *v);
             }
-            for (name, v) in [("stiffness", pull.stiffness), ("damping", pull.damping)] {
-                if !(v >= 0.0 && v.is_finite()) {
-                    p.push(format!("pulls[{i}].{name}: {v} must be finite and ≥ 0"));
-                }
-            }
-            if pull.release.is_some_and(|t| !(t > 0.0 && t.is_finite())) {
-                p.push(format!("pulls[{i}].release: must be a positive time (s)"));
+            p.non_negative(&format!("pulls[{i}].stiffness"), pull.stiffness);
+            p.non_negative(&format!("pulls[{i}].damping"), pull.damping);
+            if let Some(t) = pull.release {
+                p.positive(&format!("pulls[{i}].release"), t);
             }
             if let PullPoint::Named(n) = &pull.point {
                 if n != "top" && n != "bottom" {
@@ -324,8 +322,8 @@ impl SurfaceScene {
             origin: origin.to_string(),
             problems,
         };
-        if !p.is_empty() {
-            return Err(invalid(p));
+        if let Err(problems) = p.finish() {
+            return Err(invalid(problems));
         }
         let (mut cloud, cloud_hash) = match Shape::from_name(&raw.cloud) {
             Some(shape) => {

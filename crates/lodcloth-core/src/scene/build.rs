@@ -5,8 +5,8 @@
 use std::sync::Arc;
 
 use super::selector::{select, Selector};
-use super::validate::Problems;
 use super::{MassConvention, Scene, SceneError};
+use crate::problems::Problems;
 use crate::sim::{GridShape, Loads, NodeLoad, Pin, Simulation, State, Topology};
 
 impl Scene {
@@ -86,10 +86,10 @@ impl Scene {
     pub fn build_at(&self, nx: usize, ny: usize) -> Result<Simulation, SceneError> {
         let mut p = Problems::default();
         p.grid_size("resolution", nx, ny);
-        if !p.0.is_empty() {
+        if let Err(problems) = p.finish() {
             return Err(SceneError::Invalid {
                 origin: self.origin.clone(),
-                problems: p.0,
+                problems,
             });
         }
         let topology = Arc::new(Topology::grid(self.shape(nx, ny), self.orientation));

@@ -12,6 +12,7 @@ use super::raw::{
 };
 use super::selector::{Edge, Selector};
 use super::{Scene, SceneError, SceneForce, ScenePin};
+use crate::problems::Problems;
 use crate::sim::{
     CgSettings, GridShape, Material, Orientation, PinPath, Profile, SimParams, SpringCoeffs, SpringKind,
     StabilityCheck, StiffnessAdjustment, StrainLimit, Wind,
@@ -32,10 +33,10 @@ impl Scene {
         let forces = p.forces(&raw.forces, &reference);
         let wind = raw.wind.as_ref().map(|w| p.wind(w));
 
-        if !p.0.is_empty() {
+        if let Err(problems) = p.finish() {
             return Err(SceneError::Invalid {
                 origin: origin.to_string(),
-                problems: p.0,
+                problems,
             });
         }
         Ok(Scene {
@@ -87,10 +88,6 @@ fn reference_shape(c: &RawCloth) -> GridShape {
         height: c.height,
     }
 }
-
-/// Problems found while validating, each with its field path.
-#[derive(Default)]
-pub(super) struct Problems(pub(super) Vec<String>);
 
 // Sections of the file, in the order `Scene::validate` checks them.
 impl Problems {
@@ -237,27 +234,9 @@ impl Problems {
     }
 }
 
-// Checks of single values and of the nested forms (profiles, pin paths,
-// selectors) the sections share.
+// Checks of the nested forms (profiles, pin paths, selectors) the
+// sections share; single values are checked by `Problems` itself.
 impl Problems {
-    fn push(&mut self, s: String) {
-        self.0.push(s);
-    }
-    fn finite(&mut self, path: &str, x: f64) {
-        if !x.is_finite() {
-            self.push(format!("{path}: must be a finite number, got {x}"));
-        }
-    }
-    fn positive(&mut self, path: &str, x: f64) {
-        if !(x.is_finite() && x > 0.0) {
-            self.push(format!("{path}: must be positive and finite, got {x}"));
-        }
-    }
-    fn non_negative(&mut self, path: &str, x: f64) {
-        if !(x.is_finite() && x >= 0.0) {
-            self.push(format!("{path}: must be finite and ≥ 0, got {x}"));
-        }
-    }
     /// Nodes per side in 2..=4096; also checks a resolution to build at.
     pub(super) fn grid_size(&mut self, path: &str, nx: usize, ny: usize) {
         for (name, n) in [("nx", nx), ("ny", ny)] {
@@ -268,12 +247,6 @@ impl Problems {
                     "{path}.{name}: {n} nodes per side is above the maximum of 4096"
                 ));
             }
-        }
-    }
-    /// A finite [low, high] with low ≤ high.
-    fn interval(&mut self, path: &str, r: [f64; 2]) {
-        if !(r[0].is_finite() && r[1].is_finite() && r[0] <= r[1]) {
-            self.push(format!("{path}: must be [low, high] with low ≤ high, got {r:?}"));
         }
     }
     /// A time profile: every time finite, a ramp's end after its start.

@@ -1,0 +1,367 @@
+//! Commands on one scene file: simulate it, sweep where each integrator
+//! goes unstable, and inspect a trajectory it wrote.
+
+use std::fs;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use tracing::info;
+
+use crate::progress_bar;
+use lodcloth::experiments::{stability_sweep, StabilityRow, StabilitySweep};
+use lodcloth::output::{
+    line_chart_svg, render_png, report_csv_line, Precision, Series, TrajectoryReader, TrajectoryWriter, PALETTE,
+    REPORT_CSV_HEADER,
+};
+use lodcloth::scene::Scene;
+use lodcloth::sim::{Integrator, Simulation, StabilityCheck, StepReport};
+
+/// `simulate`'s arguments, as parsed.
+pub(crate) struct SimulateArgs {
+    pub(crate) scene: PathBuf,
+    pub(crate) nx: Option<usize>,
+    pub(crate) ny: Option<usize>,
+    pub(crate) integrator: Option<Integrator>,
+    pub(crate) dt: Option<f64>,
+    pub(crate) duration: Option<f64>,
+    pub(crate) out: Option<PathBuf>,
+    pub(crate) fps: f64,
+    pub(crate) precision: Precision,
+    pub(crate) velocities: bool,
+    pub(crate) force_unstable: bool,
+}
+
+/// `simulate`: run a scene (with the command line's overrides) and write
+/// its trajectory, per-frame report, energy chart and final render.
+pub(crate) fn simulate(a: SimulateArgs) -> Result<()> {
+    let scene = with_overrides(&a)?;
+    let (nx, ny) = (a.nx.unwrap_or(scene.nx), a.ny.unwrap_or(scene.ny));
+    let mut sim = scene.build_at(nx, ny)?;
+    let dt = sim.params().dt;
+    let steps = scene.steps();
+    let frame_every = ((1.0 / a.fps / dt).round() as u64).max(1);
+    let out = a.out.unwrap_or_else(|| PathBuf::from("out").join(&scene.name));
+    fs::create_dir_all(&out).with_context(|| format!("cannot create output directory {}", out.display()))?;
+    let modal = *sim.modal();
+    info!(
+        scene = %scene.name, nx, ny, integrator = %sim.params().integrator, dt, steps,
+        springs = sim.topology().spring_count(),
+        omega_max = format_args!("{:.0}", modal.omega_max),
+        dt_limit = format_args!("{:.3e}", sim.dt_limit()),
+        "simulating"
+    );
+
+    let traj_path = out.join("trajectory.lct");
+    let mut traj = TrajectoryWriter::create(
+        &traj_path,
+        sim.topology().n_nodes,
+        Some((nx, ny)),
+        dt,
+        u32::try_from(frame_every).context("frame interval too large")?,
+        a.precision,
+        a.velocities,
+    )?;
+    let csv_path = out.join("report.csv");
+    let mut csv = std::io::BufWriter::new(
+        fs::File::create(&csv_path).with_context(|| format!("cannot create {}", csv_path.display()))?,
+    );
+    writeln!(csv, "{REPORT_CSV_HEADER}")?;
+    traj.write(sim.state())?;
+
+    let bar = progress_bar(steps, "simulating");
+    let mut energy: [Vec<(f64, f64)>; 3] = Default::default();
+    let started = Instant::now();
+    let mut last_log = Instant::now();
+    let mut last = None;
+    let mut first_total = None;
+    for s in 1..=steps {
+        let r = sim.step();
+        last = Some(r);
+        if !r.finite {
+            bar.abandon();
+            traj.finish()?;
+            csv.flush()?;
+            bail!(
+                "the simulation diverged at step {} (t = {:.4} s): a position or velocity became non-finite; \
+                 lower dt (predicted limit {:.3e} s) or use implicit_euler",
+                r.step,
+                r.time,
+                sim.dt_limit()
+            );
+        }
+        if s % frame_every == 0 || s == steps {
+            traj.write(sim.state())?;
+            writeln!(csv, "{}", report_csv_line(&r))?;
+            energy[0].push((r.time, r.kinetic_energy));
+            energy[1].push((r.time, r.elastic_energy));
+            let e0 = *first_total.get_or_insert(r.total_energy());
+            energy[2].push((r.time, r.total_energy() - e0));
+            bar.set_position(s);
+            if bar.is_hidden() && last_log.elapsed().as_secs() >= 5 {
+                info!(step = s, of = steps, "progress {:.0}%", 100.0 * s as f64 / steps as f64);
+                last_log = Instant::now();
+            }
+        }
+    }
+    bar.finish_and_clear();
+    let wall = started.elapsed().as_secs_f64();
+    let header = traj.finish()?;
+    csv.flush()?;
+
+    let pinned: Vec<u32> = sim.loads().pins.iter().map(|p| p.node).collect();
+    let png = out.join("final.png");
+    render_png(&png, sim.topology(), sim.state(), &pinned, 800)?;
+    let svg = out.join("energy.svg");
+    let title = format!(
+        "{} — energy ({}, dt = {:e} s, {}×{})",
+        scene.name,
+        sim.params().integrator,
+        dt,
+        nx,
+        ny
+    );
+    energy_chart(&svg, &title, energy)?;
+    let r = last.context("the run has no step (duration shorter than dt)")?;
+    print_summary(&scene, &sim, &r, (nx, ny), steps, wall);
+    println!("wrote            {} ({} frames)", traj_path.display(), header.n_frames);
+    println!(
+        "                 {}, {}, {}",
+        csv_path.display(),
+        svg.display(),
+        png.display()
+    );
+    Ok(())
+}
+
+/// The scene file with the command line's integrator, dt, duration and
+/// stability overrides.
+fn with_overrides(a: &SimulateArgs) -> Result<Scene> {
+    let mut scene = Scene::load(&a.scene)?;
+    if let Some(i) = a.integrator {
+        scene.params.integrator = i;
+    }
+    if let Some(dt) = a.dt {
+        scene.params.dt = dt;
+    }
+    if let Some(d) = a.duration {
+        if !(d.is_finite() && d > 0.0) {
+            bail!("--duration must be positive, got {d}");
+        }
+        scene.duration = d;
+    }
+    if a.force_unstable {
+        scene.stability = StabilityCheck::Force;
+    }
+    if !(a.fps.is_finite() && a.fps > 0.0) {
+        bail!("--fps must be positive, got {}", a.fps);
+    }
+    Ok(scene)
+}
+
+/// Kinetic, elastic and total-minus-initial energy over time, as an SVG.
+fn energy_chart(svg: &Path, title: &str, energy: [Vec<(f64, f64)>; 3]) -> Result<()> {
+    let [kinetic, elastic, total] = energy;
+    let series = |name, points, color| Series {
+        name,
+        points,
+        markers: false,
+        color,
+    };
+    line_chart_svg(
+        svg,
+        title,
+        "time (s)",
+        "energy (J)",
+        &[
+            series("kinetic", kinetic, PALETTE[0]),
+            series("elastic", elastic, PALETTE[1]),
+            series("total − initial", total, PALETTE[2]),
+        ],
+        false,
+        false,
+    )?;
+    Ok(())
+}
+
+/// What a run was and cost, and where it ended, on stdout.
+fn print_summary(scene: &Scene, sim: &Simulation, r: &StepReport, (nx, ny): (usize, usize), steps: u64, wall: f64) {
+    println!(
+        "scene            {} ({}×{}, {} springs)",
+        scene.name,
+        nx,
+        ny,
+        sim.topology().spring_count()
+    );
+    println!(
+        "integrator       {} at dt = {:e} s (predicted limit {:.3e} s)",
+        sim.params().integrator,
+        sim.params().dt,
+        sim.dt_limit()
+    );
+    println!(
+        "steps            {} ({:.3} s simulated) in {:.3} s wall",
+        steps, r.time, wall
+    );
+    println!(
+        "cost             {:.1} µs/step, real-time factor {:.2}",
+        wall * 1e6 / steps as f64,
+        r.time / wall
+    );
+    println!(
+        "final energy     kinetic {:.4e} J, elastic {:.4e} J, gravity {:.4e} J",
+        r.kinetic_energy, r.elastic_energy, r.gravity_energy
+    );
+    println!(
+        "final max strain structural {:.2}%, shear {:.2}%, bend {:.2}%",
+        100.0 * r.max_strain[0],
+        100.0 * r.max_strain[1],
+        100.0 * r.max_strain[2]
+    );
+}
+
+pub(crate) fn stability(
+    scene_path: &Path,
+    sizes: Vec<usize>,
+    factors: Vec<f64>,
+    steps: u32,
+    bisections: u32,
+    out: &Path,
+) -> Result<()> {
+    let scene = Scene::load(scene_path)?;
+    if sizes.iter().any(|&n| n < 2) {
+        bail!("--sizes: every size must be at least 2");
+    }
+    if factors.iter().any(|f| !(f.is_finite() && *f > 0.0)) {
+        bail!("--factors: every stiffness factor must be positive");
+    }
+    fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
+    let cfg = StabilitySweep {
+        sizes,
+        stiffness_factors: factors,
+        integrators: Integrator::ALL.to_vec(),
+        material: scene.params.material,
+        side: scene.width,
+        areal_density: scene.areal_density,
+        steps,
+        bisections,
+    };
+    let total = cfg.integrators.len() * cfg.sizes.len() * cfg.stiffness_factors.len();
+    let bar = progress_bar(total as u64, "stability sweep");
+    let rows = stability_sweep(&cfg, &mut |done, total| {
+        bar.set_position(done as u64);
+        if bar.is_hidden() {
+            info!("stability sweep: {done}/{total}");
+        }
+    });
+    bar.finish_and_clear();
+
+    let csv_path = out.join("stability.csv");
+    let mut csv = String::from(
+        "integrator,n,stiffness_factor,omega_gershgorin,omega_max,damping_rate,predicted_dt,measured_stable_dt,measured_unstable_dt,measured_over_predicted\n",
+    );
+    println!(
+        "{:<17} {:>4} {:>7} {:>10} {:>12} {:>12} {:>8}",
+        "integrator", "n", "k×", "ω_max", "predicted dt", "measured dt", "ratio"
+    );
+    for r in &rows {
+        // Implicit Euler has no predicted limit: no ratio (NaN in the CSV).
+        let ratio = if r.predicted_dt.is_finite() {
+            r.measured_dt() / r.predicted_dt
+        } else {
+            f64::NAN
+        };
+        csv.push_str(&format!(
+            "{},{},{},{:.6e},{:.6e},{:.6e},{:.6e},{:.6e},{:.6e},{:.4}\n",
+            r.integrator,
+            r.n,
+            r.stiffness_factor,
+            r.omega_gershgorin,
+            r.omega_max,
+            r.damping_rate,
+            r.predicted_dt,
+            r.measured_stable,
+            r.measured_unstable,
+            ratio
+        ));
+        let measured = if r.measured_unstable.is_finite() {
+            format!("{:.3e}", r.measured_dt())
+        } else {
+            format!("≥{:.2e}", r.measured_stable)
+        };
+        println!(
+            "{:<17} {:>4} {:>7} {:>10.0} {:>12.3e} {:>12} {:>8.3}",
+            r.integrator.name(),
+            r.n,
+            r.stiffness_factor,
+            r.omega_max,
+            r.predicted_dt,
+            measured,
+            ratio
+        );
+    }
+    fs::write(&csv_path, csv).with_context(|| format!("cannot write {}", csv_path.display()))?;
+
+    // Chart: measured threshold against ω_max, with each integrator's
+    // prediction as a line (implicit Euler: lower bounds only).
+    let mut series = Vec::new();
+    let names: Vec<String> = Integrator::ALL.iter().map(|i| i.name().to_string()).collect();
+    let pred_names: Vec<String> = names.iter().map(|n| format!("{n} predicted")).collect();
+    for (i, integrator) in Integrator::ALL.iter().enumerate() {
+        let mut of: Vec<&StabilityRow> = rows.iter().filter(|r| r.integrator == *integrator).collect();
+        of.sort_by(|a, b| a.omega_max.total_cmp(&b.omega_max));
+        let color = PALETTE[i];
+        series.push(Series {
+            name: &pred_names[i],
+            points: of.iter().map(|r| (r.omega_max, r.predicted_dt)).collect(),
+            markers: false,
+            color,
+        });
+        series.push(Series {
+            name: &names[i],
+            points: of.iter().map(|r| (r.omega_max, r.measured_dt())).collect(),
+            markers: true,
+            color,
+        });
+    }
+    let svg = out.join("stability.svg");
+    line_chart_svg(
+        &svg,
+        "Largest stable dt: predicted (lines) vs measured (dots)",
+        "ω_max (rad/s)",
+        "dt (s)",
+        &series,
+        true,
+        true,
+    )?;
+    println!("wrote {} and {}", csv_path.display(), svg.display());
+    Ok(())
+}
+
+pub(crate) fn inspect(file: &Path) -> Result<()> {
+    let mut reader = TrajectoryReader::open(file)?;
+    let h = *reader.header();
+    println!("file        {}", file.display());
+    println!("nodes       {} ({}×{})", h.n_nodes, h.nx, h.ny);
+    println!("precision   {:?}, velocities {}", h.precision, h.velocities);
+    println!("dt          {:e} s, a frame every {} steps", h.dt, h.frame_every);
+    println!("frames      {}", h.n_frames);
+    let first = reader.next_frame()?.context("the file has no frame")?;
+    let mut last = first.clone();
+    while let Some(f) = reader.next_frame()? {
+        last = f;
+    }
+    let max_disp = first
+        .positions
+        .iter()
+        .zip(&last.positions)
+        .map(|(a, b)| ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt())
+        .fold(0.0, f64::max);
+    println!(
+        "time        {:.4} s … {:.4} s (steps {} … {})",
+        first.time, last.time, first.step, last.step
+    );
+    println!("largest displacement first → last frame: {max_disp:.4} m");
+    Ok(())
+}

@@ -1,0 +1,267 @@
+//! One instance on its stepping thread: its state, pacing to the wall
+//! clock, and the step itself. Commands, switches, divergence and
+//! publishing are the other stages of the same `impl`, one file each.
+
+use std::sync::mpsc::{Receiver, TryRecvError};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use tokio::sync::watch;
+
+use super::divergence::{CHECKPOINT_INTERVAL, CLEAN_INTERVAL, DIVERGED_STRAIN};
+use super::shadow::Shadow;
+use super::{lock, Command, EngineSettings, HandleParts, InstanceSetup, MetricsFrame, StateFrame, Status};
+use crate::estimate::Method;
+use crate::plan::Level;
+use crate::points::cloud::CloudMap;
+use crate::sim::{Material, Simulation, State, StepReport};
+
+/// One instance on its stepping thread.
+pub(super) struct Runner {
+    pub(super) name: String,
+    pub(super) sim: Simulation,
+    pub(super) cloud: Option<CloudMap>,
+    pub(super) level: Level,
+    pub(super) method: Method,
+    pub(super) material: Material,
+    pub(super) predicted_error: Option<f64>,
+    pub(super) coefficient_version: u32,
+    pub(super) shadow: Option<Shadow>,
+    pub(super) shadow_wanted: bool,
+    pub(super) live_error: Option<f64>,
+    /// The reference's largest displacement, once calibrated.
+    pub(super) o_max: Option<f64>,
+    pub(super) duration: f64,
+    pub(super) looping: bool,
+    pub(super) commands: Receiver<Command>,
+    pub(super) settings: EngineSettings,
+    // Pacing: step `steps_since_origin` is due at origin + steps·dt.
+    pub(super) origin: Instant,
+    pub(super) steps_since_origin: u64,
+    pub(super) paused: bool,
+    pub(super) frames: u64,
+    pub(super) episode: u64,
+    pub(super) overruns: u64,
+    pub(super) lag_resets: u64,
+    pub(super) divergences: u64,
+    // Divergence recovery: a finite state at most CHECKPOINT_INTERVAL of
+    // simulated time old, rolled back to when a step diverges.
+    pub(super) checkpoint: State,
+    pub(super) rollbacks: u64,
+    /// Divergences since the last CLEAN_INTERVAL of clean stepping.
+    pub(super) consecutive_divergences: u32,
+    pub(super) last_divergence_time: f64,
+    pub(super) halted: Option<Arc<str>>,
+    /// Waiting for a [`Command::Restore`]: no steps, no states.
+    pub(super) held: bool,
+    pub(super) last: Option<StepReport>,
+    // Metrics window.
+    pub(super) window_start: Instant,
+    pub(super) window_sim: f64,
+    pub(super) window_steps: u64,
+    pub(super) window_busy: Duration,
+    pub(super) next_publish: Instant,
+    pub(super) publish_every: Duration,
+    pub(super) next_metrics: Instant,
+    pub(super) metrics_every: Duration,
+    pub(super) states: watch::Sender<Option<Arc<StateFrame>>>,
+    pub(super) metrics: watch::Sender<Option<Arc<MetricsFrame>>>,
+    pub(super) transitions: tokio::sync::mpsc::UnboundedSender<Arc<StateFrame>>,
+    pub(super) status: Arc<Mutex<Status>>,
+}
+
+impl Runner {
+    pub(super) fn new(
+        setup: InstanceSetup,
+        commands: Receiver<Command>,
+        settings: EngineSettings,
+    ) -> (Runner, HandleParts) {
+        let now = Instant::now();
+        let (states_tx, states_rx) = watch::channel(None);
+        let (metrics_tx, metrics_rx) = watch::channel(None);
+        let (trans_tx, trans_rx) = tokio::sync::mpsc::unbounded_channel();
+        let material = setup.sim.params().material;
+        let status = Arc::new(Mutex::new(Status {
+            level: setup.level,
+            method: setup.method,
+            material,
+            dt: setup.sim.params().dt,
+            coefficient_version: 1,
+            predicted_error: None,
+            paused: false,
+            halted: None,
+            topology: setup.sim.topology().clone(),
+            pinned: setup.sim.loads().pins.iter().map(|p| p.node).collect(),
+            frame: 0,
+            o_max: None,
+            simulation_points: setup.cloud.as_ref().map(|c| c.kept.clone()),
+            cloud_points: setup.cloud.as_ref().map_or(0, |c| c.cloud_points()),
+        }));
+        let checkpoint = setup.sim.state().clone();
+        let runner = Runner {
+            name: setup.name.clone(),
+            level: setup.level,
+            method: setup.method,
+            material,
+            predicted_error: None,
+            coefficient_version: 1,
+            shadow: None,
+            shadow_wanted: setup.shadow,
+            live_error: None,
+            o_max: None,
+            duration: setup.duration,
+            looping: setup.looping,
+            sim: setup.sim,
+            cloud: setup.cloud,
+            commands,
+            settings,
+            origin: now,
+            steps_since_origin: 0,
+            paused: false,
+            frames: 0,
+            episode: 0,
+            overruns: 0,
+            lag_resets: 0,
+            divergences: 0,
+            checkpoint,
+            rollbacks: 0,
+            consecutive_divergences: 0,
+            last_divergence_time: f64::NEG_INFINITY,
+            halted: None,
+            held: setup.hold,
+            last: None,
+            window_start: now,
+            window_sim: 0.0,
+            window_steps: 0,
+            window_busy: Duration::ZERO,
+            next_publish: now,
+            publish_every: Duration::from_secs_f64(1.0 / setup.publish_hz),
+            next_metrics: now,
+            metrics_every: Duration::from_secs_f64(1.0 / settings.metrics_hz),
+            states: states_tx,
+            metrics: metrics_tx,
+            transitions: trans_tx,
+            status: status.clone(),
+        };
+        let parts = HandleParts {
+            name: setup.name,
+            states: states_rx,
+            metrics: metrics_rx,
+            transitions: trans_rx,
+            status,
+        };
+        (runner, parts)
+    }
+
+    pub(super) fn dt(&self) -> f64 {
+        self.sim.params().dt
+    }
+
+    /// When the next step is due.
+    pub(super) fn next_due(&self) -> Instant {
+        if self.paused || self.held {
+            return self.next_metrics;
+        }
+        self.origin + Duration::from_secs_f64((self.steps_since_origin + 1) as f64 * self.dt())
+    }
+
+    pub(super) fn reanchor(&mut self, now: Instant) {
+        self.origin = now;
+        self.steps_since_origin = 0;
+    }
+
+    /// Apply queued commands.
+    pub(super) fn poll_commands(&mut self) {
+        loop {
+            match self.commands.try_recv() {
+                Ok(c) => self.apply(c),
+                Err(TryRecvError::Empty | TryRecvError::Disconnected) => return,
+            }
+        }
+    }
+
+    pub(super) fn update_status(&self) {
+        let mut s = lock(&self.status);
+        s.level = self.level;
+        s.method = self.method;
+        s.material = self.material;
+        s.dt = self.dt();
+        s.coefficient_version = self.coefficient_version;
+        s.predicted_error = self.predicted_error;
+        s.paused = self.paused;
+        s.halted = self.halted.clone();
+        if !Arc::ptr_eq(&s.topology, self.sim.topology()) {
+            s.topology = self.sim.topology().clone();
+            s.pinned = self.sim.loads().pins.iter().map(|p| p.node).collect();
+            s.simulation_points = self.cloud.as_ref().map(|c| c.kept.clone());
+        }
+        s.frame = self.frames;
+        s.o_max = self.o_max;
+    }
+
+    /// Take the steps due at `now`.
+    pub(super) fn advance(&mut self, now: Instant) {
+        if self.paused || self.held {
+            self.reanchor(now);
+            return;
+        }
+        let dt = self.dt();
+        let elapsed = now.saturating_duration_since(self.origin).as_secs_f64();
+        let mut due = ((elapsed / dt) as u64).saturating_sub(self.steps_since_origin);
+        if due as f64 * dt > self.settings.max_lag {
+            self.lag_resets += 1;
+            tracing::warn!(instance = %self.name, behind_s = due as f64 * dt, "fell behind real time; dropping the backlog");
+            self.reanchor(now);
+            due = 1;
+        }
+        let n = due.min(u64::from(self.settings.max_substeps));
+        if due > n {
+            self.overruns += 1;
+        }
+        if n == 0 {
+            return;
+        }
+        let t0 = Instant::now();
+        for _ in 0..n {
+            self.step_once();
+            if self.paused {
+                break;
+            }
+        }
+        self.window_busy += t0.elapsed();
+        self.window_steps += n;
+        self.window_sim += n as f64 * dt;
+        self.steps_since_origin += n;
+    }
+
+    pub(super) fn step_once(&mut self) {
+        let report = self.sim.step();
+        self.frames += 1;
+        // Non-finite, or finite but absurd (springs at 11× their rest
+        // length: positions soon overflow f32 on the wire).
+        if !report.finite || report.max_strain_overall() > DIVERGED_STRAIN {
+            self.diverged(report.time);
+            return;
+        }
+        self.last = Some(report);
+        if report.time >= self.checkpoint.time + CHECKPOINT_INTERVAL {
+            // In place: no allocation once the buffers have their size.
+            self.checkpoint.clone_from(self.sim.state());
+            if report.time >= self.last_divergence_time + CLEAN_INTERVAL {
+                self.consecutive_divergences = 0;
+            }
+        }
+        if let Some(sh) = self.shadow.as_mut() {
+            // Once per reference metric frame interval, compare with the
+            // reference interpolated linearly to this step's time (frame f
+            // of the recording is at time (f + 1)·interval).
+            let t = report.time;
+            if sh.due(t) {
+                self.live_error = sh.error_at(t, &self.sim.state().pos, self.cloud.as_mut());
+            }
+        }
+        if self.looping && report.time >= self.duration {
+            self.restart();
+        }
+    }
+}

@@ -1,0 +1,71 @@
+//! A level switch: the state carried to the new level, the two transition
+//! states (old level, new level, same instant), the new coefficients.
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use super::runner::Runner;
+use super::shadow::Shadow;
+use super::SwitchOutcome;
+use crate::lod::transfer_state;
+use crate::plan::Prepared;
+use crate::points::cloud::CloudMap;
+use crate::sim::Simulation;
+
+impl Runner {
+    pub(super) fn switch(
+        &mut self,
+        prepared: Arc<Prepared>,
+        mut sim: Simulation,
+        cloud: Option<CloudMap>,
+    ) -> Result<SwitchOutcome, String> {
+        let previous = self.level;
+        let old_topology = self.sim.topology().clone();
+        let before = self.snapshot(true);
+        let state = match (self.cloud.as_mut(), cloud.as_ref()) {
+            (Some(from), Some(to)) => from.carry(self.sim.state(), to),
+            (None, None) => {
+                if Arc::ptr_eq(&old_topology, sim.topology()) || old_topology.n_nodes == sim.topology().n_nodes {
+                    self.sim.state().clone()
+                } else {
+                    transfer_state(&old_topology, self.sim.state(), sim.topology()).map_err(|e| e.to_string())?
+                }
+            }
+            _ => return Err("a switch between a cloth and a surface level".into()),
+        };
+        sim.set_state(state).map_err(|e| e.to_string())?;
+        self.sim = sim;
+        self.checkpoint = self.sim.state().clone();
+        self.consecutive_divergences = 0;
+        if cloud.is_some() {
+            self.cloud = cloud;
+        }
+        self.level = prepared.level;
+        self.method = prepared.method;
+        self.material = prepared.material;
+        self.predicted_error = Some(prepared.predicted_error);
+        self.o_max = Some(prepared.o_max);
+        self.coefficient_version += 1;
+        self.shadow = self
+            .shadow_wanted
+            .then(|| Shadow::new(prepared.clone(), self.sim.topology().n_nodes));
+        self.live_error = None;
+        self.reanchor(Instant::now());
+        self.update_status();
+        let after = self.snapshot(true);
+        let _ = self.transitions.send(Arc::new(before));
+        let after = Arc::new(after);
+        let _ = self.transitions.send(after.clone());
+        self.states.send_replace(Some(after));
+        Ok(SwitchOutcome {
+            previous,
+            level: self.level,
+            method: self.method,
+            material: self.material,
+            predicted_error: self.predicted_error,
+            dt: self.dt(),
+            coefficient_version: self.coefficient_version,
+            frame: self.frames,
+        })
+    }
+}

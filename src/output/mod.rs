@@ -1,0 +1,37 @@
+//! Files a run leaves behind: the binary trajectory (written and read back),
+//! the per-step CSV report, PNG renders of a cloth or a cloud, SVG charts
+//! and error maps. One file per format; they share the camera.
+
+mod camera;
+mod chart;
+mod error_map;
+mod render;
+mod report;
+mod trajectory;
+
+use std::path::Path;
+
+pub use chart::{line_chart_svg, Series, PALETTE};
+pub use error_map::{error_map_svg, heat_color, ClothPanel};
+pub use render::{render_png, render_points_png};
+pub use report::{report_csv_line, REPORT_CSV_HEADER};
+pub use trajectory::{Frame, Precision, TrajectoryHeader, TrajectoryReader, TrajectoryWriter, TRAJECTORY_MAGIC};
+
+/// Errors from reading or writing output files.
+#[derive(Debug, thiserror::Error)]
+pub enum OutputError {
+    #[error("{path}: {source}")]
+    Io { path: String, source: std::io::Error },
+    #[error("{path}: not a trajectory file ({reason})")]
+    Format { path: String, reason: String },
+    #[error("{path}: cannot draw: {reason}")]
+    Draw { path: String, reason: String },
+}
+
+/// Maps an I/O error on `path` to [`OutputError::Io`].
+fn io_err(path: &Path) -> impl Fn(std::io::Error) -> OutputError + '_ {
+    move |source| OutputError::Io {
+        path: path.display().to_string(),
+        source,
+    }
+}

@@ -1,0 +1,148 @@
+//! `switch`: a level (or the cheapest meeting an error bound) prepared and
+//! taken over by the running instance, one at a time per instance with a
+//! bounded queue.
+
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::Arc;
+use std::time::Instant;
+
+use prost::Message;
+use zenoh::query::Query;
+
+use super::{decode, refuse, reply_error, reply_ok, target};
+use crate::estimate::Method;
+use crate::plan::{Level, PrepareError};
+use crate::proto::v1::error::Code;
+use crate::proto::{self, schema, v1, WireLevel};
+use crate::service::prepare::{prepare, switch_to, Ready};
+use crate::service::request::{self, SwitchTarget};
+use crate::service::{keys, Context, Instance, MAX_PENDING_SWITCHES};
+
+/// Holds one of an instance's bounded switch slots (see
+/// [`MAX_PENDING_SWITCHES`]); frees it when dropped.
+struct SwitchSlot<'a>(&'a AtomicUsize);
+
+impl<'a> SwitchSlot<'a> {
+    fn take(pending: &'a AtomicUsize) -> Option<SwitchSlot<'a>> {
+        pending
+            .fetch_update(Ordering::AcqRel, Ordering::Acquire, |n| {
+                (n < MAX_PENDING_SWITCHES).then_some(n + 1)
+            })
+            .ok()
+            .map(|_| SwitchSlot(pending))
+    }
+}
+
+impl Drop for SwitchSlot<'_> {
+    fn drop(&mut self) {
+        self.0.fetch_sub(1, Ordering::AcqRel);
+    }
+}
+
+pub(in crate::service) async fn answer_switch(ctx: Arc<Context>, q: Query) {
+    let arrived = Instant::now();
+    let checked = target(&ctx, &q, "switch").and_then(|inst| {
+        let req: v1::SwitchRequest = decode(&q, schema::SWITCH_REQUEST)?;
+        Ok((inst, request::switch_plan(inst.preparer.plan(), &req)?))
+    });
+    let (inst, plan) = match checked {
+        Ok(c) => c,
+        Err(r) => return refuse(&q, r).await,
+    };
+    // A bounded queue per instance: a flood of switches is refused here,
+    // cheaply, instead of piling up behind the one being applied.
+    let Some(_slot) = SwitchSlot::take(&inst.pending_switches) else {
+        return reply_error(
+            &q,
+            Code::Busy,
+            format!(
+                "{MAX_PENDING_SWITCHES} switches of '{}' are already in progress or waiting; retry when one completes",
+                inst.handle.name
+            ),
+        )
+        .await;
+    };
+    let config = inst.preparer.plan().clone();
+    let method = plan.method;
+    let level = match plan.target {
+        SwitchTarget::Level(level) => level,
+        SwitchTarget::MaxError(bound) => match cheapest_meeting(inst, method, bound).await {
+            Ok(level) => level,
+            Err(message) => return reply_error(&q, Code::NoLevelMeetsError, message).await,
+        },
+    };
+    if *ctx.closing.borrow() {
+        return reply_error(&q, Code::Unavailable, "the daemon is shutting down").await;
+    }
+    let was_ready = inst.preparer.get(level, method).is_some();
+    let _guard = inst.switching.lock().await;
+    let ready = match prepare(inst.preparer.clone(), level, method).await {
+        Ok(p) => p,
+        Err(e) => {
+            let code = match e {
+                PrepareError::Unstable { .. } => Code::Unstable,
+                PrepareError::NotAllowed { .. } => Code::LevelNotAllowed,
+                _ => Code::EstimationFailed,
+            };
+            return reply_error(&q, code, e.to_string()).await;
+        }
+    };
+    let cached = was_ready || ready.prepared.cached;
+    match switch_to(&inst.handle, ready).await {
+        Ok(o) => {
+            tracing::info!(instance = %config.name, from = %o.previous, to = %o.level, %method, "switched");
+            let reply = v1::SwitchReply {
+                instance: config.name.clone(),
+                previous: Some(o.previous.to_wire()),
+                level: Some(o.level.to_wire()),
+                method: o.method.to_string(),
+                coefficients: Some(proto::coefficients(&o.material)),
+                predicted_error: o.predicted_error,
+                dt: o.dt,
+                seconds: arrived.elapsed().as_secs_f64(),
+                cached,
+                coefficient_version: o.coefficient_version,
+                frame: o.frame,
+            };
+            reply_ok(
+                &q,
+                keys::switch(&ctx.prefix, &config.name),
+                schema::SWITCH_REPLY,
+                reply.encode_to_vec(),
+            )
+            .await;
+        }
+        Err(e) => reply_error(&q, Code::Unavailable, e).await,
+    }
+}
+
+/// The coarsest allowed level whose predicted error is at most `bound`:
+/// every level's prediction is needed, so they are prepared cheapest first
+/// until one meets it. Err: why none does (the best one's error).
+async fn cheapest_meeting(inst: &Instance, method: Method, bound: f64) -> Result<Level, String> {
+    let config = inst.preparer.plan();
+    let mut levels = config.levels.clone();
+    levels.sort_by_key(|l| l.nodes());
+    let mut best: Option<(Level, f64)> = None;
+    for l in levels {
+        match prepare(inst.preparer.clone(), l, method).await {
+            Ok(Ready { prepared: p, .. }) => {
+                if p.predicted_error <= bound {
+                    return Ok(l);
+                }
+                if best.is_none_or(|(_, b)| p.predicted_error < b) {
+                    best = Some((l, p.predicted_error));
+                }
+            }
+            Err(err) => tracing::warn!(instance = %config.name, %l, "skipped for max_error: {err}"),
+        }
+    }
+    let best = best.map_or("no level could be prepared".to_string(), |(l, b)| {
+        format!("the best is {l} at {:.2} %", 100.0 * b)
+    });
+    Err(format!(
+        "no allowed level of '{}' has a predicted error ≤ {:.2} %; {best}",
+        config.name,
+        100.0 * bound
+    ))
+}

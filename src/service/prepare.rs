@@ -1,0 +1,105 @@
+//! Levels prepared off the stepping threads and handed to the engine:
+//! the start-up precomputation, and the switch every request ends in.
+
+use std::collections::BTreeMap;
+use std::sync::Arc;
+use std::time::Duration;
+
+use tokio::sync::oneshot;
+
+use super::persist::resume;
+use super::{lower_priority, Context};
+use crate::engine::{Command, InstanceHandle, Snapshot, SwitchOutcome};
+use crate::estimate::Method;
+use crate::plan::{Level, PrepareError, Prepared, Preparer};
+use crate::points::cloud::CloudMap;
+use crate::sim::Simulation;
+
+/// A prepared level with what the stepping thread needs to take it over.
+pub(super) struct Ready {
+    pub(super) prepared: Arc<Prepared>,
+    pub(super) sim: Simulation,
+    pub(super) cloud: Option<CloudMap>,
+}
+
+/// Prepare `level` on a background thread; the new level's simulation (and
+/// a surface's cloud map) is built there too, so the stepping thread only
+/// transfers the state.
+pub(super) async fn prepare(preparer: Arc<Preparer>, level: Level, method: Method) -> Result<Ready, PrepareError> {
+    let (tx, rx) = oneshot::channel();
+    let spawned = std::thread::Builder::new()
+        .name("lodcloth-prepare".into())
+        .spawn(move || {
+            lower_priority();
+            let result = preparer.prepare(level, method).and_then(|prepared| {
+                let sim = prepared.simulation()?;
+                let cloud = prepared.cloud_map();
+                Ok(Ready { prepared, sim, cloud })
+            });
+            let _ = tx.send(result);
+        });
+    let failed = |message: String| PrepareError::Failed { level, method, message };
+    spawned.map_err(|e| failed(format!("cannot start a thread: {e}")))?;
+    rx.await.map_err(|_| failed("the preparation thread stopped".into()))?
+}
+
+/// At start-up: resume the instances that have a snapshot, give every
+/// instance its configured method's coefficients at its start level, then
+/// prepare the other levels.
+pub(super) async fn precompute(ctx: Arc<Context>, all_levels: bool, resumes: BTreeMap<String, Box<Snapshot>>) {
+    resume(ctx.clone(), resumes).await;
+    for inst in ctx.instances.values() {
+        let config = inst.preparer.plan().clone();
+        let level = config.start;
+        // Prepare without holding the switch lock (client switches go on
+        // meanwhile); apply only if nobody has switched the instance since.
+        let prepared = prepare(inst.preparer.clone(), level, config.method).await;
+        let _guard = inst.switching.lock().await;
+        let status = inst.handle.status();
+        if status.level != level || status.coefficient_version != 1 {
+            continue;
+        }
+        match prepared {
+            Ok(ready) => match switch_to(&inst.handle, ready).await {
+                Ok(o) => tracing::info!(
+                    instance = %config.name,
+                    %level,
+                    method = %config.method,
+                    predicted_error = o.predicted_error,
+                    "estimated coefficients live"
+                ),
+                Err(e) => tracing::error!(instance = %config.name, "applying the estimate: {e}"),
+            },
+            Err(e) => tracing::error!(instance = %config.name, "preparing the start level: {e}"),
+        }
+    }
+    if !all_levels {
+        return;
+    }
+    for inst in ctx.instances.values() {
+        let config = inst.preparer.plan().clone();
+        for &level in &config.levels {
+            if let Err(e) = prepare(inst.preparer.clone(), level, config.method).await {
+                tracing::warn!(instance = %config.name, %level, "cannot prepare: {e}");
+            }
+        }
+    }
+    tracing::info!("every configured level is prepared");
+}
+
+pub(super) async fn switch_to(handle: &InstanceHandle, ready: Ready) -> Result<SwitchOutcome, String> {
+    let (tx, rx) = oneshot::channel();
+    handle
+        .send(Command::Switch {
+            prepared: ready.prepared,
+            sim: Box::new(ready.sim),
+            cloud: ready.cloud.map(Box::new),
+            reply: tx,
+        })
+        .map_err(str::to_string)?;
+    match tokio::time::timeout(Duration::from_secs(30), rx).await {
+        Ok(Ok(outcome)) => outcome,
+        Ok(Err(_)) => Err("the engine stopped before the switch".into()),
+        Err(_) => Err("the engine did not apply the switch within 30 s".into()),
+    }
+}
