@@ -260,64 +260,7 @@ impl SurfaceScene {
 
     /// Check every field (all problems at once), then load or generate the cloud.
     pub fn validate(raw: RawSurfaceScene, origin: &str, text_hash: u64) -> Result<SurfaceScene, SurfaceSceneError> {
-        let mut p = Problems::new();
-        for (name, v) in [
-            ("density", raw.density),
-            ("duration", raw.duration),
-            ("frame_hz", raw.frame_hz),
-            ("size", raw.size),
-        ] {
-            p.positive(name, v);
-        }
-        for (name, v) in [
-            ("stretch[0] (K)", raw.stretch[0]),
-            ("stretch[1] (C)", raw.stretch[1]),
-            ("bend[0] (K)", raw.bend[0]),
-            ("bend[1] (C)", raw.bend[1]),
-            ("drag", raw.drag),
-            ("noise", raw.noise),
-        ] {
-            p.non_negative(name, v);
-        }
-        for (i, g) in raw.gravity.iter().enumerate() {
-            p.finite(&format!("gravity[{i}]"), *g);
-        }
-        if let Some(z) = raw.pin_below {
-            p.finite("pin_below", z);
-        }
-        if !(6..=40).contains(&raw.ring_k) {
-            p.push(format!(
-                "ring_k: must be in 6..=40 (10–20 in the paper), got {}",
-                raw.ring_k
-            ));
-        }
-        let integrator = names::parse::<Integrator>(&raw.integrator)
-            .map_err(|e| p.push(format!("integrator: {e}")))
-            .ok();
-        if raw.duration * raw.frame_hz < 3.0 {
-            p.push(format!(
-                "duration: duration × frame_hz must give at least 3 frames to measure an error, got {}",
-                raw.duration * raw.frame_hz
-            ));
-        }
-        if let Some(count) = raw.count {
-            p.at_least("count", count, 4);
-        }
-        for (i, pull) in raw.pulls.iter().enumerate() {
-            for (k, v) in pull.offset.iter().enumerate() {
-                p.finite(&format!("pulls[{i}].offset[{k}]"), *v);
-            }
-            p.non_negative(&format!("pulls[{i}].stiffness"), pull.stiffness);
-            p.non_negative(&format!("pulls[{i}].damping"), pull.damping);
-            if let Some(t) = pull.release {
-                p.positive(&format!("pulls[{i}].release"), t);
-            }
-            if let PullPoint::Named(n) = &pull.point {
-                if n != "top" && n != "bottom" {
-                    p.push(format!("pulls[{i}].point: '{n}' is not top, bottom or a point index"));
-                }
-            }
-        }
+        let (p, integrator) = check_fields(&raw);
         let invalid = |problems| SurfaceSceneError::Invalid {
             origin: origin.to_string(),
             problems,
@@ -325,34 +268,7 @@ impl SurfaceScene {
         if let Err(problems) = p.finish() {
             return Err(invalid(problems));
         }
-        let (mut cloud, cloud_hash) = match Shape::from_name(&raw.cloud) {
-            Some(shape) => {
-                let count = raw.count.unwrap_or(match shape {
-                    Shape::Sphere => 3203,
-                    Shape::Hat => 1600,
-                    Shape::Patch => 2500,
-                });
-                (generate(shape, count, raw.size, raw.noise, raw.seed), 0)
-            }
-            None => {
-                let path = PathBuf::from(&raw.cloud);
-                if raw.count.is_some() || raw.noise != 0.0 {
-                    return Err(invalid(vec![format!(
-                        "count/noise: only for generated shapes (sphere, hat, patch), not the file {}",
-                        raw.cloud
-                    )]));
-                }
-                let bytes = std::fs::read(&path).map_err(|source| SurfaceSceneError::Io {
-                    path: path.display().to_string(),
-                    source,
-                })?;
-                let cloud = io::read(&path).map_err(|source| SurfaceSceneError::Cloud {
-                    origin: origin.to_string(),
-                    source,
-                })?;
-                (cloud, fnv1a64(&bytes))
-            }
-        };
+        let (mut cloud, cloud_hash) = load_cloud(&raw, origin)?;
         if cloud.len() < 4 {
             return Err(invalid(vec![format!(
                 "cloud: a surface needs at least 4 points, {} has {}",
@@ -470,6 +386,106 @@ impl SurfaceScene {
             progress,
         )
     }
+}
+
+/// Every field of a surface scene that can be checked without its cloud
+/// (all problems at once), and its integrator if the name is known.
+fn check_fields(raw: &RawSurfaceScene) -> (Problems, Option<Integrator>) {
+    let mut p = Problems::new();
+    for (name, v) in [
+        ("density", raw.density),
+        ("duration", raw.duration),
+        ("frame_hz", raw.frame_hz),
+        ("size", raw.size),
+    ] {
+        p.positive(name, v);
+    }
+    for (name, v) in [
+        ("stretch[0] (K)", raw.stretch[0]),
+        ("stretch[1] (C)", raw.stretch[1]),
+        ("bend[0] (K)", raw.bend[0]),
+        ("bend[1] (C)", raw.bend[1]),
+        ("drag", raw.drag),
+        ("noise", raw.noise),
+    ] {
+        p.non_negative(name, v);
+    }
+    for (i, g) in raw.gravity.iter().enumerate() {
+        p.finite(&format!("gravity[{i}]"), *g);
+    }
+    if let Some(z) = raw.pin_below {
+        p.finite("pin_below", z);
+    }
+    if !(6..=40).contains(&raw.ring_k) {
+        p.push(format!(
+            "ring_k: must be in 6..=40 (10–20 in the paper), got {}",
+            raw.ring_k
+        ));
+    }
+    let integrator = names::parse::<Integrator>(&raw.integrator)
+        .map_err(|e| p.push(format!("integrator: {e}")))
+        .ok();
+    if raw.duration * raw.frame_hz < 3.0 {
+        p.push(format!(
+            "duration: duration × frame_hz must give at least 3 frames to measure an error, got {}",
+            raw.duration * raw.frame_hz
+        ));
+    }
+    if let Some(count) = raw.count {
+        p.at_least("count", count, 4);
+    }
+    for (i, pull) in raw.pulls.iter().enumerate() {
+        for (k, v) in pull.offset.iter().enumerate() {
+            p.finite(&format!("pulls[{i}].offset[{k}]"), *v);
+        }
+        p.non_negative(&format!("pulls[{i}].stiffness"), pull.stiffness);
+        p.non_negative(&format!("pulls[{i}].damping"), pull.damping);
+        if let Some(t) = pull.release {
+            p.positive(&format!("pulls[{i}].release"), t);
+        }
+        if let PullPoint::Named(n) = &pull.point {
+            if n != "top" && n != "bottom" {
+                p.push(format!("pulls[{i}].point: '{n}' is not top, bottom or a point index"));
+            }
+        }
+    }
+    (p, integrator)
+}
+
+/// The scene's cloud, generated or read from its file, and a hash of the
+/// file's bytes (0 for a generated shape, whose parameters are in the text).
+fn load_cloud(raw: &RawSurfaceScene, origin: &str) -> Result<(PointCloud, u64), SurfaceSceneError> {
+    Ok(match Shape::from_name(&raw.cloud) {
+        Some(shape) => {
+            let count = raw.count.unwrap_or(match shape {
+                Shape::Sphere => 3203,
+                Shape::Hat => 1600,
+                Shape::Patch => 2500,
+            });
+            (generate(shape, count, raw.size, raw.noise, raw.seed), 0)
+        }
+        None => {
+            let path = PathBuf::from(&raw.cloud);
+            if raw.count.is_some() || raw.noise != 0.0 {
+                return Err(SurfaceSceneError::Invalid {
+                    origin: origin.to_string(),
+                    problems: vec![format!(
+                        "count/noise: only for generated shapes (sphere, hat, patch), not the file {}",
+                        raw.cloud
+                    )],
+                });
+            }
+            let bytes = std::fs::read(&path).map_err(|source| SurfaceSceneError::Io {
+                path: path.display().to_string(),
+                source,
+            })?;
+            let cloud = io::read(&path).map_err(|source| SurfaceSceneError::Cloud {
+                origin: origin.to_string(),
+                source,
+            })?;
+            (cloud, fnv1a64(&bytes))
+        }
+    })
 }
 
 #[cfg(test)]
