@@ -1,7 +1,7 @@
 //! Atomic file replacement, the one way lodcloth writes a file that a crash
 //! must never leave torn (coefficient cache entries, instance snapshots).
 //!
-//! [`write`] writes a temporary file unique to this write in the same
+//! [`write()`] writes a temporary file unique to this write in the same
 //! directory (`.<final name>.<pid>.<counter>.tmp`, created exclusively),
 //! `fsync`s it, renames it over the final name (atomic on POSIX file systems)
 //! and `fsync`s the directory. A reader sees the old file or the new one,
@@ -82,7 +82,7 @@ fn create_temp(dir: &Path, file_name: &str) -> Result<(PathBuf, fs::File), FileE
     }
 }
 
-/// Deletes the temporary files in `dir` that [`write`] left for final names
+/// Deletes the temporary files in `dir` that [`write()`] left for final names
 /// ending in `final_suffix` and whose writer is gone: its process no longer
 /// runs (checked on Linux via /proc) or the file is older than
 /// [`STALE_TEMP_AGE`]. Returns how many were removed. Problems with single
@@ -125,7 +125,7 @@ pub fn remove_stale_temp_files(dir: &Path, final_suffix: &str) -> Result<usize, 
     Ok(removed)
 }
 
-/// The writer's pid if `name` is one of [`write`]'s temporary files for a
+/// The writer's pid if `name` is one of [`write()`]'s temporary files for a
 /// final name ending in `final_suffix` (`.<final name>.<pid>.<counter>.tmp`).
 pub fn temp_file_pid(name: &str, final_suffix: &str) -> Option<u32> {
     let stem = name.strip_prefix('.')?.strip_suffix(TEMP_SUFFIX)?;

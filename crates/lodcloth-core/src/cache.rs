@@ -52,10 +52,6 @@
 //! The checksum covers every byte before its line. Floats are written in
 //! Rust's shortest round-trip form, so every `f64` reads back bit for bit.
 
-// Public items predating the core crate are not all documented yet; the
-// crate-wide `missing_docs` lint applies to everything else (issue 18).
-#![allow(missing_docs)]
-
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::fs;
@@ -332,7 +328,10 @@ pub enum Provenance {
     /// No cache file existed; computed and stored.
     Computed,
     /// The cache file was unusable (`reason` says why); computed and stored over it.
-    RecomputedAfterCorrupt { reason: String },
+    RecomputedAfterCorrupt {
+        /// Why the file could not be used.
+        reason: String,
+    },
 }
 
 /// Why the cache could not be read or written.
@@ -343,16 +342,28 @@ pub enum CacheError {
     Io {
         /// What was being done, e.g. "cannot read".
         op: &'static str,
+        /// The file or directory it was done on.
         path: PathBuf,
+        /// What the operating system reported.
         source: io::Error,
     },
     /// A cache file exists but cannot be trusted; recomputing replaces it.
     #[error("coefficient cache file {path} is corrupt: {reason}")]
-    Corrupt { path: PathBuf, reason: String },
+    Corrupt {
+        /// The cache file.
+        path: PathBuf,
+        /// What is wrong with it (checksum, format, key).
+        reason: String,
+    },
     /// An entry was refused before writing (it would be refused on reading),
     /// or a computed entry does not belong to the requested key.
     #[error("coefficient cache: refusing entry for {file_name}: {reason}")]
-    Invalid { file_name: String, reason: String },
+    Invalid {
+        /// The entry's file name in the cache directory.
+        file_name: String,
+        /// Why it was refused.
+        reason: String,
+    },
 }
 
 impl From<FileError> for CacheError {

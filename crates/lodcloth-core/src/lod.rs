@@ -3,7 +3,7 @@
 //!
 //! # Correlation (Sung 2018 §3.2)
 //! Both grids cover the same W×H cloth, so a node is identified by its
-//! material coordinates (u, v) ∈ [0,1]² (`u = i/(nx−1)`, `v = j/(ny−1)`). A
+//! material coordinates (u, v) ∈ \[0,1\]² (`u = i/(nx−1)`, `v = j/(ny−1)`). A
 //! target node is located in the source grid's cell `(i, j) = ⌊(u·(nx−1),
 //! v·(ny−1))⌋` and, inside it, in one of the two triangles of the source's
 //! documented triangulation ([`Topology::grid`]: each quad split along its
@@ -28,10 +28,6 @@
 //! Mapping a fine state to a coarse one gives coarse positions equal to the
 //! "coherent positions" of the error metric: the switch causes no jump there.
 
-// Public items predating the core crate are not all documented yet; the
-// crate-wide `missing_docs` lint applies to everything else (issue 18).
-#![allow(missing_docs)]
-
 use crate::sim::{GridShape, State, Topology};
 
 /// Errors of correlating two cloths.
@@ -39,18 +35,30 @@ use crate::sim::{GridShape, State, Topology};
 pub enum LodError {
     /// Correlation needs the grid structure of both cloths.
     #[error("{which} cloth is not a rectangular grid; barycentric correlation needs both grids")]
-    NotAGrid { which: &'static str },
+    NotAGrid {
+        /// Which side: "source" or "target".
+        which: &'static str,
+    },
     /// The two grids do not describe the same cloth.
     #[error("the grids cover different cloths: {source_w}×{source_h} m vs {target_w}×{target_h} m")]
     DifferentCloth {
+        /// The source cloth's width (m).
         source_w: f64,
+        /// The source cloth's height (m).
         source_h: f64,
+        /// The target cloth's width (m).
         target_w: f64,
+        /// The target cloth's height (m).
         target_h: f64,
     },
     /// A state does not have the node count the correlation expects.
     #[error("state has {got} nodes, the correlation expects {expected}")]
-    SizeMismatch { got: usize, expected: usize },
+    SizeMismatch {
+        /// Nodes in the state given.
+        got: usize,
+        /// Nodes the correlation maps from.
+        expected: usize,
+    },
 }
 
 /// Where one target node lies in the source mesh.

@@ -20,10 +20,6 @@
 //! Held-out data: the fit only ever simulates up to its last training frame;
 //! callers score the result on other frames (or other scenes).
 
-// Public items predating the core crate are not all documented yet; the
-// crate-wide `missing_docs` lint applies to everything else (issue 18).
-#![allow(missing_docs)]
-
 use std::ops::Range;
 
 use nalgebra::{Matrix6, Vector6};
@@ -75,19 +71,25 @@ impl FitOptions {
 /// Outcome of [`fit`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct FitReport {
+    /// The fitted coefficients.
     pub material: Material,
     /// Where it started ("same", "gkd", "lsq" or "given") and the training
     /// RMS error of every start candidate.
     pub start: &'static str,
+    /// Each start candidate's name and training RMS error (infinite when
+    /// unstable at the level's dt).
     pub candidates: Vec<(&'static str, f64)>,
     /// Training RMS error (fraction of O_max) at the start and at the end.
     pub start_rms: f64,
+    /// Training RMS error (fraction of O_max) at the end.
     pub rms: f64,
     /// RMS error after each accepted iteration.
     pub history: Vec<f64>,
+    /// Levenberg–Marquardt iterations taken.
     pub iterations: usize,
     /// Coarse simulations run.
     pub evaluations: usize,
+    /// Why the iterations stopped.
     pub stop: &'static str,
     /// Training frames used.
     pub train: Range<usize>,

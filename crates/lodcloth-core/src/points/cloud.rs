@@ -2,10 +2,6 @@
 //! transfer from the simulated points to every cloud point, and the carry of
 //! a state from one level of a cloud to another at a switch.
 
-// Public items predating the core crate are not all documented yet; the
-// crate-wide `missing_docs` lint applies to everything else (issue 18).
-#![allow(missing_docs)]
-
 use std::sync::Arc;
 
 use crate::points::model::PointModel;
@@ -22,6 +18,7 @@ pub struct CloudMap {
     transfer: Transfer,
     /// The deformed cloud after the last [`CloudMap::update`].
     pub positions: Vec<V3>,
+    /// Unit normals of the deformed cloud, one per point.
     pub normals: Vec<V3>,
     /// Scratch for velocity transfer at a switch.
     scratch: Vec<V3>,

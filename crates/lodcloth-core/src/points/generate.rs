@@ -4,10 +4,6 @@
 //! curved shapes, the R2 low-discrepancy sequence on the patch), so no two
 //! coincide and no four lie exactly on a circle in a regular pattern.
 
-// Public items predating the core crate are not all documented yet; the
-// crate-wide `missing_docs` lint applies to everything else (issue 18).
-#![allow(missing_docs)]
-
 use std::f64::consts::{PI, TAU};
 
 use super::PointCloud;
@@ -25,8 +21,10 @@ pub enum Shape {
 }
 
 impl Shape {
+    /// Every shape, in the order the command line lists them.
     pub const ALL: [Shape; 3] = [Shape::Sphere, Shape::Hat, Shape::Patch];
 
+    /// The shape's name in scene files and on the command line.
     pub const fn name(self) -> &'static str {
         match self {
             Shape::Sphere => "sphere",
@@ -35,6 +33,7 @@ impl Shape {
         }
     }
 
+    /// The shape called `name`, if any.
     pub fn from_name(name: &str) -> Option<Shape> {
         Shape::ALL.into_iter().find(|s| s.name() == name)
     }
@@ -106,6 +105,7 @@ pub fn generate(shape: Shape, count: usize, size: f64, noise: f64, seed: u64) ->
 pub struct SplitMix(pub u64);
 
 impl SplitMix {
+    /// The next 64 random bits.
     pub fn next_u64(&mut self) -> u64 {
         self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
         let mut z = self.0;

@@ -3,10 +3,6 @@
 //! neighbours (Su et al. 2007 §3.1). Both simplification (ring diameter) and
 //! spring building (ring order) use it.
 
-// Public items predating the core crate are not all documented yet; the
-// crate-wide `missing_docs` lint applies to everything else (issue 18).
-#![allow(missing_docs)]
-
 use spade::{DelaunayTriangulation, Point2, Triangulation};
 
 use crate::sim::vec3::{cross, dist, dot, norm, sub, tangent_basis, V3};
@@ -14,9 +10,13 @@ use crate::sim::vec3::{cross, dist, dot, norm, sub, tangent_basis, V3};
 /// Tangent frame at a point: `t1 × t2 = n`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Frame {
+    /// The point the frame is attached to.
     pub origin: V3,
+    /// First unit tangent.
     pub t1: V3,
+    /// Second unit tangent, orthogonal to `t1`.
     pub t2: V3,
+    /// Unit normal.
     pub n: V3,
 }
 

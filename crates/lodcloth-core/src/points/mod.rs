@@ -18,10 +18,6 @@
 //! - [`model`] — the pipeline assembled; [`estimate`] — per-size stiffness fit;
 //!   [`scene`] — surface scene files for the daemon's `surface` instances.
 
-// Public items predating the core crate are not all documented yet; the
-// crate-wide `missing_docs` lint applies to everything else (issue 18).
-#![allow(missing_docs)]
-
 pub mod cloud;
 pub mod estimate;
 pub mod generate;
@@ -40,7 +36,9 @@ use crate::sim::vec3::V3;
 /// A point cloud: positions and, when known, unit normals.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct PointCloud {
+    /// Point positions (m).
     pub positions: Vec<V3>,
+    /// Unit normals, one per point (`None` until estimated or read).
     pub normals: Option<Vec<V3>>,
 }
 

@@ -2,10 +2,6 @@
 //! its simplification, the mass-spring surface on the survivors as an
 //! ordinary [`Simulation`], and the transfer back to every original point.
 
-// Public items predating the core crate are not all documented yet; the
-// crate-wide `missing_docs` lint applies to everything else (issue 18).
-#![allow(missing_docs)]
-
 use std::sync::Arc;
 
 use super::simplify::{simplify, Simplification, SimplifyError, SimplifyOptions};
@@ -31,6 +27,7 @@ pub struct SurfaceParams {
     pub gravity: V3,
     /// Global drag rate (1/s).
     pub drag: f64,
+    /// The integrator.
     pub integrator: Integrator,
     /// Fixed time step; `None` takes `safety` × the predicted stability limit.
     pub dt: Option<f64>,
@@ -76,22 +73,37 @@ pub struct Pull {
 /// What went wrong building a surface model.
 #[derive(Debug, thiserror::Error)]
 pub enum ModelError {
+    /// The cloud has no normals.
     #[error("the point cloud has no normals (estimate them first)")]
     NoNormals,
+    /// Simplification failed.
     #[error("simplification: {0}")]
     Simplify(#[from] SimplifyError),
+    /// The springs on tangent planes could not be built.
     #[error("springs: {0}")]
     Surface(#[from] SurfaceError),
+    /// The simulation refused its parameters.
     #[error("simulation: {0}")]
     Sim(#[from] SimError),
+    /// The MLS transfer could not be built.
     #[error("transfer: {0}")]
     Transfer(#[from] TransferError),
+    /// A pull names a point beyond the cloud.
     #[error("pull on point {point}: the cloud has {points} points")]
-    PullPoint { point: usize, points: usize },
+    PullPoint {
+        /// The point index given.
+        point: usize,
+        /// Points in the cloud.
+        points: usize,
+    },
+    /// A parameter out of its range.
     #[error("surface parameter {name} = {value} is invalid: {reason}")]
     Param {
+        /// The parameter.
         name: &'static str,
+        /// Its value.
         value: f64,
+        /// What it must be.
         reason: &'static str,
     },
 }
@@ -105,11 +117,15 @@ pub struct PointModel {
     pub kept: Vec<u32>,
     /// Simplification statistics (`None` when every point is simulated).
     pub simplification: Option<Simplification>,
+    /// The springs on the simulation points' tangent planes.
     pub surface: Arc<Surface>,
+    /// The simulation of the kept points.
     pub sim: Simulation,
+    /// How the simulated points move the full cloud (MLS).
     pub transfer: Transfer,
     /// The deformed full cloud after the last [`PointModel::update_cloud`].
     pub positions: Vec<V3>,
+    /// Unit normals of the deformed full cloud.
     pub normals: Vec<V3>,
 }
 

@@ -13,10 +13,6 @@
 //! stiffened twice). The triangles are the union of all rings' triangles,
 //! each kept once, oriented as the first ring that had it.
 
-// Public items predating the core crate are not all documented yet; the
-// crate-wide `missing_docs` lint applies to everything else (issue 18).
-#![allow(missing_docs)]
-
 use std::collections::{HashMap, HashSet};
 
 use super::knn::Knn;
@@ -27,12 +23,21 @@ use crate::sim::{SpringGroup, SpringKind, Topology};
 /// Why a surface could not be built.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum SurfaceError {
+    /// Fewer than 4 points.
     #[error("a surface needs at least 4 points, got {0}")]
     TooFew(usize),
+    /// Fewer than 4 neighbours per one-ring.
     #[error("k = {0} neighbours is too few for a one-ring (need at least 4)")]
     FewNeighbours(usize),
+    /// Two points at the same place.
     #[error("point {index} repeats point {other}: two simulation points at the same place")]
-    Duplicate { index: usize, other: usize },
+    Duplicate {
+        /// The later point.
+        index: usize,
+        /// The earlier point at the same place.
+        other: usize,
+    },
+    /// A point whose one-ring has no triangle.
     #[error("point {0} has no triangle in its one-ring (isolated from the rest of the surface)")]
     Isolated(usize),
 }

@@ -117,7 +117,7 @@ impl GridShape {
         self.height / (self.ny - 1) as f64
     }
 
-    /// Material coordinates (u, v) ∈ [0,1]² of node (i, j).
+    /// Material coordinates (u, v) ∈ \[0,1\]² of node (i, j).
     pub fn uv(&self, i: usize, j: usize) -> (f64, f64) {
         (i as f64 / (self.nx - 1) as f64, j as f64 / (self.ny - 1) as f64)
     }

@@ -1,33 +1,34 @@
 //! Small helpers on `[f64; 3]` for geometry outside the hot kernels (which
 //! work on structure-of-arrays slices instead).
 
-// Public items predating the core crate are not all documented yet; the
-// crate-wide `missing_docs` lint applies to everything else (issue 18).
-#![allow(missing_docs)]
-
 /// A 3-vector.
 pub type V3 = [f64; 3];
 
+/// `a + b`.
 #[inline]
 pub fn add(a: V3, b: V3) -> V3 {
     [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
 }
 
+/// `a − b`.
 #[inline]
 pub fn sub(a: V3, b: V3) -> V3 {
     [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
 }
 
+/// `s · a`.
 #[inline]
 pub fn scale(a: V3, s: f64) -> V3 {
     [a[0] * s, a[1] * s, a[2] * s]
 }
 
+/// The dot product `a · b`.
 #[inline]
 pub fn dot(a: V3, b: V3) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
+/// The cross product `a × b` (right-handed).
 #[inline]
 pub fn cross(a: V3, b: V3) -> V3 {
     [
@@ -37,11 +38,13 @@ pub fn cross(a: V3, b: V3) -> V3 {
     ]
 }
 
+/// The Euclidean length `|a|`.
 #[inline]
 pub fn norm(a: V3) -> f64 {
     dot(a, a).sqrt()
 }
 
+/// The Euclidean distance `|a − b|`.
 #[inline]
 pub fn dist(a: V3, b: V3) -> f64 {
     norm(sub(a, b))
