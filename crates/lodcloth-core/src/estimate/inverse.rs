@@ -53,10 +53,6 @@
 //! coefficient is fixed at 1e-3× the reference and the rest re-solved
 //! (reported as `clamped`).
 
-// Public items predating the core crate are not all documented yet; the
-// crate-wide `missing_docs` lint applies to everything else (issue 18).
-#![allow(missing_docs)]
-
 use nalgebra::{Matrix6, Vector6};
 
 use super::reference::Reference;

@@ -3,10 +3,6 @@
 //! `x y z nx ny nz` per line, `#` comments). Every failure names the file
 //! and the line, vertex or property at fault.
 
-// Public items predating the core crate are not all documented yet; the
-// crate-wide `missing_docs` lint applies to everything else (issue 18).
-#![allow(missing_docs)]
-
 use std::io::{BufRead, BufReader, Write};
 use std::path::{Path, PathBuf};
 
@@ -22,16 +18,29 @@ use crate::sim::vec3::{normalize, V3};
 /// A point-cloud file that could not be read or written.
 #[derive(Debug, thiserror::Error)]
 pub enum PointsIoError {
+    /// The file could not be read or written.
     #[error("{path}: {source}")]
     Io {
+        /// The file.
         path: PathBuf,
+        /// What the operating system reported.
         #[source]
         source: std::io::Error,
     },
+    /// The file's contents are not a valid cloud of its format.
     #[error("{path}: {message}")]
-    Invalid { path: PathBuf, message: String },
+    Invalid {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong and where.
+        message: String,
+    },
+    /// The extension names no format this module reads.
     #[error("{path}: unknown point-cloud format (expected .ply, .xyz, .txt or .pts)")]
-    Format { path: PathBuf },
+    Format {
+        /// The file.
+        path: PathBuf,
+    },
 }
 
 fn invalid(path: &Path, message: impl Into<String>) -> PointsIoError {

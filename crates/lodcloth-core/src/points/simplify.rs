@@ -9,10 +9,6 @@
 //! A removal that would break it (the points the candidate covers have no
 //! other survivor that close) is refused and the candidate is kept.
 
-// Public items predating the core crate are not all documented yet; the
-// crate-wide `missing_docs` lint applies to everything else (issue 18).
-#![allow(missing_docs)]
-
 use std::cmp::Reverse;
 use std::collections::BinaryHeap;
 
@@ -45,16 +41,31 @@ impl Default for SimplifyOptions {
 /// Why simplification options were refused.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum SimplifyError {
+    /// Neither a threshold nor a target count.
     #[error("simplification needs a threshold, a target count, or both")]
     NoStop,
+    /// Fewer than 4 neighbours per one-ring.
     #[error("k = {0} neighbours is too few for a one-ring (need at least 4)")]
     FewNeighbours(usize),
+    /// A threshold that is not positive and finite.
     #[error("threshold must be positive and finite, got {0}")]
     Threshold(f64),
+    /// A target count outside 4..=points.
     #[error("target count {target} must be between 4 and the cloud's {points} points")]
-    Target { target: usize, points: usize },
+    Target {
+        /// The target given.
+        target: usize,
+        /// Points in the cloud.
+        points: usize,
+    },
+    /// Not one normal per point.
     #[error("{normals} normals for {points} points")]
-    Normals { normals: usize, points: usize },
+    Normals {
+        /// Normals given.
+        normals: usize,
+        /// Points in the cloud.
+        points: usize,
+    },
 }
 
 /// Result of a simplification.

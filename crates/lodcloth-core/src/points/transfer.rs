@@ -20,10 +20,6 @@
 //! per (point, neighbour): value, ∂/∂x̄ and ∂/∂ȳ. A step is then a sparse
 //! product with no allocation.
 
-// Public items predating the core crate are not all documented yet; the
-// crate-wide `missing_docs` lint applies to everything else (issue 18).
-#![allow(missing_docs)]
-
 use nalgebra::{Matrix4, Vector4};
 
 use super::knn::Knn;
@@ -39,7 +35,10 @@ pub enum NormalUpdate {
     Gradient,
     /// The paper's covariance analysis of the `k` nearest original points
     /// (neighbours fixed at rest), signed to agree with the previous normal.
-    Covariance { k: usize },
+    Covariance {
+        /// Nearest original points in each covariance.
+        k: usize,
+    },
 }
 
 /// Transfer settings.
@@ -48,7 +47,9 @@ pub struct TransferOptions {
     /// The support radius is `support` × the distance to the `neighbours`-th
     /// nearest simulation point; the Gaussian width h is half the radius.
     pub neighbours: usize,
+    /// The support radius's factor (≥ 1; see `neighbours`).
     pub support: f64,
+    /// How the deformed cloud's normals are computed.
     pub normals: NormalUpdate,
 }
 
@@ -65,14 +66,25 @@ impl Default for TransferOptions {
 /// Why a transfer could not be set up.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum TransferError {
+    /// Fewer than 3 simulation points.
     #[error("transfer needs at least 3 simulation points, got {0}")]
     TooFew(usize),
+    /// Not one normal per point.
     #[error("{normals} normals for {points} points")]
-    Normals { normals: usize, points: usize },
+    Normals {
+        /// Normals given.
+        normals: usize,
+        /// Points in the cloud.
+        points: usize,
+    },
+    /// An option out of its range.
     #[error("transfer option {name} = {value} is invalid: {reason}")]
     Option {
+        /// The option.
         name: &'static str,
+        /// Its value.
         value: f64,
+        /// What it must be.
         reason: &'static str,
     },
 }
