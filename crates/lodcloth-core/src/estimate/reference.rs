@@ -17,10 +17,6 @@
 //! Averages over evenly spaced samples estimate the all-frames averages of the
 //! paper without bias. `O_max` is measured at every step.
 
-// Public items predating the core crate are not all documented yet; the
-// crate-wide `missing_docs` lint applies to everything else (issue 18).
-#![allow(missing_docs)]
-
 use std::sync::Arc;
 
 use crate::sim::{Integrator, Material, Simulation, Topology};

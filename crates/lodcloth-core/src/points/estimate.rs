@@ -9,13 +9,10 @@
 //! frame, and taking the mean displacement error over the training frames
 //! normalised by the reference's largest displacement (the cloth metric,
 //! Sung eq. 9, on every original point). The scales are searched in log
-//! space by alternating golden-section line searches; candidates whose dt
+//! space: a grid scan over both, then Nelder–Mead from the best cell;
+//! candidates whose dt
 //! would exceed `max_dt_fraction` of the stability limit are rejected, so a
 //! fit never produces an unstable model. Pure: no I/O, no threads.
-
-// Public items predating the core crate are not all documented yet; the
-// crate-wide `missing_docs` lint applies to everything else (issue 18).
-#![allow(missing_docs)]
 
 use std::sync::Arc;
 
@@ -39,14 +36,29 @@ pub struct SurfaceReference {
 /// Why a reference or a fit failed.
 #[derive(Debug, thiserror::Error)]
 pub enum SurfaceEstimateError {
+    /// The model's dt does not divide the frame interval.
     #[error("the model's dt {dt} s does not divide the frame interval {interval} s")]
-    FrameMismatch { dt: f64, interval: f64 },
+    FrameMismatch {
+        /// The model's time step (s).
+        dt: f64,
+        /// The reference's frame interval (s).
+        interval: f64,
+    },
+    /// The reference became non-finite at this frame.
     #[error("the reference diverged at frame {0}")]
     Diverged(usize),
+    /// The reference never moved.
     #[error("the reference never moved: there is nothing to fit")]
     NoMotion,
+    /// The model and the reference have different clouds.
     #[error("the model has {model} points, the reference {reference}")]
-    Points { model: usize, reference: usize },
+    Points {
+        /// Points the model moves.
+        model: usize,
+        /// Points in the reference.
+        reference: usize,
+    },
+    /// The simulation refused the rescaled coefficients.
     #[error("{0}")]
     Sim(#[from] SimError),
 }
@@ -188,12 +200,15 @@ impl Default for SurfaceFitOptions {
 /// A fitted material.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SurfaceFit {
+    /// The fitted stretch and bend coefficients.
     pub material: Material,
     /// Factors applied to the starting stretch and bend stiffness.
     pub stretch_scale: f64,
+    /// See `stretch_scale`.
     pub bend_scale: f64,
     /// Training error before and after.
     pub before: SurfaceScore,
+    /// See `before`.
     pub after: SurfaceScore,
     /// Simulations run.
     pub evaluations: usize,

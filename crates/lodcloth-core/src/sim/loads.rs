@@ -2,10 +2,6 @@
 //! time profiles, forces on node sets, wind, and pins moving along paths.
 //! The scene module builds these from config for a given resolution.
 
-// Public items predating the core crate are not all documented yet; the
-// crate-wide `missing_docs` lint applies to everything else (issue 18).
-#![allow(missing_docs)]
-
 use std::f64::consts::TAU;
 
 use super::forces::node_normals;
