@@ -132,6 +132,7 @@ pub struct Observation {
     pub time: f64,
     /// Coarse positions and velocities (SoA).
     pub pos: Vec<f64>,
+    /// Coarse velocities (SoA).
     pub vel: Vec<f64>,
     /// `m·a − F_ext` per coarse node (SoA; 0 at pinned nodes).
     pub spring_force: Vec<f64>,
@@ -145,7 +146,9 @@ pub struct Observation {
 /// (pinned nodes carry no information about the springs).
 #[derive(Debug, Clone)]
 pub struct Observations {
+    /// Per coarse node: not pinned.
     pub free: Vec<bool>,
+    /// One observation per reference sample.
     pub samples: Vec<Observation>,
 }
 
@@ -243,6 +246,7 @@ pub struct Rejections {
     pub negative_c: [u64; 3],
     /// Accepted K and C values per type.
     pub accepted_k: [u64; 3],
+    /// See `accepted_k`.
     pub accepted_c: [u64; 3],
 }
 
@@ -258,10 +262,13 @@ pub enum Distribution {
 /// Result of BCD/GKD.
 #[derive(Debug, Clone, PartialEq)]
 pub struct InverseEstimate {
+    /// The estimated coefficients.
     pub material: Material,
+    /// Samples rejected, by reason and spring type.
     pub rejections: Rejections,
     /// Types that had no accepted K (or C) sample and kept the reference's value.
     pub fallback_k: [bool; 3],
+    /// See `fallback_k`.
     pub fallback_c: [bool; 3],
 }
 
@@ -439,6 +446,7 @@ fn mean_rest_lengths(topology: &Topology) -> [f64; 3] {
 /// Result of the global least-squares fit.
 #[derive(Debug, Clone, PartialEq)]
 pub struct LsqEstimate {
+    /// The estimated coefficients.
     pub material: Material,
     /// Condition number of the column-equilibrated normal matrix.
     pub condition: f64,

@@ -14,10 +14,6 @@
 //! - `lsq`: one global least-squares fit of the six coefficients ([`inverse`]);
 //! - `fit`: minimise the simulated displacement error directly ([`fit`]).
 
-// Public items predating the core crate are not all documented yet; the
-// crate-wide `missing_docs` lint applies to everything else (issue 18).
-#![allow(missing_docs)]
-
 pub mod fit;
 pub mod inverse;
 pub mod metric;
@@ -41,7 +37,9 @@ use crate::sim::{Integrator, Loads, Material, SimError, SimParams, Simulation, S
 pub struct Progress {
     /// What is running ("observe", "inverse", "lsq", "fit", "score").
     pub stage: &'static str,
+    /// Units of work done.
     pub done: u64,
+    /// Units of work in the stage.
     pub total: u64,
 }
 
@@ -54,10 +52,16 @@ pub fn no_progress(_: Progress) {}
 /// An estimation method, usable by name everywhere (CLI, config, cache).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Method {
+    /// The reference's per-spring coefficients, unchanged.
     Same,
+    /// The paper's inverse Hooke fit with barycentric shares (eq. 3).
     Bcd,
+    /// The paper's inverse Hooke fit with Gaussian-kernel shares (eqs. 4–6).
     Gkd,
+    /// A global least-squares inverse fit over every observation.
     Lsq,
+    /// Coefficients fitted so the coarse run tracks the reference
+    /// (Levenberg–Marquardt on the eq. 9 residuals).
     Fit,
 }
 
@@ -98,21 +102,51 @@ impl fmt::Display for Method {
 /// Errors of setting up or running an estimation.
 #[derive(Debug, thiserror::Error)]
 pub enum EstimateError {
+    /// The levels could not be correlated.
     #[error(transparent)]
     Lod(#[from] LodError),
+    /// The scene could not be built.
     #[error(transparent)]
     Scene(#[from] SceneError),
+    /// The coarse simulation refused its parameters.
     #[error("coarse cloth {nx}×{ny}: {source}")]
-    Sim { nx: usize, ny: usize, source: SimError },
+    Sim {
+        /// Coarse nodes per row.
+        nx: usize,
+        /// Coarse nodes per column.
+        ny: usize,
+        /// The simulation's reason.
+        source: SimError,
+    },
+    /// The coarse dt does not divide the reference's frame interval.
     #[error(
         "coarse dt {dt} s does not divide the reference's metric frame interval {interval} s; \
          pick dt = interval / k for an integer k"
     )]
-    FrameMismatch { dt: f64, interval: f64 },
+    FrameMismatch {
+        /// The coarse time step (s).
+        dt: f64,
+        /// The reference's metric frame interval (s).
+        interval: f64,
+    },
+    /// A frame range beyond the recording.
     #[error("frame range {start}..{end} is outside the reference's {frames} metric frames")]
-    FrameRange { start: usize, end: usize, frames: usize },
+    FrameRange {
+        /// First frame asked for.
+        start: usize,
+        /// One past the last.
+        end: usize,
+        /// Metric frames recorded.
+        frames: usize,
+    },
+    /// A coarse level below 2×2.
     #[error("the coarse cloth needs at least 2×2 nodes, got {nx}×{ny}")]
-    Resolution { nx: usize, ny: usize },
+    Resolution {
+        /// Nodes per row asked for.
+        nx: usize,
+        /// Nodes per column asked for.
+        ny: usize,
+    },
 }
 
 /// One coarse level to estimate for and score against a reference.
@@ -120,11 +154,17 @@ pub enum EstimateError {
 pub struct LodProblem {
     /// The scene (its params are the reference's).
     pub scene: Scene,
+    /// The recorded fine run.
     pub reference: Arc<Reference>,
+    /// Coarse nodes per row.
     pub nx: usize,
+    /// Coarse nodes per column.
     pub ny: usize,
+    /// How the coarse level's node masses are made.
     pub mass: MassConvention,
+    /// The coarse level's integrator.
     pub integrator: Integrator,
+    /// The coarse level's time step (s).
     pub dt: f64,
     topology: Arc<Topology>,
     correlation: Correlation,
@@ -338,16 +378,23 @@ impl LodProblem {
 /// Coefficients from one method, with its diagnostics.
 #[derive(Debug, Clone)]
 pub struct Estimate {
+    /// The method.
     pub method: Method,
+    /// The coefficients it gave.
     pub material: Material,
+    /// What it reports besides.
     pub details: Details,
 }
 
 /// Method-specific diagnostics.
 #[derive(Debug, Clone)]
 pub enum Details {
+    /// Nothing to report.
     Same,
+    /// BCD or GKD.
     Inverse(InverseEstimate),
+    /// Least squares.
     Lsq(LsqEstimate),
+    /// The fit.
     Fit(FitReport),
 }

@@ -53,7 +53,9 @@ pub struct Sample {
     pub time: f64,
     /// Positions at steps n−s, n, n+s (SoA, f64), s = the difference span.
     pub prev: Vec<f64>,
+    /// Positions at step n.
     pub cur: Vec<f64>,
+    /// Positions at step n+s.
     pub next: Vec<f64>,
 }
 
@@ -68,11 +70,15 @@ pub struct Reference {
     pub material: Material,
     /// Reference integrator and step.
     pub integrator: Integrator,
+    /// The reference's time step (s).
     pub dt: f64,
+    /// What was recorded and how often.
     pub spec: RecordSpec,
     /// Metric frames: `frame_times[f]` and positions `frames[f]` (SoA, f32).
     pub frame_times: Vec<f64>,
+    /// The step count of each metric frame.
     pub frame_steps: Vec<u64>,
+    /// Positions of each metric frame.
     pub frames: Vec<Vec<f32>>,
     /// Estimation samples.
     pub samples: Vec<Sample>,
@@ -85,10 +91,21 @@ pub struct Reference {
 /// Why a reference could not be recorded.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum ReferenceError {
+    /// A position or velocity became non-finite.
     #[error("the reference diverged at step {step} (t = {time:.4} s); lower its dt or check its coefficients")]
-    Diverged { step: u64, time: f64 },
+    Diverged {
+        /// The step.
+        step: u64,
+        /// Its time (s).
+        time: f64,
+    },
+    /// No node moved from rest.
     #[error("the reference never moved from its rest shape (O_max = {o_max}); the relative error is undefined")]
-    NoMotion { o_max: f64 },
+    NoMotion {
+        /// The largest displacement (m).
+        o_max: f64,
+    },
+    /// The record spec is inconsistent (says which field).
     #[error("invalid record spec: {0}")]
     Spec(&'static str),
 }

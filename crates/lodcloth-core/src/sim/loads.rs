@@ -13,14 +13,28 @@ pub enum Profile {
     /// s = 1.
     Constant,
     /// 0 before `start`, rising linearly to 1 at `end`, 1 after.
-    Ramp { start: f64, end: f64 },
+    Ramp {
+        /// When the ramp starts (s).
+        start: f64,
+        /// When it reaches 1 (s).
+        end: f64,
+    },
     /// 1 for `start ≤ t < start + duration`, else 0.
-    Pulse { start: f64, duration: f64 },
+    Pulse {
+        /// When the pulse starts (s).
+        start: f64,
+        /// How long it lasts (s).
+        duration: f64,
+    },
     /// s = offset + amplitude · sin(2π·frequency·t + phase).
     Sine {
+        /// Hz.
         frequency: f64,
+        /// Radians.
         phase: f64,
+        /// Dimensionless.
         amplitude: f64,
+        /// Dimensionless.
         offset: f64,
     },
 }
@@ -120,9 +134,21 @@ pub enum PinPath {
     Fixed,
     /// anchor + velocity·(clamp(t, start, end) − start): moves at constant
     /// velocity during [start, end], at rest before and after.
-    Linear { velocity: [f64; 3], start: f64, end: f64 },
+    Linear {
+        /// Velocity while moving (m/s).
+        velocity: [f64; 3],
+        /// When it starts moving (s).
+        start: f64,
+        /// When it stops (s).
+        end: f64,
+    },
     /// anchor + amplitude · sin(2π·frequency·t): oscillates about the anchor.
-    Sine { amplitude: [f64; 3], frequency: f64 },
+    Sine {
+        /// Largest offset from the anchor along each axis (m).
+        amplitude: [f64; 3],
+        /// Hz.
+        frequency: f64,
+    },
 }
 
 impl PinPath {

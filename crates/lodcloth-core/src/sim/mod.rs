@@ -4,10 +4,6 @@
 //! and returns a [`StepReport`]. Numerical trouble comes back as data
 //! (`report.finite == false`), never as a panic or an error.
 
-// Public items predating the core crate are not all documented yet; the
-// crate-wide `missing_docs` lint applies to everything else (issue 18).
-#![allow(missing_docs)]
-
 mod forces;
 mod implicit;
 mod loads;
@@ -42,27 +38,39 @@ pub enum SimError {
     /// A scalar parameter is out of its valid range.
     #[error("{name} = {value}: {reason}")]
     InvalidParameter {
+        /// The parameter (e.g. `dt`, `masses[12]`).
         name: String,
+        /// Its value.
         value: f64,
+        /// What it must be.
         reason: &'static str,
     },
     /// Array sizes do not match the topology.
     #[error("{what} has {got} entries, the cloth has {expected} nodes")]
     SizeMismatch {
+        /// The array.
         what: &'static str,
+        /// Its length.
         got: usize,
+        /// Nodes in the cloth.
         expected: usize,
     },
     /// A node index is outside the cloth.
     #[error("{what}: node {node} does not exist (the cloth has {n_nodes} nodes)")]
     NodeOutOfRange {
+        /// What names the node (a pin, a force).
         what: &'static str,
+        /// The index given.
         node: u32,
+        /// Nodes in the cloth.
         n_nodes: usize,
     },
     /// A node is pinned twice.
     #[error("node {node} is pinned more than once")]
-    DuplicatePin { node: u32 },
+    DuplicatePin {
+        /// The node.
+        node: u32,
+    },
     /// dt is beyond the predicted stability limit of the integrator.
     #[error(
         "dt = {dt:e} s is beyond the predicted stability limit of {integrator} ({limit:e} s; \
@@ -70,10 +78,15 @@ pub enum SimError {
          lower dt, soften the springs, choose another integrator, or force it"
     )]
     UnstableTimeStep {
+        /// The integrator.
         integrator: Integrator,
+        /// The time step asked for (s).
         dt: f64,
+        /// The predicted largest stable time step (s).
         limit: f64,
+        /// The highest natural frequency of the springs (rad/s).
         omega_max: f64,
+        /// The damping rate of the stiffest mode (1/s).
         damping_rate: f64,
     },
 }
