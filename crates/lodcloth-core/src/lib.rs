@@ -32,6 +32,7 @@
 //! - [`hash`] — FNV-1a, the one hash of file names, checksums and digests.
 //! - [`atomic`] — the one atomic file replacement (cache entries, snapshots).
 //! - [`names`] — the one parser of integrator, method and mass names.
+//! - [`problems`] — the one way input is validated and its problems worded.
 
 #![warn(missing_docs)]
 
