@@ -20,7 +20,7 @@ fn shipped_scenes() -> Vec<PathBuf> {
     files
 }
 
-const RESOLUTIONS: [(usize, usize); 3] = [(16, 16), (40, 40), (100, 37)];
+const RESOLUTIONS: [(usize, usize); 4] = [(16, 16), (40, 40), (100, 37), (7, 5)];
 
 #[test]
 fn every_shipped_scene_parses_validates_and_builds_at_its_own_and_other_resolutions() {
@@ -200,6 +200,18 @@ fn per_node_total_mass_is_proportional_to_the_node_count() {
     }
 }
 
+/// Σ share · rest position over a load's nodes (shares sum to 1).
+fn centre_of_load(sim: &lodcloth::sim::Simulation, load: &lodcloth::sim::NodeLoad) -> [f64; 3] {
+    let mut c = [0.0; 3];
+    for (&k, &w) in load.nodes.iter().zip(&load.shares) {
+        let p = sim.topology().rest_positions[k as usize];
+        for d in 0..3 {
+            c[d] += w * p[d];
+        }
+    }
+    c
+}
+
 #[test]
 fn loads_and_pins_resolve_to_the_same_physical_quantities_at_every_resolution() {
     for path in shipped_scenes() {
@@ -225,6 +237,20 @@ fn loads_and_pins_resolve_to_the_same_physical_quantities_at_every_resolution() 
                     assert!(
                         (g[c] - e[c]).abs() < 1e-12,
                         "{}: {g:?} vs {e:?} at {nx}x{ny}",
+                        path.display()
+                    );
+                }
+            }
+            // Each load acts at the same point of the cloth (its centre of
+            // load in the rest shape) at every resolution: an edge at its
+            // middle, a region at the patch's centre, even where the
+            // patch is smaller than a cell.
+            for (l, r) in sim.loads().forces.iter().zip(&reference.loads().forces) {
+                let (a, b) = (centre_of_load(&sim, l), centre_of_load(&reference, r));
+                for c in 0..3 {
+                    assert!(
+                        (a[c] - b[c]).abs() < 1e-9,
+                        "{}: centre of load {a:?} at {nx}x{ny}, {b:?} at the reference",
                         path.display()
                     );
                 }

@@ -4,7 +4,7 @@
 
 use std::sync::Arc;
 
-use super::selector::{select, Selector};
+use super::selector::{region_load, select, Selector};
 use super::{MassConvention, Scene, SceneError};
 use crate::problems::Problems;
 use crate::sim::{GridShape, Loads, NodeLoad, Pin, Simulation, State, Topology};
@@ -49,6 +49,17 @@ impl Scene {
         }
         let mut forces = Vec::new();
         for (sel, total, profile, name) in &self.forces {
+            // A region is a physical patch: its consistent nodal load, the
+            // same patch at every level (see `region_load`).
+            if let Some(load) = region_load(sel, &shape) {
+                forces.push(NodeLoad {
+                    nodes: load.iter().map(|x| x.0).collect(),
+                    shares: load.iter().map(|x| x.1).collect(),
+                    force: *total,
+                    profile: *profile,
+                });
+                continue;
+            }
             let nodes = select(sel, &shape);
             let area: f64 = nodes.iter().map(|&k| topology.node_areas[k as usize]).sum();
             if nodes.is_empty() {

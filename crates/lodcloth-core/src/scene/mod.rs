@@ -6,8 +6,14 @@
 //! Node sets are given independently of resolution (edges, corners, regions
 //! in material coordinates u, v ∈ [0, 1], or node indices at the scene's own
 //! resolution mapped to the nearest node), so one scene drives every level of
-//! detail. Forces are totals in newtons split over the selected nodes by
-//! their area, so the same physical load acts at every resolution.
+//! detail. Forces are totals in newtons, so the same physical load acts at
+//! every resolution: on a region (a physical patch) as a uniform traction
+//! over the patch, each node carrying the integral of its bilinear
+//! interpolation function over it — the same patch and the same centre of
+//! load at every level, even one so coarse that no node lies inside; on any
+//! other node set split over its nodes by their area. A pin holds the nodes
+//! its selector picks; a pin region that holds no node at a level is an
+//! error naming the pin and the level, never a silent change of constraint.
 //!
 //! # Layout
 //! - `mod.rs` — the validated [`Scene`], reading it from a file or text.

@@ -210,7 +210,9 @@ pub struct RawSelector {
     pub edge: Option<String>,
     /// "top-left", "top-right", "bottom-left" or "bottom-right".
     pub corner: Option<String>,
-    /// Nodes whose material coordinates lie in u ∈ [u0, u1], v ∈ [v0, v1].
+    /// A patch u ∈ [u0, u1], v ∈ [v0, v1]. A pin holds the nodes inside it
+    /// (an error at a level where none is); a force acts on the patch itself
+    /// (nodes share it by their interpolation functions), at every level.
     pub region: Option<RawRegion>,
     /// [i, j] indices at the scene's resolution, mapped to the nearest node at others.
     pub nodes: Option<Vec<[usize; 2]>>,

@@ -19,6 +19,7 @@ pub enum Selector {
     Corner(Edge, Edge),
     /// Nodes whose material coordinates lie in [u0, u1] × [v0, v1], bounds
     /// included with 1e-9 slack; may select no node at a coarse resolution.
+    /// A force on a region loads the patch itself instead (`region_load`).
     Region {
         /// [u0, u1] along the width (dimensionless, 0 = left, 1 = right).
         u: [f64; 2],
@@ -85,4 +86,126 @@ pub(super) fn select(selector: &Selector, shape: &GridShape) -> Vec<u32> {
         }
     }
     out
+}
+
+/// The nodes a force on `selector` loads at `shape`, with each node's share
+/// of the total (shares sum to 1), or `None` when the selector is not a
+/// region (its nodes then share the force by their areas).
+///
+/// A region is a physical patch of the cloth, the same patch at every level:
+/// its force is a uniform traction over the patch, and each node carries
+/// the integral over the patch of its bilinear interpolation function
+/// (the consistent nodal load of finite elements). The shares therefore sum
+/// to 1 and their first moment is exactly the patch's centre at every
+/// resolution, including one so coarse that no node lies inside the patch
+/// (then the nodes around it carry it). A region of zero width along u or v
+/// (a line or a point) is a line or point load, interpolated the same way.
+pub(super) fn region_load(selector: &Selector, shape: &GridShape) -> Option<Vec<(u32, f64)>> {
+    let Selector::Region { u, v } = selector else {
+        return None;
+    };
+    let along_u = hat_weights(u[0], u[1], shape.nx);
+    let along_v = hat_weights(v[0], v[1], shape.ny);
+    let mut out = Vec::with_capacity(along_u.len() * along_v.len());
+    for &(j, wv) in &along_v {
+        for &(i, wu) in &along_u {
+            out.push((shape.node(i, j) as u32, wu * wv));
+        }
+    }
+    Some(out)
+}
+
+/// For nodes at t_k = k/(n−1), k in 0..n: the mean over [a, b] ⊂ [0, 1] of
+/// each node's hat function φ_k(t) = max(0, 1 − |t − t_k|·(n−1)) (its value
+/// at `a` when a = b), for the nodes where it is not zero. The hats are a
+/// partition of unity that reproduces linear functions, so the weights sum
+/// to 1 and their mean node coordinate is (a + b)/2.
+fn hat_weights(a: f64, b: f64, n: usize) -> Vec<(usize, f64)> {
+    let h = 1.0 / (n - 1) as f64;
+    let (a, b) = (a.clamp(0.0, 1.0), b.clamp(0.0, 1.0));
+    let first = ((a / h).floor() as usize).saturating_sub(1);
+    let last = (((b / h).ceil() as usize) + 1).min(n - 1);
+    let mut out = Vec::new();
+    for k in first..=last {
+        let c = k as f64 * h;
+        let w = if b > a {
+            hat_integral(c, h, a, b) / (b - a)
+        } else {
+            (1.0 - (a - c).abs() / h).max(0.0)
+        };
+        if w > 0.0 {
+            out.push((k, w));
+        }
+    }
+    out
+}
+
+/// ∫ over [a, b] of the hat of half-width `h` centred at `c`.
+fn hat_integral(c: f64, h: f64, a: f64, b: f64) -> f64 {
+    // Rising side [c − h, c]: φ = 1 + (t − c)/h; falling side [c, c + h]: φ = 1 − (t − c)/h.
+    let part = |lo: f64, hi: f64, slope: f64| {
+        if hi <= lo {
+            0.0
+        } else {
+            (hi - lo) + slope * ((hi - c).powi(2) - (lo - c).powi(2)) / (2.0 * h)
+        }
+    };
+    part(a.max(c - h), b.min(c), 1.0) + part(a.max(c), b.min(c + h), -1.0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn shape(nx: usize, ny: usize) -> GridShape {
+        GridShape {
+            nx,
+            ny,
+            width: 1.0,
+            height: 1.0,
+        }
+    }
+
+    /// The hat integrals against a midpoint-rule quadrature of the hats
+    /// themselves (an independent computation of the same integral).
+    #[test]
+    fn hat_weights_match_quadrature() {
+        for &(a, b, n) in &[(0.95, 1.0, 64), (0.95, 1.0, 16), (0.0, 0.05, 40), (0.3, 0.71, 7), (0.0, 1.0, 5)] {
+            let h = 1.0 / (n - 1) as f64;
+            let m = 200_000;
+            let mut quad = vec![0.0; n];
+            for s in 0..m {
+                let t = a + (b - a) * (s as f64 + 0.5) / m as f64;
+                for (k, q) in quad.iter_mut().enumerate() {
+                    *q += (1.0 - (t - k as f64 * h).abs() / h).max(0.0) / m as f64;
+                }
+            }
+            let w = hat_weights(a, b, n);
+            for (k, q) in quad.iter().enumerate() {
+                let got = w.iter().find(|x| x.0 == k).map_or(0.0, |x| x.1);
+                assert!((got - q).abs() < 1e-6, "[{a}, {b}] at n = {n}, node {k}: {got} vs {q}");
+            }
+        }
+    }
+
+    #[test]
+    fn a_region_load_sums_to_one_and_is_centred_on_the_region_at_every_resolution() {
+        let region = Selector::Region {
+            u: [0.95, 1.0],
+            v: [0.9, 0.97],
+        };
+        for (nx, ny) in [(64, 64), (40, 40), (16, 16), (40, 24), (100, 37), (7, 5), (2, 2)] {
+            let s = shape(nx, ny);
+            let load = region_load(&region, &s).expect("a region");
+            let total: f64 = load.iter().map(|x| x.1).sum();
+            let (mut cu, mut cv) = (0.0, 0.0);
+            for &(k, w) in &load {
+                let (u, v) = s.uv(k as usize % nx, k as usize / nx);
+                cu += w * u;
+                cv += w * v;
+            }
+            assert!((total - 1.0).abs() < 1e-12, "{nx}x{ny}: shares sum to {total}");
+            assert!((cu - 0.975).abs() < 1e-12 && (cv - 0.935).abs() < 1e-12, "{nx}x{ny}: centre ({cu}, {cv})");
+        }
+    }
 }
