@@ -17,7 +17,7 @@ use lodcloth::experiments::lod::{
     generalisation, lod_plan, pareto, switch_test, table1_scene, Table1Options, Table1Row, TABLE1_VARIANTS,
 };
 use lodcloth::output::{error_map_svg, line_chart_svg, ClothPanel, Series, PALETTE};
-use lodcloth::plan::{default_problem, record_reference, Estimator};
+use lodcloth::plan::{default_problem, record_reference, Estimator, GridLevel};
 use lodcloth::scene::{MassConvention, Scene};
 use lodcloth::sim::Integrator;
 
@@ -55,9 +55,10 @@ pub struct Common {
     /// Steps between the positions a sample differences (1 = consecutive, the paper's).
     #[arg(long, default_value_t = 1)]
     difference_span: u64,
-    /// Reference resolution (square; default: each scene's own).
+    /// Reference resolution, as for levels: N (along the longer side, the
+    /// aspect ratio kept) or NXxNY (default: each scene's own).
     #[arg(long)]
-    reference: Option<usize>,
+    reference: Option<GridLevel>,
     /// Training frames of `fit` (evenly spaced) and its iteration limit.
     #[arg(long, default_value_t = 120)]
     fit_frames: usize,
@@ -83,7 +84,7 @@ pub struct Common {
 impl Common {
     fn apply_quick(&mut self) {
         if self.quick {
-            self.reference = Some(self.reference.unwrap_or(24));
+            self.reference = Some(self.reference.unwrap_or(GridLevel::Long(24)));
             self.frames = 15_000;
             self.metric_stride = 25;
             self.estimate_stride = 50;
@@ -102,9 +103,8 @@ impl Common {
             .iter()
             .map(|p| {
                 let mut s = Scene::load(p).with_context(|| format!("loading scene {}", p.display()))?;
-                if let Some(n) = self.reference {
-                    s.nx = n;
-                    s.ny = n;
+                if let Some(level) = self.reference {
+                    (s.nx, s.ny) = level.resolve(s.width, s.height);
                 }
                 Ok(s)
             })
@@ -175,17 +175,19 @@ pub enum Experiment {
     Table1 {
         #[command(flatten)]
         common: Common,
-        /// Coarse levels (square).
+        /// Coarse levels: N (N nodes along the longer side, the cloth's
+        /// aspect ratio kept) or NXxNY, e.g. `48,40` or `40x24,30x18`.
         #[arg(long, value_delimiter = ',')]
-        levels: Vec<usize>,
+        levels: Vec<GridLevel>,
     },
     /// Speed against accuracy for (level, method, integrator, dt), with the
     /// Pareto front marked.
     Pareto {
         #[command(flatten)]
         common: Common,
+        /// Levels, as for `table1`.
         #[arg(long, value_delimiter = ',')]
-        levels: Vec<usize>,
+        levels: Vec<GridLevel>,
         /// Methods compared.
         #[arg(long, value_delimiter = ',', default_values_t = vec!["same".to_string(), "lsq".to_string(), "fit".to_string()])]
         methods: Vec<String>,
@@ -202,24 +204,26 @@ pub enum Experiment {
         /// Largest acceptable mean error, in percent.
         #[arg(long)]
         max_error: f64,
+        /// Levels tried, as for `table1` (those not coarser than the reference are skipped).
         #[arg(long, value_delimiter = ',')]
-        levels: Vec<usize>,
+        levels: Vec<GridLevel>,
     },
     /// Fit on one scene, score on the others; fit on the first 10 % of the
     /// frames vs on all of them.
     Generalise {
         #[command(flatten)]
         common: Common,
-        #[arg(long, default_value_t = 40)]
-        level: usize,
+        /// Level, as for `table1`.
+        #[arg(long, default_value_t = GridLevel::Long(40))]
+        level: GridLevel,
     },
     /// Switch reference ↔ a coarse level mid-run and measure the jump.
     SwitchTest {
         #[command(flatten)]
         common: Common,
-        /// Coarse level.
-        #[arg(long, default_value_t = 40)]
-        level: usize,
+        /// Coarse level, as for `table1`.
+        #[arg(long, default_value_t = GridLevel::Long(40))]
+        level: GridLevel,
         /// Method giving the coarse coefficients.
         #[arg(long, default_value = "fit")]
         method: String,
@@ -238,9 +242,9 @@ pub fn run(experiment: Experiment) -> Result<()> {
             let levels = if !levels.is_empty() {
                 levels
             } else if common.quick {
-                vec![16, 12]
+                longs(&[16, 12])
             } else {
-                vec![60, 56, 52, 48, 44, 40, 32, 24, 16]
+                longs(&[60, 56, 52, 48, 44, 40, 32, 24, 16])
             };
             table1(&common, &levels)
         }
@@ -254,9 +258,9 @@ pub fn run(experiment: Experiment) -> Result<()> {
             let levels = if !levels.is_empty() {
                 levels
             } else if common.quick {
-                vec![24, 16, 12]
+                longs(&[24, 16, 12])
             } else {
-                vec![64, 48, 40, 32, 24]
+                longs(&[64, 48, 40, 32, 24])
             };
             let methods = methods
                 .iter()
@@ -274,7 +278,7 @@ pub fn run(experiment: Experiment) -> Result<()> {
                 bail!("--max-error must be a positive percentage, got {max_error}");
             }
             let levels = if levels.is_empty() {
-                vec![8, 12, 16, 24, 32, 40, 44, 48, 52, 56, 60]
+                longs(&[8, 12, 16, 24, 32, 40, 44, 48, 52, 56, 60])
             } else {
                 levels
             };
@@ -298,6 +302,17 @@ pub fn run(experiment: Experiment) -> Result<()> {
     }
 }
 
+/// Window of the short-horizon measure (s): the level restarts from the
+/// reference's state this often (0.25 s, as issue 19 proposes: a quarter of
+/// the pull's swing, long enough for a coarse level's own dynamics to show).
+const SHORT_WINDOW: f64 = 0.25;
+
+/// Default level chains: N nodes along each scene's longer side, so every
+/// level keeps the cloth's aspect ratio.
+fn longs(sides: &[usize]) -> Vec<GridLevel> {
+    sides.iter().map(|&n| GridLevel::Long(n)).collect()
+}
+
 fn log_line(line: String) {
     info!("{line}");
 }
@@ -318,13 +333,13 @@ fn reference_for(scene: &Scene, spec: RecordSpec) -> Result<(Arc<Reference>, f64
     Ok((reference, cost))
 }
 
-fn table1(common: &Common, levels: &[usize]) -> Result<()> {
+fn table1(common: &Common, levels: &[GridLevel]) -> Result<()> {
     let out = common.out("out/table1")?;
     let spec = common.spec()?;
     let scenes = common.scenes()?;
     let frames = (spec.frames / spec.metric_stride) as usize;
-    let map_level = if levels.contains(&48) {
-        48
+    let map_level = if levels.contains(&GridLevel::Long(48)) {
+        GridLevel::Long(48)
     } else {
         levels[levels.len() / 2]
     };
@@ -335,6 +350,7 @@ fn table1(common: &Common, levels: &[usize]) -> Result<()> {
         fit: common.fit(frames)?,
         dt_margin: 0.75,
         map_level,
+        short_window: SHORT_WINDOW,
     };
     let started = Instant::now();
     let estimator = common.estimator()?;
@@ -360,7 +376,7 @@ fn write_table1(
     out: &Path,
     rows: &[Table1Row],
     ref_costs: &[(String, f64)],
-    levels: &[usize],
+    levels: &[GridLevel],
     scenes: &[Scene],
     common: &Common,
 ) -> Result<()> {
@@ -375,15 +391,15 @@ fn write_table1(
 /// Every row of Table 1, one line each.
 fn table1_csv(rows: &[Table1Row]) -> String {
     let mut csv = String::from(
-        "scene,level,nodes,reduction,variant,method,mass,k_structural,k_shear,k_bend,c_structural,c_shear,c_bend,dt,dt_over_limit,mean,held_out_mean,p95,max,first_quarter,last_quarter,worst_time,worst_frame_mean,estimate_s,cost_s_per_s,diverged,notes\n",
+        "scene,level,nodes,reduction,variant,method,mass,k_structural,k_shear,k_bend,c_structural,c_shear,c_bend,dt,dt_over_limit,mean,held_out_mean,short_held_out_mean,p95,max,first_quarter,last_quarter,worst_time,worst_frame_mean,estimate_s,cost_s_per_s,diverged,notes\n",
     );
     for r in rows {
         let m = r.material.springs;
         let _ = writeln!(
             csv,
-            "{},{},{},{:.4},{},{},{},{},{},{},{},{},{},{:e},{:.3},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.4},{:.6},{:.2},{:.4},{},\"{}\"",
+            "{},{},{},{:.4},{},{},{},{},{},{},{},{},{},{:e},{:.3},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.4},{:.6},{:.2},{:.4},{},\"{}\"",
             r.scene,
-            r.level,
+            format_args!("{}x{}", r.nx, r.ny),
             r.nodes,
             r.reduction,
             r.variant.label(),
@@ -399,6 +415,7 @@ fn table1_csv(rows: &[Table1Row]) -> String {
             r.dt_ratio,
             r.all.mean,
             r.held_out_mean,
+            r.short_held_out_mean,
             r.all.p95,
             r.all.max,
             r.all.first_quarter,
@@ -415,7 +432,7 @@ fn table1_csv(rows: &[Table1Row]) -> String {
 }
 
 /// The mean over scenes of `f` for one level and variant.
-fn mean_of(rows: &[Table1Row], level: usize, label: &str, f: impl Fn(&Table1Row) -> f64) -> f64 {
+fn mean_of(rows: &[Table1Row], level: GridLevel, label: &str, f: impl Fn(&Table1Row) -> f64) -> f64 {
     let v: Vec<f64> = rows
         .iter()
         .filter(|r| r.level == level && r.variant.label() == label)
@@ -429,7 +446,7 @@ fn mean_of(rows: &[Table1Row], level: usize, label: &str, f: impl Fn(&Table1Row)
 fn table1_by_level(
     rows: &[Table1Row],
     labels: &[String],
-    levels: &[usize],
+    levels: &[GridLevel],
     scenes: &[Scene],
     common: &Common,
 ) -> String {
@@ -448,9 +465,13 @@ fn table1_by_level(
         common.metric_stride,
         if common.quick { " --quick" } else { "" }
     );
-    for (title, held) in [
-        ("All frames (fit's training half included)", false),
-        ("Held-out frames (second half of the run: fit never saw them)", true),
+    let short_title = format!(
+        "Held-out frames, short horizon (the level restarted from the reference's mapped state every {SHORT_WINDOW} s)"
+    );
+    for (title, which) in [
+        ("All frames (fit's training half included)", 0),
+        ("Held-out frames (second half of the run: fit never saw them)", 1),
+        (short_title.as_str(), 2),
     ] {
         let _ = writeln!(md, "### {title}\n");
         let _ = writeln!(
@@ -463,21 +484,38 @@ fn table1_by_level(
             if !rows.iter().any(|r| r.level == level) {
                 continue;
             }
-            let reduction = rows.iter().find(|r| r.level == level).map_or(0.0, |r| r.reduction);
+            let first = rows.iter().find(|r| r.level == level);
+            let reduction = first.map_or(0.0, |r| r.reduction);
+            // The grid itself when every scene resolves the level alike.
+            let name = match first {
+                Some(f)
+                    if rows
+                        .iter()
+                        .filter(|r| r.level == level)
+                        .all(|r| (r.nx, r.ny) == (f.nx, f.ny)) =>
+                {
+                    format!("{}×{}", f.nx, f.ny)
+                }
+                _ => format!("{level} (aspect kept)"),
+            };
             let cells: Vec<String> = labels
                 .iter()
                 .map(|l| {
-                    let v = mean_of(rows, level, l, |r| if held { r.held_out_mean } else { r.all.mean });
+                    let v = mean_of(rows, level, l, |r| match which {
+                        0 => r.all.mean,
+                        1 => r.held_out_mean,
+                        _ => r.short_held_out_mean,
+                    });
                     format!("{:.2}", 100.0 * v)
                 })
                 .collect();
             let paper = PAPER_TABLE1
                 .iter()
-                .find(|p| p.0 == level)
+                .find(|p| Some(p.0) == level.square())
                 .map_or("—".to_string(), |p| format!("{} / {} / {}", p.1, p.2, p.3));
             let _ = writeln!(
                 md,
-                "| {level}×{level} | {:.0}% | {} | {paper} |",
+                "| {name} | {:.0}% | {} | {paper} |",
                 100.0 * reduction,
                 cells.join(" | ")
             );
@@ -505,8 +543,8 @@ fn table1_by_scene(rows: &[Table1Row], ref_costs: &[(String, f64)]) -> String {
             md,
             "| {} | {}×{} | {} | {:.2} / {:.2} | {:.2} | {:.2} | {:.0} | {:.3} |",
             r.scene,
-            r.level,
-            r.level,
+            r.nx,
+            r.ny,
             gkd.map_or("—".into(), |g| format!(
                 "{:.2} / {:.2}",
                 100.0 * g.all.mean,
@@ -528,7 +566,7 @@ fn table1_by_scene(rows: &[Table1Row], ref_costs: &[(String, f64)]) -> String {
 }
 
 /// Held-out mean error against node reduction, one line per variant.
-fn table1_chart(out: &Path, rows: &[Table1Row], labels: &[String], levels: &[usize]) -> Result<()> {
+fn table1_chart(out: &Path, rows: &[Table1Row], labels: &[String], levels: &[GridLevel]) -> Result<()> {
     let series: Vec<Series<'_>> = labels
         .iter()
         .enumerate()
@@ -560,7 +598,14 @@ fn table1_chart(out: &Path, rows: &[Table1Row], labels: &[String], levels: &[usi
     Ok(())
 }
 
-fn write_error_maps(out: &Path, scene: &Scene, reference: &Reference, rows: &[Table1Row], level: usize) -> Result<()> {
+fn write_error_maps(
+    out: &Path,
+    scene: &Scene,
+    reference: &Reference,
+    rows: &[Table1Row],
+    level: GridLevel,
+) -> Result<()> {
+    let (nx, ny) = level.resolve(scene.width, scene.height);
     let chosen = [
         (Method::Same, MassConvention::PerNode),
         (Method::Bcd, MassConvention::PerNode),
@@ -583,7 +628,7 @@ fn write_error_maps(out: &Path, scene: &Scene, reference: &Reference, rows: &[Ta
             .position(|&t| (t - r.all.worst_time).abs() < 1e-9)
             .unwrap_or(0);
         let ref_pos: Vec<f64> = reference.frames[frame].iter().map(|&x| f64::from(x)).collect();
-        let coarse = lodcloth::sim::Topology::grid(scene.shape(level, level), scene.orientation);
+        let coarse = lodcloth::sim::Topology::grid(scene.shape(nx, ny), scene.orientation);
         let panels = [
             ClothPanel {
                 title: format!("reference {}×{}", scene.nx, scene.ny),
@@ -593,7 +638,7 @@ fn write_error_maps(out: &Path, scene: &Scene, reference: &Reference, rows: &[Ta
             },
             ClothPanel {
                 title: format!(
-                    "{} {level}×{level}: mean {:.2}%",
+                    "{} {nx}×{ny}: mean {:.2}%",
                     r.variant.label(),
                     100.0 * r.all.worst_frame_mean
                 ),
@@ -618,7 +663,7 @@ fn write_error_maps(out: &Path, scene: &Scene, reference: &Reference, rows: &[Ta
     Ok(())
 }
 
-fn pareto_cmd(common: &Common, levels: &[usize], methods: &[Method], fractions: &[f64]) -> Result<()> {
+fn pareto_cmd(common: &Common, levels: &[GridLevel], methods: &[Method], fractions: &[f64]) -> Result<()> {
     let out = common.out("out/pareto")?;
     let spec = common.spec()?;
     let scene = common.scenes()?.into_iter().next().context("no scene")?;
@@ -640,8 +685,9 @@ fn pareto_cmd(common: &Common, levels: &[usize], methods: &[Method], fractions: 
     for p in &points {
         let _ = writeln!(
             csv,
-            "{},{},{},{:e},{:.3},{:.5},{:.6},{}",
-            p.level,
+            "{}x{},{},{},{:e},{:.3},{:.5},{:.6},{}",
+            p.nx,
+            p.ny,
             p.method,
             p.integrator.name(),
             p.dt,
@@ -692,7 +738,7 @@ fn pareto_cmd(common: &Common, levels: &[usize], methods: &[Method], fractions: 
     Ok(())
 }
 
-fn plan_cmd(common: &Common, max_error: f64, levels: &[usize]) -> Result<()> {
+fn plan_cmd(common: &Common, max_error: f64, levels: &[GridLevel]) -> Result<()> {
     let out = common.out("out/lod-plan")?;
     let estimator = common.estimator()?;
     let spec = common.spec()?;
@@ -701,14 +747,13 @@ fn plan_cmd(common: &Common, max_error: f64, levels: &[usize]) -> Result<()> {
     for scene in common.scenes()? {
         let (reference, _) = reference_for(&scene, spec)?;
         let fit = common.fit(reference.frames.len())?;
-        let levels: Vec<usize> = levels.iter().copied().filter(|&l| l < scene.nx.max(scene.ny)).collect();
-        let steps = lod_plan(&scene, &reference, &levels, max_error, &fit, &estimator, &mut log_line)?;
+        let steps = lod_plan(&scene, &reference, levels, max_error, &fit, &estimator, &mut log_line)?;
         match steps.iter().find(|s| s.accepted) {
             Some(s) => println!(
                 "{}: {}×{} (held-out error {:.2}% ≤ {:.2}%), coefficients {:?}",
                 scene.name,
-                s.level,
-                s.level,
+                s.nx,
+                s.ny,
                 100.0 * s.held_out_mean,
                 100.0 * max_error,
                 s.material
@@ -725,8 +770,19 @@ fn plan_cmd(common: &Common, max_error: f64, levels: &[usize]) -> Result<()> {
             let m = s.material.springs;
             let _ = writeln!(
                 csv,
-                "{},{},{:e},{:.6},{},{},{},{},{},{},{}",
-                scene.name, s.level, s.dt, s.held_out_mean, s.accepted, m[0].k, m[1].k, m[2].k, m[0].c, m[1].c, m[2].c
+                "{},{}x{},{:e},{:.6},{},{},{},{},{},{},{}",
+                scene.name,
+                s.nx,
+                s.ny,
+                s.dt,
+                s.held_out_mean,
+                s.accepted,
+                m[0].k,
+                m[1].k,
+                m[2].k,
+                m[0].c,
+                m[1].c,
+                m[2].c
             );
         }
     }
@@ -734,7 +790,7 @@ fn plan_cmd(common: &Common, max_error: f64, levels: &[usize]) -> Result<()> {
     Ok(())
 }
 
-fn switch_cmd(common: &Common, level: usize, method: Method, at: f64, window: f64) -> Result<()> {
+fn switch_cmd(common: &Common, level: GridLevel, method: Method, at: f64, window: f64) -> Result<()> {
     let out = common.out("out/switch-test")?;
     let spec = common.spec()?;
     let mut csv = String::from(
@@ -745,12 +801,13 @@ fn switch_cmd(common: &Common, level: usize, method: Method, at: f64, window: f6
         let interval = reference.dt * reference.spec.metric_stride as f64;
         let at_frame = (at / interval).round() as usize;
         let window_frames = ((window / interval).round() as usize).max(1);
-        let problem = default_problem(&scene, &reference, level)?;
+        let (nx, ny) = level.resolve(scene.width, scene.height);
+        let problem = default_problem(&scene, &reference, (nx, ny))?;
         let fit = common.fit(reference.frames.len())?;
         let material = common.estimator()?.estimate(&problem, method, &fit)?.material;
         let r = switch_test(&problem, material, at_frame, window_frames)?;
         println!(
-            "{}: {}×{}↔{level}×{level} ({method}) at t = {:.3} s: position jump {:.2e} m, KE jump {:.2}%, \
+            "{}: {}×{}↔{nx}×{ny} ({method}) at t = {:.3} s: position jump {:.2e} m, KE jump {:.2}%, \
              error over the next {window} s: transfer {:.2}%, never switched {:.2}%, zeroed velocities {:.2}%; \
              back to fine: KE jump {:.2}%, error {:.2}%",
             scene.name,
@@ -767,7 +824,7 @@ fn switch_cmd(common: &Common, level: usize, method: Method, at: f64, window: f6
         );
         let _ = writeln!(
             csv,
-            "{},{level},{method},{:.4},{:e},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6}",
+            "{},{nx}x{ny},{method},{:.4},{:e},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6}",
             scene.name,
             r.switch_time,
             r.position_jump,
@@ -783,7 +840,7 @@ fn switch_cmd(common: &Common, level: usize, method: Method, at: f64, window: f6
     Ok(())
 }
 
-fn generalise_cmd(common: &Common, level: usize) -> Result<()> {
+fn generalise_cmd(common: &Common, level: GridLevel) -> Result<()> {
     let out = common.out("out/generalise")?;
     let spec = common.spec()?;
     let mut pairs = Vec::new();
@@ -795,7 +852,7 @@ fn generalise_cmd(common: &Common, level: usize) -> Result<()> {
     let g = generalisation(&pairs, level, &common.fit(frames)?, &common.estimator()?, &mut log_line)?;
     let mut csv = String::from("fitted_on,scored_on,mean_error,own_fit_error,ratio\n");
     let mut md = format!(
-        "Generalisation of `fit` at {level}×{level} (mean error over every frame, %). Rows: scene fitted on; columns: scene scored on.\n\n| fitted on | {} |\n|---|{}\n",
+        "Generalisation of `fit` at level {level} (mean error over every frame, %). Rows: scene fitted on; columns: scene scored on.\n\n| fitted on | {} |\n|---|{}\n",
         g.scenes.join(" | "),
         "---|".repeat(g.scenes.len())
     );

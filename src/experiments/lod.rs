@@ -10,7 +10,7 @@ use rayon::prelude::*;
 
 use crate::estimate::{no_progress, ErrorReport, EstimateError, FitOptions, LodProblem, Method, RecordSpec, Reference};
 use crate::lod::transfer_state;
-use crate::plan::{default_problem, level_dt, stable_problem, Estimator, PlanError};
+use crate::plan::{default_problem, level_dt, stable_problem, Estimator, GridLevel, PlanError};
 use crate::scene::{MassConvention, Scene};
 use crate::sim::{Integrator, Material};
 
@@ -68,21 +68,28 @@ pub const TABLE1_VARIANTS: [Variant; 8] = [
 /// Options of [`table1_scene`].
 #[derive(Debug, Clone)]
 pub struct Table1Options {
-    pub levels: Vec<usize>,
+    /// Levels as named (each resolved against the scene's aspect ratio).
+    pub levels: Vec<GridLevel>,
     pub spec: RecordSpec,
     pub variants: Vec<Variant>,
     pub fit: FitOptions,
     /// dt of a level as a fraction of the `same` model's stability limit.
     pub dt_margin: f64,
     /// Level whose worst-frame error maps are kept.
-    pub map_level: usize,
+    pub map_level: GridLevel,
+    /// Window of the short-horizon measure (s): the level restarts from the
+    /// reference's state this often ([`LodProblem::score_windows`]).
+    pub short_window: f64,
 }
 
 /// One cell of Table 1 (scene × level × variant).
 #[derive(Debug, Clone)]
 pub struct Table1Row {
     pub scene: String,
-    pub level: usize,
+    /// The level as named; `nx × ny` is what it is on this scene.
+    pub level: GridLevel,
+    pub nx: usize,
+    pub ny: usize,
     pub nodes: usize,
     /// 1 − coarse nodes / reference nodes.
     pub reduction: f64,
@@ -95,6 +102,9 @@ pub struct Table1Row {
     pub all: ErrorReport,
     /// Over the held-out frames (after the fit's training window).
     pub held_out_mean: f64,
+    /// Over the held-out frames, restarted from the reference every
+    /// `short_window` seconds (the short-horizon measure).
+    pub short_held_out_mean: f64,
     pub estimate_seconds: f64,
     /// Wall seconds per simulated second of the coarse run.
     pub cost: f64,
@@ -119,19 +129,20 @@ pub fn table1_scene(
     }
     let n_ref = reference.topology.n_nodes;
     let integrator = scene.params.integrator;
-    let run = |level: usize, variant: &Variant| -> Result<Table1Row, PlanError> {
+    let run = |level: GridLevel, variant: &Variant| -> Result<Table1Row, PlanError> {
+        let (nx, ny) = level.resolve(scene.width, scene.height);
         // dt from the `same` model, then checked against the estimate.
         let (dt, _) = level_dt(
             scene,
             reference,
-            level,
-            level,
+            nx,
+            ny,
             variant.mass,
             integrator,
             reference.material,
             options.dt_margin,
         )?;
-        let problem = LodProblem::new(scene, reference.clone(), level, level, variant.mass, integrator, dt)?;
+        let problem = LodProblem::new(scene, reference.clone(), nx, ny, variant.mass, integrator, dt)?;
         let mut fit = options.fit.clone();
         fit.train = Some(train.clone());
         let est = estimator.estimate(&problem, variant.method, &fit)?;
@@ -141,17 +152,23 @@ pub fn table1_scene(
         let t1 = Instant::now();
         let all = problem.score(est.material, 0..frames, &mut no_progress)?;
         let cost = t1.elapsed().as_secs_f64() / (frames as f64 * reference.dt * reference.spec.metric_stride as f64);
+        let interval = reference.dt * reference.spec.metric_stride as f64;
+        let window = ((options.short_window / interval).round() as usize).max(1);
+        let short = problem.score_windows(est.material, held_out.clone(), window, &mut no_progress)?;
         let keep_map = level == options.map_level;
         Ok(Table1Row {
             scene: scene.name.clone(),
             level,
-            nodes: level * level,
-            reduction: 1.0 - (level * level) as f64 / n_ref as f64,
+            nx,
+            ny,
+            nodes: nx * ny,
+            reduction: 1.0 - (nx * ny) as f64 / n_ref as f64,
             variant: *variant,
             material: est.material,
             dt,
             dt_ratio: dt / limit,
             held_out_mean: all.mean_over(held_out.clone()),
+            short_held_out_mean: short.mean,
             all: if keep_map { all } else { strip(all) },
             estimate_seconds: est.seconds,
             cost,
@@ -168,11 +185,14 @@ pub fn table1_scene(
         for row in level_rows {
             let r = row?;
             log(format!(
-                "{} {level}×{level} {:<14} mean {:6.2}%  held-out {:6.2}%  p95 {:6.2}%  dt {:.2e} ({:.2} of limit)  est {:.1}s  {}",
+                "{} {}×{} {:<14} mean {:6.2}%  held-out {:6.2}% (short horizon {:5.2}%)  p95 {:6.2}%  dt {:.2e} ({:.2} of limit)  est {:.1}s  {}",
                 scene.name,
+                r.nx,
+                r.ny,
                 r.variant.label(),
                 100.0 * r.all.mean,
                 100.0 * r.held_out_mean,
+                100.0 * r.short_held_out_mean,
                 100.0 * r.all.p95,
                 r.dt,
                 r.dt_ratio,
@@ -347,7 +367,8 @@ pub fn switch_test(
 /// One point of the speed/accuracy chart.
 #[derive(Debug, Clone)]
 pub struct ParetoPoint {
-    pub level: usize,
+    pub nx: usize,
+    pub ny: usize,
     pub method: Method,
     pub integrator: Integrator,
     pub dt: f64,
@@ -362,7 +383,7 @@ pub struct ParetoPoint {
 pub fn pareto(
     scene: &Scene,
     reference: &Arc<Reference>,
-    levels: &[usize],
+    levels: &[GridLevel],
     methods: &[Method],
     integrators: &[Integrator],
     dt_fractions: &[f64],
@@ -373,8 +394,9 @@ pub fn pareto(
     let frames = reference.frames.len();
     let mut points = Vec::new();
     for &level in levels {
+        let (nx, ny) = level.resolve(scene.width, scene.height);
         // Estimate once per method with the scene's integrator at half its limit.
-        let base = default_problem(scene, reference, level)?;
+        let base = default_problem(scene, reference, (nx, ny))?;
         for &method in methods {
             let material = estimator.estimate(&base, method, fit)?.material;
             for &integrator in integrators {
@@ -389,35 +411,28 @@ pub fn pareto(
                     let (dt, limit) = level_dt(
                         scene,
                         reference,
-                        level,
-                        level,
+                        nx,
+                        ny,
                         MassConvention::Lumped,
                         probe_integrator,
                         material,
                         frac * scale,
                     )?;
-                    let p = LodProblem::new(
-                        scene,
-                        reference.clone(),
-                        level,
-                        level,
-                        MassConvention::Lumped,
-                        integrator,
-                        dt,
-                    )?;
+                    let p = LodProblem::new(scene, reference.clone(), nx, ny, MassConvention::Lumped, integrator, dt)?;
                     let t = Instant::now();
                     let r = p.score(material, 0..frames, &mut no_progress)?;
                     let cost = t.elapsed().as_secs_f64()
                         / (frames as f64 * reference.dt * reference.spec.metric_stride as f64);
                     log(format!(
-                        "{level}×{level} {method:<4} {:<16} dt {dt:.2e} ({:.2} of limit): {:.3} s/s, error {:.2}%",
+                        "{nx}×{ny} {method:<4} {:<16} dt {dt:.2e} ({:.2} of limit): {:.3} s/s, error {:.2}%",
                         integrator.name(),
                         dt / limit,
                         cost,
                         100.0 * r.mean
                     ));
                     points.push(ParetoPoint {
-                        level,
+                        nx,
+                        ny,
                         method,
                         integrator,
                         dt,
@@ -450,7 +465,8 @@ pub fn mark_front(points: &mut [ParetoPoint]) {
 /// Outcome of [`lod_plan`] for one level tried.
 #[derive(Debug, Clone)]
 pub struct PlanStep {
-    pub level: usize,
+    pub nx: usize,
+    pub ny: usize,
     pub material: Material,
     pub dt: f64,
     pub held_out_mean: f64,
@@ -462,30 +478,37 @@ pub struct PlanStep {
 pub fn lod_plan(
     scene: &Scene,
     reference: &Arc<Reference>,
-    levels: &[usize],
+    levels: &[GridLevel],
     max_error: f64,
     fit: &FitOptions,
     estimator: &Estimator,
     log: &mut dyn FnMut(String),
 ) -> Result<Vec<PlanStep>, PlanError> {
-    let mut levels = levels.to_vec();
-    levels.sort_unstable();
+    // Levels coarser than the reference, from the fewest nodes up.
+    let mut levels: Vec<(usize, usize)> = levels
+        .iter()
+        .map(|l| l.resolve(scene.width, scene.height))
+        .filter(|&(nx, ny)| nx <= scene.nx && ny <= scene.ny && nx * ny < scene.nx * scene.ny)
+        .collect();
+    levels.sort_unstable_by_key(|&(nx, ny)| (nx * ny, nx));
+    levels.dedup();
     let frames = reference.frames.len();
     let train = fit.train_range(frames);
     let mut steps = Vec::new();
-    for level in levels {
-        let p = default_problem(scene, reference, level)?;
+    for (nx, ny) in levels {
+        let p = default_problem(scene, reference, (nx, ny))?;
         let est = estimator.estimate(&p, Method::Fit, fit)?;
         let held = p.score(est.material, train.end..frames, &mut no_progress)?.mean;
         let accepted = held <= max_error;
         log(format!(
-            "{level}×{level}: held-out error {:.2}% {} {:.2}%",
+            "{nx}×{ny}: held-out error {:.2}% {} {:.2}%",
             100.0 * held,
             if accepted { "≤" } else { ">" },
             100.0 * max_error
         ));
         steps.push(PlanStep {
-            level,
+            nx,
+            ny,
             material: est.material,
             dt: p.dt,
             held_out_mean: held,
@@ -501,7 +524,8 @@ pub fn lod_plan(
 /// Cross-scene and short-window generalisation of `fit` at one level.
 #[derive(Debug, Clone)]
 pub struct Generalisation {
-    pub level: usize,
+    /// The level as named, resolved against each scene's aspect ratio.
+    pub level: GridLevel,
     pub scenes: Vec<String>,
     /// `cross[a][b]`: coefficients fitted on scene a's training window,
     /// mean error over every frame of scene b.
@@ -516,14 +540,18 @@ pub struct Generalisation {
 /// every scene; and compare a first-10 % fit with a full-run fit.
 pub fn generalisation(
     scenes: &[(Scene, Arc<Reference>)],
-    level: usize,
+    level: GridLevel,
     fit: &FitOptions,
     estimator: &Estimator,
     log: &mut dyn FnMut(String),
 ) -> Result<Generalisation, PlanError> {
     let mut problems = Vec::new();
     for (scene, reference) in scenes {
-        problems.push(default_problem(scene, reference, level)?);
+        problems.push(default_problem(
+            scene,
+            reference,
+            level.resolve(scene.width, scene.height),
+        )?);
     }
     let mut fitted = Vec::new();
     let mut short_window = Vec::new();
@@ -545,8 +573,10 @@ pub fn generalisation(
         let es = p.score(ms, 0..frames, &mut no_progress)?.mean;
         let ef = p.score(mf, 0..frames, &mut no_progress)?.mean;
         log(format!(
-            "{} {level}×{level}: fit on first 10% → {:.3}%, on all frames → {:.3}% (ratio {:.2})",
+            "{} {}×{}: fit on first 10% → {:.3}%, on all frames → {:.3}% (ratio {:.2})",
             p.scene.name,
+            p.nx,
+            p.ny,
             100.0 * es,
             100.0 * ef,
             es / ef

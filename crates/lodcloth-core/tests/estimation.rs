@@ -219,3 +219,77 @@ fn estimation_samples_hold_the_positions_of_the_steps_they_name() {
         assert_eq!(frame, &want);
     }
 }
+
+/// The short-horizon measure restarts the level from the reference's mapped
+/// state. Against the reference itself (same resolution, coefficients and
+/// dt) a whole-run window is the plain run (error only the f32 rounding of
+/// the recorded frames), and short windows add only the restart's error:
+/// velocities by central differences over ±2 ms.
+#[test]
+fn short_horizon_windows_restart_from_the_reference_state() {
+    let s = scene(12, "symplectic_euler", 2e-4);
+    let reference = record(&s, 3000, 10, 20);
+    let material = reference.material;
+    let same = LodProblem::new(
+        &s,
+        reference.clone(),
+        12,
+        12,
+        MassConvention::Lumped,
+        Integrator::SymplecticEuler,
+        2e-4,
+    )
+    .unwrap();
+    let frames = same.frames();
+    let whole = same.score(material, 0..frames, &mut no_progress).unwrap();
+    let one_window = same
+        .score_windows(material, 0..frames, frames, &mut no_progress)
+        .unwrap();
+    assert_eq!(whole.mean, one_window.mean, "one window from rest is the plain run");
+    assert!(whole.mean < 1e-6, "the reference against itself: {}", whole.mean);
+    let windowed = same.score_windows(material, 0..frames, 25, &mut no_progress).unwrap();
+    assert_eq!(windowed.frame_means.len(), frames);
+    // A coarse level restarted the same way: its own model error dominates.
+    let coarse = LodProblem::new(
+        &s,
+        reference,
+        8,
+        8,
+        MassConvention::Lumped,
+        Integrator::SymplecticEuler,
+        2e-4,
+    )
+    .unwrap();
+    let coarse_long = coarse.score(material, 0..frames, &mut no_progress).unwrap();
+    let coarse_short = coarse.score_windows(material, 0..frames, 25, &mut no_progress).unwrap();
+    eprintln!(
+        "mean error: reference vs itself {:.2e} whole, {:.2e} in 50 ms windows; 8x8 {:.2e} whole, {:.2e} in windows",
+        whole.mean, windowed.mean, coarse_long.mean, coarse_short.mean
+    );
+    assert!(
+        windowed.mean < 0.05 * coarse_short.mean,
+        "restart error {} is not small against the 8x8 level's own {}",
+        windowed.mean,
+        coarse_short.mean
+    );
+    assert!(
+        coarse_short.mean < coarse_long.mean,
+        "windows restarted on the reference ({}) should not drift as far as the whole run ({})",
+        coarse_short.mean,
+        coarse_long.mean
+    );
+    // Windows later in the run restart there: scoring only the second half
+    // in windows needs no run through the first.
+    let half = coarse
+        .score_windows(material, frames / 2..frames, 25, &mut no_progress)
+        .unwrap();
+    assert_eq!(half.frame_means.len(), frames - frames / 2);
+    let tail = &coarse_short.frame_means[frames / 2..];
+    for (a, b) in half.frame_means.iter().zip(tail) {
+        assert!(
+            (a - b).abs() <= 1e-12 * b.max(1e-12),
+            "{a} vs {b}: a window's score depends only on its start"
+        );
+    }
+    assert!(coarse.score_windows(material, 0..frames, 0, &mut no_progress).is_err());
+}

@@ -160,30 +160,17 @@ pub fn level_dt(
     Ok((interval / k, limit))
 }
 
-/// Level n×n of `scene` as the daemon and `lod-plan` run it: lumped masses,
+/// Level nx×ny of `scene` as the daemon and `lod-plan` run it: lumped masses,
 /// the scene's integrator, dt at ≤ 0.75 of the `same` model's stability limit.
-pub fn default_problem(scene: &Scene, reference: &Arc<Reference>, level: usize) -> Result<LodProblem, PlanError> {
+pub fn default_problem(
+    scene: &Scene,
+    reference: &Arc<Reference>,
+    (nx, ny): (usize, usize),
+) -> Result<LodProblem, PlanError> {
     let integrator = scene.params.integrator;
     let mass = MassConvention::Lumped;
-    let (dt, _) = level_dt(
-        scene,
-        reference,
-        level,
-        level,
-        mass,
-        integrator,
-        reference.material,
-        0.75,
-    )?;
-    Ok(LodProblem::new(
-        scene,
-        reference.clone(),
-        level,
-        level,
-        mass,
-        integrator,
-        dt,
-    )?)
+    let (dt, _) = level_dt(scene, reference, nx, ny, mass, integrator, reference.material, 0.75)?;
+    Ok(LodProblem::new(scene, reference.clone(), nx, ny, mass, integrator, dt)?)
 }
 
 /// `problem` itself when `material` runs within 0.8 of its predicted

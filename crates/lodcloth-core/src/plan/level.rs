@@ -98,6 +98,82 @@ impl<'de> serde::Deserialize<'de> for Level {
     }
 }
 
+/// A grid level named for any scene, as the experiments take it: `N` is N
+/// nodes along the cloth's longer side and as many along the other as keep
+/// its cells closest to square (so a chain of `N`s keeps the cloth's aspect
+/// ratio); `NXxNY` is exactly that grid.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum GridLevel {
+    /// N nodes along the longer side, the cloth's aspect ratio kept.
+    Long(usize),
+    /// Exactly `nx × ny` nodes.
+    Exact {
+        /// Nodes along the cloth's width.
+        nx: usize,
+        /// Nodes along the cloth's height.
+        ny: usize,
+    },
+}
+
+impl GridLevel {
+    /// `(nx, ny)` for a cloth of `width × height` (m). For `Long(n)` on a
+    /// cloth wider than tall, nx = n and ny = round((n − 1)·height/width) + 1
+    /// (at least 2), which makes the cells as square as a grid of n columns
+    /// allows; the other way round for a cloth taller than wide.
+    pub fn resolve(self, width: f64, height: f64) -> (usize, usize) {
+        match self {
+            GridLevel::Exact { nx, ny } => (nx, ny),
+            GridLevel::Long(n) => {
+                let other = |long: f64, short: f64| (((n - 1) as f64 * short / long).round() as usize + 1).max(2);
+                if width >= height {
+                    (n, other(width, height))
+                } else {
+                    (other(height, width), n)
+                }
+            }
+        }
+    }
+
+    /// N of a square level (`N`, or `NxN`): how the paper names its levels.
+    pub fn square(self) -> Option<usize> {
+        match self {
+            GridLevel::Long(n) => Some(n),
+            GridLevel::Exact { nx, ny } if nx == ny => Some(nx),
+            GridLevel::Exact { .. } => None,
+        }
+    }
+}
+
+impl fmt::Display for GridLevel {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            GridLevel::Long(n) => write!(f, "{n}"),
+            GridLevel::Exact { nx, ny } => write!(f, "{nx}x{ny}"),
+        }
+    }
+}
+
+impl FromStr for GridLevel {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<GridLevel, String> {
+        let bad = || {
+            format!(
+                "'{s}' is not a grid level; write N (N nodes along the longer side, aspect ratio kept, e.g. 40) or NXxNY (e.g. 40x24), each side at least 2"
+            )
+        };
+        let side = |t: &str| t.trim().parse::<usize>().ok().filter(|&n| n >= 2);
+        let t = s.trim();
+        match t.split_once(['x', 'X']) {
+            Some((a, b)) => Ok(GridLevel::Exact {
+                nx: side(a).ok_or_else(bad)?,
+                ny: side(b).ok_or_else(bad)?,
+            }),
+            None => side(t).map(GridLevel::Long).ok_or_else(bad),
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -113,5 +189,36 @@ mod tests {
         assert_eq!("273".parse::<Level>(), Ok(Level::Points(273)));
         assert_eq!("273pts".parse::<Level>(), Ok(Level::Points(273)));
         assert_eq!(Level::Points(85).to_string().parse::<Level>(), Ok(Level::Points(85)));
+    }
+
+    #[test]
+    fn grid_levels_parse_print_and_keep_the_aspect_ratio() {
+        assert_eq!("40".parse::<GridLevel>(), Ok(GridLevel::Long(40)));
+        assert_eq!(" 40X24 ".parse::<GridLevel>(), Ok(GridLevel::Exact { nx: 40, ny: 24 }));
+        for bad in ["1", "0x4", "x", "40x", "-3", "4.5"] {
+            assert!(bad.parse::<GridLevel>().is_err(), "{bad} parsed");
+        }
+        for l in [GridLevel::Long(17), GridLevel::Exact { nx: 30, ny: 18 }] {
+            assert_eq!(l.to_string().parse::<GridLevel>(), Ok(l));
+        }
+        // A square cloth: N×N. A 5:3 cloth: 48 columns of 47 cells of 5/47 m,
+        // rows of 3/(28) m: the nearest to square; and the transposed cloth.
+        assert_eq!(GridLevel::Long(40).resolve(1.0, 1.0), (40, 40));
+        assert_eq!(GridLevel::Long(48).resolve(5.0, 3.0), (48, 29));
+        assert_eq!(GridLevel::Long(48).resolve(3.0, 5.0), (29, 48));
+        assert_eq!(GridLevel::Long(2).resolve(10.0, 1.0), (2, 2));
+        assert_eq!(GridLevel::Exact { nx: 40, ny: 24 }.resolve(1.0, 1.0), (40, 24));
+        // The cells of Long(n) are within one row of square for any aspect.
+        for n in [8, 16, 33, 64] {
+            for aspect in [1.0, 1.3, 2.0, 3.0, 5.0 / 3.0] {
+                let (nx, ny) = GridLevel::Long(n).resolve(aspect, 1.0);
+                let (hx, hy) = (aspect / (nx - 1) as f64, 1.0 / (ny - 1) as f64);
+                let rows = 1.0 / hx;
+                assert!(
+                    ((ny - 1) as f64 - rows).abs() <= 0.5 + 1e-9,
+                    "{n} at {aspect}: {nx}x{ny}, cells {hx}×{hy}"
+                );
+            }
+        }
     }
 }

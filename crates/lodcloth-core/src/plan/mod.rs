@@ -14,5 +14,5 @@ pub use estimator::{
     default_problem, level_dt, notes, record_reference, stable_problem, Estimated, Estimator, PlanError,
 };
 pub use instance::{EstimationPlan, InstanceKind, InstancePlan};
-pub use level::Level;
+pub use level::{GridLevel, Level};
 pub use prepare::{allowed, Basis, PrepareError, Prepared, Preparer, Start};

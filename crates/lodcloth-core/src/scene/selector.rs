@@ -170,7 +170,13 @@ mod tests {
     /// themselves (an independent computation of the same integral).
     #[test]
     fn hat_weights_match_quadrature() {
-        for &(a, b, n) in &[(0.95, 1.0, 64), (0.95, 1.0, 16), (0.0, 0.05, 40), (0.3, 0.71, 7), (0.0, 1.0, 5)] {
+        for &(a, b, n) in &[
+            (0.95, 1.0, 64),
+            (0.95, 1.0, 16),
+            (0.0, 0.05, 40),
+            (0.3, 0.71, 7),
+            (0.0, 1.0, 5),
+        ] {
             let h = 1.0 / (n - 1) as f64;
             let m = 200_000;
             let mut quad = vec![0.0; n];
@@ -205,7 +211,10 @@ mod tests {
                 cv += w * v;
             }
             assert!((total - 1.0).abs() < 1e-12, "{nx}x{ny}: shares sum to {total}");
-            assert!((cu - 0.975).abs() < 1e-12 && (cv - 0.935).abs() < 1e-12, "{nx}x{ny}: centre ({cu}, {cv})");
+            assert!(
+                (cu - 0.975).abs() < 1e-12 && (cv - 0.935).abs() < 1e-12,
+                "{nx}x{ny}: centre ({cu}, {cv})"
+            );
         }
     }
 }
