@@ -1,7 +1,9 @@
-//! Longer studies built on the core: stability sweeps, and the level-of-detail
-//! experiments (Table 1, Pareto front, LOD planning, switch continuity). These
-//! measure wall-clock time, which the pure modules never do.
+//! Longer studies built on the core: stability sweeps, the level-of-detail
+//! experiments (Table 1, Pareto front, LOD planning, switch continuity) and
+//! the generalisation suite. These measure wall-clock time, which the pure
+//! modules never do.
 
+pub mod generalise;
 pub mod lod;
 mod stability;
 

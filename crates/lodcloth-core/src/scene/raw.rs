@@ -315,14 +315,15 @@ pub struct RawPin {
     pub path: RawPinPath,
 }
 
-/// `[[forces]]`: a total force on a set of nodes, split over them by their
-/// area so the same physical load acts at every resolution.
+/// `[[forces]]`: a total force on a set of nodes, so the same physical load
+/// acts at every resolution: on a region, as a uniform traction over that
+/// patch; on any other node set, split over the nodes by their area.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct RawForce {
     /// The loaded nodes; must select at least one node at every resolution built.
     pub nodes: RawSelector,
-    /// Total force (N) at profile value 1, split over the nodes by area.
+    /// Total force (N) at profile value 1.
     pub total: [f64; 3],
     /// Time profile scaling `total`; default constant.
     #[serde(default)]

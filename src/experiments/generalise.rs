@@ -1,0 +1,242 @@
+//! Generalisation over a suite of scenes (issue 19): every estimator is
+//! trained on the first part of each scene's run and scored on the rest
+//! (held-out time), and its corrections are carried to scenes it never saw
+//! (held-out scenes); both in the long-horizon measure (Sung eq. 9 over a
+//! whole run from rest) and the short-horizon one (the level restarted from
+//! the reference every window, [`LodProblem::score_windows`]).
+//!
+//! What carries from one scene to another is not a set of coefficients —
+//! the suite's fabrics differ (cotton, canvas, knit) — but the *correction*
+//! an estimator applies to the reference's coefficients at a level: the
+//! ratio K_level / K_reference and C_level / C_reference per spring type.
+//! A held-out scene gets the geometric mean of the other scenes' ratios
+//! applied to its own reference coefficients.
+
+use std::sync::Arc;
+
+use crate::estimate::{no_progress, ErrorReport, FitOptions, LodProblem, Method, Reference};
+use crate::plan::{default_problem, stable_problem, Estimator, GridLevel, PlanError};
+use crate::scene::Scene;
+use crate::sim::{Material, SpringCoeffs};
+
+/// Options of [`suite`].
+#[derive(Debug, Clone)]
+pub struct SuiteOptions {
+    /// The level, named once for every scene (resolved against each
+    /// scene's aspect ratio).
+    pub level: GridLevel,
+    /// Estimators compared.
+    pub methods: Vec<Method>,
+    /// The fit's settings; its training window is set per scene to the
+    /// first `train_fraction` of the run.
+    pub fit: FitOptions,
+    /// Fraction of each run estimators train on; the rest is held out.
+    pub train_fraction: f64,
+    /// Window of the short-horizon measure (s).
+    pub short_window: f64,
+}
+
+/// Held-out statistics of one model on one scene (fractions of O_max).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HeldOut {
+    /// Mean over nodes and held-out frames (long horizon: one run from rest).
+    pub mean: f64,
+    /// 95th percentile over nodes and held-out frames.
+    pub p95: f64,
+    /// Mean over the last quarter of the held-out frames.
+    pub last_quarter: f64,
+    /// Mean over the held-out frames, restarted from the reference every
+    /// short window (short horizon).
+    pub short_mean: f64,
+    /// 95th percentile of the short-horizon errors.
+    pub short_p95: f64,
+}
+
+/// One scene × estimator of the suite.
+#[derive(Debug, Clone)]
+pub struct SuiteRow {
+    /// The scene's name.
+    pub scene: String,
+    /// The level on this scene.
+    pub nx: usize,
+    /// The level on this scene.
+    pub ny: usize,
+    /// 1 − level nodes / reference nodes.
+    pub reduction: f64,
+    /// The estimator.
+    pub method: Method,
+    /// Coefficients estimated on this scene's training window.
+    pub material: Material,
+    /// Wall seconds of that estimate (0 when cached).
+    pub estimate_seconds: f64,
+    /// Its score on this scene's held-out frames.
+    pub own: HeldOut,
+    /// The other scenes' corrections applied to this scene's reference
+    /// coefficients, scored on the same frames; `None` for a lone scene.
+    pub transferred: Option<HeldOut>,
+}
+
+/// Run the suite: `scenes` with their recorded references.
+pub fn suite(
+    scenes: &[(Scene, Arc<Reference>)],
+    options: &SuiteOptions,
+    estimator: &Estimator,
+    log: &mut dyn FnMut(String),
+) -> Result<Vec<SuiteRow>, PlanError> {
+    if !(options.train_fraction > 0.0 && options.train_fraction < 1.0) {
+        return Err(PlanError::Invalid(format!(
+            "the training fraction must be in (0, 1), got {}",
+            options.train_fraction
+        )));
+    }
+    let mut problems = Vec::with_capacity(scenes.len());
+    for (scene, reference) in scenes {
+        let level = options.level.resolve(scene.width, scene.height);
+        problems.push(default_problem(scene, reference, level)?);
+    }
+    // Every scene's own estimate, per method.
+    let mut rows = Vec::new();
+    for p in &problems {
+        let frames = p.frames();
+        let train_end = ((frames as f64 * options.train_fraction).round() as usize).clamp(1, frames - 1);
+        let fit = FitOptions {
+            train: Some(0..train_end),
+            ..options.fit.clone()
+        };
+        for &method in &options.methods {
+            let est = estimator.estimate(p, method, &fit)?;
+            let own = held_out(p, est.material, train_end, options.short_window)?;
+            log(format!(
+                "{} {}×{} {:<4} held-out mean {:.2}%  p95 {:.2}%  last quarter {:.2}%  short horizon {:.2}%  est {:.0} s",
+                p.scene.name,
+                p.nx,
+                p.ny,
+                method,
+                100.0 * own.mean,
+                100.0 * own.p95,
+                100.0 * own.last_quarter,
+                100.0 * own.short_mean,
+                est.seconds
+            ));
+            rows.push(SuiteRow {
+                scene: p.scene.name.clone(),
+                nx: p.nx,
+                ny: p.ny,
+                reduction: 1.0 - (p.nx * p.ny) as f64 / p.reference.topology.n_nodes as f64,
+                method,
+                material: est.material,
+                estimate_seconds: est.seconds,
+                own,
+                transferred: None,
+            });
+        }
+    }
+    // Held-out scenes: each scene with the others' corrections.
+    if problems.len() > 1 {
+        for (b, p) in problems.iter().enumerate() {
+            let frames = p.frames();
+            let train_end = ((frames as f64 * options.train_fraction).round() as usize).clamp(1, frames - 1);
+            for &method in &options.methods {
+                // Rows are in scene-major order: row i is scene i / m.
+                let m = options.methods.len();
+                let others: Vec<(Material, Material)> = rows
+                    .iter()
+                    .enumerate()
+                    .filter(|(i, r)| r.method == method && i / m != b)
+                    .map(|(i, r)| (r.material, problems[i / m].reference.material))
+                    .collect();
+                let material = corrected(p.reference.material, &others);
+                let score = held_out(p, material, train_end, options.short_window)?;
+                log(format!(
+                    "{} {:<4} from the other scenes: held-out mean {:.2}%, short horizon {:.2}%",
+                    p.scene.name,
+                    method,
+                    100.0 * score.mean,
+                    100.0 * score.short_mean
+                ));
+                if let Some(row) = rows[b * m..(b + 1) * m].iter_mut().find(|r| r.method == method) {
+                    row.transferred = Some(score);
+                }
+            }
+        }
+    }
+    Ok(rows)
+}
+
+/// `base` scaled per spring type and coefficient by the geometric mean of
+/// `estimated / reference` over `pairs` (`base` itself when there are none).
+/// A zero coefficient on either side carries no ratio.
+fn corrected(base: Material, pairs: &[(Material, Material)]) -> Material {
+    let ratio = |f: &dyn Fn(&Material, usize) -> f64, t: usize| -> f64 {
+        let logs: Vec<f64> = pairs
+            .iter()
+            .map(|(e, r)| (f(e, t), f(r, t)))
+            .filter(|&(e, r)| e > 0.0 && r > 0.0)
+            .map(|(e, r)| (e / r).ln())
+            .collect();
+        if logs.is_empty() {
+            1.0
+        } else {
+            (logs.iter().sum::<f64>() / logs.len() as f64).exp()
+        }
+    };
+    let k = |m: &Material, t: usize| m.springs[t].k;
+    let c = |m: &Material, t: usize| m.springs[t].c;
+    Material {
+        springs: [0, 1, 2].map(|t| SpringCoeffs {
+            k: base.springs[t].k * ratio(&k, t),
+            c: base.springs[t].c * ratio(&c, t),
+        }),
+    }
+}
+
+/// `material` on `problem`'s held-out frames (from `train_end`), long and
+/// short horizon, at a dt the model is stable at.
+fn held_out(
+    problem: &LodProblem,
+    material: Material,
+    train_end: usize,
+    short_window: f64,
+) -> Result<HeldOut, PlanError> {
+    let (p, _) = stable_problem(problem, material)?;
+    let frames = p.frames();
+    let interval = p.reference.dt * p.reference.spec.metric_stride as f64;
+    let window = ((short_window / interval).round() as usize).max(1);
+    let long: ErrorReport = p.score(material, train_end..frames, &mut no_progress)?;
+    let short = p.score_windows(material, train_end..frames, window, &mut no_progress)?;
+    Ok(HeldOut {
+        mean: long.mean,
+        p95: long.p95,
+        last_quarter: long.last_quarter,
+        short_mean: short.mean,
+        short_p95: short.p95,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn material(k: [f64; 3], c: [f64; 3]) -> Material {
+        Material {
+            springs: [0, 1, 2].map(|t| SpringCoeffs { k: k[t], c: c[t] }),
+        }
+    }
+
+    #[test]
+    fn corrections_carry_as_geometric_mean_ratios() {
+        let reference_a = material([400.0, 60.0, 8.0], [0.04, 0.006, 0.0008]);
+        let reference_b = material([2000.0, 600.0, 200.0], [0.2, 0.06, 0.02]);
+        // Scene a's estimator doubled every K and halved every C; scene b's
+        // multiplied K by 8 and C by 2: the geometric means are 4 and 1.
+        let est_a = material([800.0, 120.0, 16.0], [0.02, 0.003, 0.0004]);
+        let est_b = material([16000.0, 4800.0, 1600.0], [0.4, 0.12, 0.04]);
+        let base = material([40.0, 6.0, 0.8], [0.004, 0.0006, 0.00008]);
+        let m = corrected(base, &[(est_a, reference_a), (est_b, reference_b)]);
+        for t in 0..3 {
+            assert!((m.springs[t].k / base.springs[t].k - 4.0).abs() < 1e-12);
+            assert!((m.springs[t].c / base.springs[t].c - 1.0).abs() < 1e-12);
+        }
+        assert_eq!(corrected(base, &[]), base);
+    }
+}

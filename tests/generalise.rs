@@ -1,0 +1,142 @@
+//! The generalisation suite and levels of any shape: each scene gets the
+//! named level at its own aspect ratio, estimators are scored on held-out
+//! frames in both horizons, and a correction carried to another scene is the
+//! other scenes' estimate/reference ratio (so `same`, which changes
+//! nothing, carries over exactly).
+
+use std::sync::Arc;
+
+use lodcloth::estimate::{FitOptions, Method, RecordSpec, Reference};
+use lodcloth::experiments::generalise::{suite, SuiteOptions};
+use lodcloth::experiments::lod::lod_plan;
+use lodcloth::plan::{Estimator, GridLevel};
+use lodcloth::scene::Scene;
+
+/// A small cloth of `width × height` at `nx × ny`, top edge pinned, pulled
+/// at its bottom edge, with fabric stiffness scaled by `k`.
+fn scene(name: &str, width: f64, height: f64, nx: usize, ny: usize, k: f64) -> Scene {
+    let text = format!(
+        r#"
+name = "{name}"
+[cloth]
+width = {width}
+height = {height}
+nx = {nx}
+ny = {ny}
+orientation = "horizontal"
+areal_density = 0.2
+[springs]
+structural = {{ k = {}, c = {} }}
+shear = {{ k = {}, c = {} }}
+bend = {{ k = {}, c = {} }}
+[simulation]
+integrator = "symplectic_euler"
+dt = 2e-4
+duration = 1.0
+drag = 0.5
+[[pins]]
+nodes = {{ edge = "top" }}
+[[forces]]
+nodes = {{ edge = "bottom" }}
+total = [0.3, -0.5, 0.2]
+profile = {{ kind = "sine", frequency = 1.5 }}
+"#,
+        300.0 * k,
+        0.03 * k,
+        50.0 * k,
+        0.005 * k,
+        6.0 * k,
+        0.0006 * k
+    );
+    Scene::from_toml(&text, name).expect("valid test scene")
+}
+
+fn record(scene: &Scene) -> Arc<Reference> {
+    let spec = RecordSpec {
+        frames: 2000,
+        metric_stride: 10,
+        estimate_stride: 20,
+        difference_span: 1,
+    };
+    Arc::new(Reference::record(scene.build().expect("builds"), spec, &mut |_, _| {}).expect("records"))
+}
+
+fn no_cache() -> Estimator {
+    Estimator {
+        cache: None,
+        tag: "test".into(),
+    }
+}
+
+#[test]
+fn the_suite_scores_each_scene_at_its_aspect_and_carries_corrections_as_ratios() {
+    let scenes: Vec<(Scene, Arc<Reference>)> = [
+        scene("wide-cotton", 2.0, 1.0, 17, 9, 1.0),
+        scene("square-canvas", 1.0, 1.0, 12, 12, 4.0),
+    ]
+    .into_iter()
+    .map(|s| {
+        let r = record(&s);
+        (s, r)
+    })
+    .collect();
+    let options = SuiteOptions {
+        level: GridLevel::Long(9),
+        methods: vec![Method::Same, Method::Fit],
+        fit: FitOptions {
+            max_frames: 20,
+            max_iterations: 3,
+            ..FitOptions::default()
+        },
+        train_fraction: 0.5,
+        short_window: 0.05,
+    };
+    let rows = suite(&scenes, &options, &no_cache(), &mut |_| {}).expect("suite runs");
+    assert_eq!(rows.len(), 4);
+    // The level keeps each cloth's aspect ratio: 9 along the longer side.
+    assert_eq!((rows[0].nx, rows[0].ny), (9, 5));
+    assert_eq!((rows[2].nx, rows[2].ny), (9, 9));
+    for r in &rows {
+        let t = r.transferred.expect("two scenes: each has the other's correction");
+        for v in [
+            r.own.mean,
+            r.own.p95,
+            r.own.last_quarter,
+            r.own.short_mean,
+            t.mean,
+            t.short_mean,
+        ] {
+            assert!(v.is_finite() && v > 0.0, "{} {}: {v}", r.scene, r.method);
+        }
+        assert!(r.own.p95 >= r.own.mean, "{} {}: p95 below the mean", r.scene, r.method);
+        if r.method == Method::Same {
+            // `same` corrects nothing, so the other scene's correction is
+            // the identity and the score is the scene's own, exactly.
+            assert_eq!(t, r.own, "{}: same carried over", r.scene);
+        }
+    }
+}
+
+#[test]
+fn lod_plan_takes_levels_of_any_shape_and_skips_those_not_coarser_than_the_reference() {
+    let s = scene("wide", 2.0, 1.0, 17, 9, 1.0);
+    let reference = record(&s);
+    let fit = FitOptions {
+        train: Some(0..100),
+        max_frames: 20,
+        max_iterations: 2,
+        ..FitOptions::default()
+    };
+    let levels = [
+        GridLevel::Exact { nx: 17, ny: 9 }, // the reference itself: skipped
+        GridLevel::Exact { nx: 20, ny: 5 }, // finer along one side: skipped
+        GridLevel::Long(9),                 // 9×5
+        GridLevel::Exact { nx: 12, ny: 4 }, // 48 nodes: tried after 9×5 (45)
+    ];
+    let mut lines = Vec::new();
+    let steps = lod_plan(&s, &reference, &levels, 1e9, &fit, &no_cache(), &mut |l| lines.push(l)).expect("plans");
+    // The coarsest is tried first, and a bound of 1e9 accepts it at once.
+    assert_eq!(steps.len(), 1, "{lines:?}");
+    assert_eq!((steps[0].nx, steps[0].ny), (9, 5));
+    assert!(steps[0].accepted);
+}
