@@ -8,7 +8,7 @@ use std::sync::Arc;
 
 use lodcloth::estimate::{FitOptions, Method, RecordSpec, Reference};
 use lodcloth::experiments::generalise::{suite, SuiteOptions};
-use lodcloth::experiments::lod::lod_plan;
+use lodcloth::experiments::lod::{lod_plan, Horizon};
 use lodcloth::plan::{Estimator, GridLevel};
 use lodcloth::scene::Scene;
 
@@ -133,10 +133,19 @@ fn lod_plan_takes_levels_of_any_shape_and_skips_those_not_coarser_than_the_refer
         GridLevel::Long(9),                 // 9×5
         GridLevel::Exact { nx: 12, ny: 4 }, // 48 nodes: tried after 9×5 (45)
     ];
-    let mut lines = Vec::new();
-    let steps = lod_plan(&s, &reference, &levels, 1e9, &fit, &no_cache(), &mut |l| lines.push(l)).expect("plans");
-    // The coarsest is tried first, and a bound of 1e9 accepts it at once.
-    assert_eq!(steps.len(), 1, "{lines:?}");
-    assert_eq!((steps[0].nx, steps[0].ny), (9, 5));
-    assert!(steps[0].accepted);
+    let mut errors = Vec::new();
+    for horizon in [Horizon::Long, Horizon::Short { window: 0.05 }] {
+        let mut lines = Vec::new();
+        let steps = lod_plan(&s, &reference, &levels, 1e9, horizon, &fit, &no_cache(), &mut |l| {
+            lines.push(l)
+        })
+        .expect("plans");
+        // The coarsest is tried first, and a bound of 1e9 accepts it at once.
+        assert_eq!(steps.len(), 1, "{lines:?}");
+        assert_eq!((steps[0].nx, steps[0].ny), (9, 5));
+        assert!(steps[0].accepted);
+        errors.push(steps[0].held_out_mean);
+    }
+    // Restarted every 50 ms, the same model drifts less than over the run.
+    assert!(errors[1] < errors[0], "short {} vs long {}", errors[1], errors[0]);
 }

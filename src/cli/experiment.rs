@@ -15,7 +15,7 @@ use lodcloth::cache::CoefficientCache;
 use lodcloth::estimate::{FitOptions, Method, RecordSpec, Reference};
 use lodcloth::experiments::generalise::{suite, SuiteOptions, SuiteRow};
 use lodcloth::experiments::lod::{
-    lod_plan, pareto, switch_test, table1_scene, Table1Options, Table1Row, TABLE1_VARIANTS,
+    lod_plan, pareto, switch_test, table1_scene, Horizon, Table1Options, Table1Row, TABLE1_VARIANTS,
 };
 use lodcloth::output::{error_map_svg, line_chart_svg, ClothPanel, Series, PALETTE};
 use lodcloth::plan::{default_problem, record_reference, Estimator, GridLevel};
@@ -221,6 +221,10 @@ pub enum Experiment {
         /// Largest acceptable mean error, in percent.
         #[arg(long)]
         max_error: f64,
+        /// The error bounded: `long` (one run from rest, Sung eq. 9) or
+        /// `short` (restarted from the reference every 0.25 s).
+        #[arg(long, default_value = "long", value_parser = ["long", "short"])]
+        horizon: String,
         /// Levels tried, as for `table1` (those not coarser than the reference are skipped).
         #[arg(long, value_delimiter = ',')]
         levels: Vec<GridLevel>,
@@ -289,6 +293,7 @@ pub fn run(experiment: Experiment) -> Result<()> {
         Experiment::LodPlan {
             mut common,
             max_error,
+            horizon,
             levels,
         } => {
             common.apply_quick();
@@ -300,7 +305,12 @@ pub fn run(experiment: Experiment) -> Result<()> {
             } else {
                 levels
             };
-            plan_cmd(&common, max_error / 100.0, &levels)
+            let horizon = if horizon == "short" {
+                Horizon::Short { window: SHORT_WINDOW }
+            } else {
+                Horizon::Long
+            };
+            plan_cmd(&common, max_error / 100.0, horizon, &levels)
         }
         Experiment::Generalise {
             mut common,
@@ -768,7 +778,7 @@ fn pareto_cmd(common: &Common, levels: &[GridLevel], methods: &[Method], fractio
     Ok(())
 }
 
-fn plan_cmd(common: &Common, max_error: f64, levels: &[GridLevel]) -> Result<()> {
+fn plan_cmd(common: &Common, max_error: f64, horizon: Horizon, levels: &[GridLevel]) -> Result<()> {
     let out = common.out("out/lod-plan")?;
     let estimator = common.estimator()?;
     let spec = common.spec()?;
@@ -777,7 +787,16 @@ fn plan_cmd(common: &Common, max_error: f64, levels: &[GridLevel]) -> Result<()>
     for scene in common.scenes()? {
         let (reference, _) = reference_for(&scene, spec)?;
         let fit = common.fit(reference.frames.len())?;
-        let steps = lod_plan(&scene, &reference, levels, max_error, &fit, &estimator, &mut log_line)?;
+        let steps = lod_plan(
+            &scene,
+            &reference,
+            levels,
+            max_error,
+            horizon,
+            &fit,
+            &estimator,
+            &mut log_line,
+        )?;
         match steps.iter().find(|s| s.accepted) {
             Some(s) => println!(
                 "{}: {}×{} (held-out error {:.2}% ≤ {:.2}%), coefficients {:?}",
