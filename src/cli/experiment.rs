@@ -428,16 +428,23 @@ fn write_table1(
     table1_chart(out, rows, &labels, levels)
 }
 
+/// The CSV columns of a model's coefficients, and their cells.
+const COEFFICIENT_HEADER: &str = "k_structural,k_shear,k_bend,c_structural,c_shear,c_bend";
+
+fn coefficient_cells(material: &lodcloth::sim::Material) -> String {
+    let m = material.springs;
+    format!("{},{},{},{},{},{}", m[0].k, m[1].k, m[2].k, m[0].c, m[1].c, m[2].c)
+}
+
 /// Every row of Table 1, one line each.
 fn table1_csv(rows: &[Table1Row]) -> String {
-    let mut csv = String::from(
-        "scene,level,nodes,reduction,variant,method,mass,k_structural,k_shear,k_bend,c_structural,c_shear,c_bend,dt,dt_over_limit,mean,held_out_mean,short_held_out_mean,p95,max,first_quarter,last_quarter,worst_time,worst_frame_mean,estimate_s,cost_s_per_s,diverged,notes\n",
+    let mut csv = format!(
+        "scene,level,nodes,reduction,variant,method,mass,{COEFFICIENT_HEADER},dt,dt_over_limit,mean,held_out_mean,short_held_out_mean,p95,max,first_quarter,last_quarter,worst_time,worst_frame_mean,estimate_s,cost_s_per_s,diverged,notes\n",
     );
     for r in rows {
-        let m = r.material.springs;
         let _ = writeln!(
             csv,
-            "{},{},{},{:.4},{},{},{},{},{},{},{},{},{},{:e},{:.3},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.4},{:.6},{:.2},{:.4},{},\"{}\"",
+            "{},{},{},{:.4},{},{},{},{},{:e},{:.3},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.4},{:.6},{:.2},{:.4},{},\"{}\"",
             r.scene,
             format_args!("{}x{}", r.nx, r.ny),
             r.nodes,
@@ -445,12 +452,7 @@ fn table1_csv(rows: &[Table1Row]) -> String {
             r.variant.label(),
             r.variant.method,
             r.variant.mass.name(),
-            m[0].k,
-            m[1].k,
-            m[2].k,
-            m[0].c,
-            m[1].c,
-            m[2].c,
+            coefficient_cells(&r.material),
             r.dt,
             r.dt_ratio,
             r.all.mean,
@@ -782,8 +784,7 @@ fn plan_cmd(common: &Common, max_error: f64, horizon: Horizon, levels: &[GridLev
     let out = common.out("out/lod-plan")?;
     let estimator = common.estimator()?;
     let spec = common.spec()?;
-    let mut csv =
-        String::from("scene,level,dt,held_out_mean,accepted,k_structural,k_shear,k_bend,c_structural,c_shear,c_bend\n");
+    let mut csv = format!("scene,level,dt,held_out_mean,accepted,{COEFFICIENT_HEADER}\n");
     for scene in common.scenes()? {
         let (reference, _) = reference_for(&scene, spec)?;
         let fit = common.fit(reference.frames.len())?;
@@ -816,22 +817,16 @@ fn plan_cmd(common: &Common, max_error: f64, horizon: Horizon, levels: &[GridLev
             ),
         }
         for s in &steps {
-            let m = s.material.springs;
             let _ = writeln!(
                 csv,
-                "{},{}x{},{:e},{:.6},{},{},{},{},{},{},{}",
+                "{},{}x{},{:e},{:.6},{},{}",
                 scene.name,
                 s.nx,
                 s.ny,
                 s.dt,
                 s.held_out_mean,
                 s.accepted,
-                m[0].k,
-                m[1].k,
-                m[2].k,
-                m[0].c,
-                m[1].c,
-                m[2].c
+                coefficient_cells(&s.material)
             );
         }
     }
@@ -916,31 +911,25 @@ fn generalise_cmd(common: &Common, level: GridLevel, methods: &[Method]) -> Resu
 }
 
 fn suite_csv(rows: &[SuiteRow]) -> String {
-    let mut csv = String::from(
-        "scene,level,reduction,method,k_structural,k_shear,k_bend,c_structural,c_shear,c_bend,estimate_s,\
+    let mut csv = format!(
+        "scene,level,reduction,method,{COEFFICIENT_HEADER},estimate_s,\
          mean,p95,last_quarter,short_mean,short_p95,\
          transferred_mean,transferred_p95,transferred_last_quarter,transferred_short_mean,transferred_short_p95\n",
     );
     for r in rows {
-        let m = r.material.springs;
         let t = r.transferred;
         let opt = |f: fn(&lodcloth::experiments::generalise::HeldOut) -> f64| {
             t.as_ref().map_or(String::new(), |h| format!("{:.6}", f(h)))
         };
         let _ = writeln!(
             csv,
-            "\"{}\",{}x{},{:.4},{},{},{},{},{},{},{},{:.1},{:.6},{:.6},{:.6},{:.6},{:.6},{},{},{},{},{}",
+            "\"{}\",{}x{},{:.4},{},{},{:.1},{:.6},{:.6},{:.6},{:.6},{:.6},{},{},{},{},{}",
             r.scene.replace('"', "'"),
             r.nx,
             r.ny,
             r.reduction,
             r.method,
-            m[0].k,
-            m[1].k,
-            m[2].k,
-            m[0].c,
-            m[1].c,
-            m[2].c,
+            coefficient_cells(&r.material),
             r.estimate_seconds,
             r.own.mean,
             r.own.p95,

@@ -98,7 +98,7 @@ pub fn suite(
     let mut rows = Vec::new();
     for p in &problems {
         let frames = p.frames();
-        let train_end = ((frames as f64 * options.train_fraction).round() as usize).clamp(1, frames - 1);
+        let train_end = train_end(frames, options.train_fraction);
         let fit = FitOptions {
             train: Some(0..train_end),
             ..options.fit.clone()
@@ -135,7 +135,7 @@ pub fn suite(
     if problems.len() > 1 {
         for (b, p) in problems.iter().enumerate() {
             let frames = p.frames();
-            let train_end = ((frames as f64 * options.train_fraction).round() as usize).clamp(1, frames - 1);
+            let train_end = train_end(frames, options.train_fraction);
             for &method in &options.methods {
                 // Rows are in scene-major order: row i is scene i / m.
                 let m = options.methods.len();
@@ -161,6 +161,12 @@ pub fn suite(
         }
     }
     Ok(rows)
+}
+
+/// The first held-out frame when the first `fraction` of `frames` trains
+/// (at least one frame on each side).
+fn train_end(frames: usize, fraction: f64) -> usize {
+    ((frames as f64 * fraction).round() as usize).clamp(1, frames - 1)
 }
 
 /// `base` scaled per spring type and coefficient by the geometric mean of

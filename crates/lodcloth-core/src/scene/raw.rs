@@ -321,7 +321,9 @@ pub struct RawPin {
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct RawForce {
-    /// The loaded nodes; must select at least one node at every resolution built.
+    /// The loaded nodes; a selector other than a region must select at
+    /// least one node at every resolution built (a region always loads the
+    /// nodes around its patch).
     pub nodes: RawSelector,
     /// Total force (N) at profile value 1.
     pub total: [f64; 3],
