@@ -110,7 +110,7 @@ pub fn metrics_message(instance: &str, m: &MetricsFrame) -> v1::Metrics {
 
 /// Coefficients on the wire.
 pub fn coefficients(m: &Material) -> v1::Coefficients {
-    let [s, h, b] = m.springs;
+    let [s, sv, h, b, bv] = m.springs;
     v1::Coefficients {
         structural_k: s.k,
         structural_c: s.c,
@@ -118,24 +118,38 @@ pub fn coefficients(m: &Material) -> v1::Coefficients {
         shear_c: h.c,
         bend_k: b.k,
         bend_c: b.c,
+        structural_v_k: Some(sv.k),
+        structural_v_c: Some(sv.c),
+        bend_v_k: Some(bv.k),
+        bend_v_c: Some(bv.c),
     }
 }
 
-/// Coefficients from the wire.
+/// Coefficients from the wire (absent `_v` fields: the same as along u).
 pub fn material(c: &v1::Coefficients) -> Material {
+    let su = SpringCoeffs {
+        k: c.structural_k,
+        c: c.structural_c,
+    };
+    let bu = SpringCoeffs {
+        k: c.bend_k,
+        c: c.bend_c,
+    };
     Material {
         springs: [
+            su,
             SpringCoeffs {
-                k: c.structural_k,
-                c: c.structural_c,
+                k: c.structural_v_k.unwrap_or(su.k),
+                c: c.structural_v_c.unwrap_or(su.c),
             },
             SpringCoeffs {
                 k: c.shear_k,
                 c: c.shear_c,
             },
+            bu,
             SpringCoeffs {
-                k: c.bend_k,
-                c: c.bend_c,
+                k: c.bend_v_k.unwrap_or(bu.k),
+                c: c.bend_v_c.unwrap_or(bu.c),
             },
         ],
     }
@@ -200,6 +214,30 @@ mod tests {
             vec![Level::Points(85), Level::Points(273), Level::new(16, 16)]
         );
         assert!(toml::from_str::<L>("levels = [-3]").is_err());
+    }
+
+    #[test]
+    fn coefficients_cross_the_wire_per_direction_and_old_messages_mean_v_equals_u() {
+        let m = Material {
+            springs: [
+                SpringCoeffs { k: 400.0, c: 0.04 },
+                SpringCoeffs { k: 250.0, c: 0.025 },
+                SpringCoeffs { k: 60.0, c: 0.006 },
+                SpringCoeffs { k: 8.0, c: 8e-4 },
+                SpringCoeffs { k: 5.0, c: 5e-4 },
+            ],
+        };
+        assert_eq!(material(&coefficients(&m)), m);
+        // A message from before the `_v` fields: v is u.
+        let old = v1::Coefficients {
+            structural_v_k: None,
+            structural_v_c: None,
+            bend_v_k: None,
+            bend_v_c: None,
+            ..coefficients(&m)
+        };
+        let [su, _, sh, bu, _] = m.springs;
+        assert_eq!(material(&old), Material::isotropic([su, sh, bu]));
     }
 
     #[test]

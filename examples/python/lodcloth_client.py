@@ -273,9 +273,13 @@ def cmd_switch(args, session, msgs: Messages) -> None:
             f"took {r.seconds:.3f} s ({'prepared' if r.cached else 'estimated now'}), "
             f"coefficient version {r.coefficient_version}, frame {r.frame}"
         )
+        # Along v where the level's cells are not square (absent: as along u).
+        sv = (c.structural_v_k, c.structural_v_c) if c.HasField("structural_v_k") else (c.structural_k, c.structural_c)
+        bv = (c.bend_v_k, c.bend_v_c) if c.HasField("bend_v_k") else (c.bend_k, c.bend_c)
         print(
-            f"  K/C structural {c.structural_k:.4e}/{c.structural_c:.4e}  "
-            f"shear {c.shear_k:.4e}/{c.shear_c:.4e}  bend {c.bend_k:.4e}/{c.bend_c:.4e}"
+            f"  K/C structural u {c.structural_k:.4e}/{c.structural_c:.4e} v {sv[0]:.4e}/{sv[1]:.4e}  "
+            f"shear {c.shear_k:.4e}/{c.shear_c:.4e}  "
+            f"bend u {c.bend_k:.4e}/{c.bend_c:.4e} v {bv[0]:.4e}/{bv[1]:.4e}"
         )
         return
     refusals = [err for err in errors if lodcloth_error(msgs, err) is not None]

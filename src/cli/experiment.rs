@@ -121,7 +121,8 @@ impl Common {
             .map(|p| {
                 let mut s = Scene::load(p).with_context(|| format!("loading scene {}", p.display()))?;
                 if let Some(level) = self.reference {
-                    (s.nx, s.ny) = level.resolve(s.width, s.height);
+                    let (nx, ny) = level.resolve(s.width, s.height);
+                    s.set_resolution(nx, ny);
                 }
                 Ok(s)
             })
@@ -429,11 +430,14 @@ fn write_table1(
 }
 
 /// The CSV columns of a model's coefficients, and their cells.
-const COEFFICIENT_HEADER: &str = "k_structural,k_shear,k_bend,c_structural,c_shear,c_bend";
+const COEFFICIENT_HEADER: &str = "k_structural_u,k_structural_v,k_shear,k_bend_u,k_bend_v,\
+                                  c_structural_u,c_structural_v,c_shear,c_bend_u,c_bend_v";
 
 fn coefficient_cells(material: &lodcloth::sim::Material) -> String {
     let m = material.springs;
-    format!("{},{},{},{},{},{}", m[0].k, m[1].k, m[2].k, m[0].c, m[1].c, m[2].c)
+    let k: Vec<String> = m.iter().map(|s| s.k.to_string()).collect();
+    let c: Vec<String> = m.iter().map(|s| s.c.to_string()).collect();
+    format!("{},{}", k.join(","), c.join(","))
 }
 
 /// Every row of Table 1, one line each.
@@ -649,7 +653,7 @@ fn write_error_maps(
 ) -> Result<()> {
     let (nx, ny) = level.resolve(scene.width, scene.height);
     let chosen = [
-        (Method::Same, MassConvention::PerNode),
+        (Method::SameSpring, MassConvention::PerNode),
         (Method::Bcd, MassConvention::PerNode),
         (Method::Gkd, MassConvention::PerNode),
         (Method::Fit, MassConvention::Lumped),

@@ -358,10 +358,12 @@ pub fn switch(c: Connect, args: SwitchArgs) -> Result<()> {
             if r.cached { " (prepared)" } else { " (estimated now)" },
             r.coefficient_version
         );
-        println!(
-            "  K/C structural {:.4e}/{:.4e}  shear {:.4e}/{:.4e}  bend {:.4e}/{:.4e}",
-            k.structural_k, k.structural_c, k.shear_k, k.shear_c, k.bend_k, k.bend_c
-        );
+        let m = lodcloth::proto::material(&k);
+        let kc: Vec<String> = lodcloth::sim::SpringClass::ALL
+            .iter()
+            .map(|&c| format!("{c} {:.4e}/{:.4e}", m.get(c).k, m.get(c).c))
+            .collect();
+        println!("  K/C {}", kc.join("  "));
         let _ = client.session.close().await;
         Ok(())
     })

@@ -28,11 +28,12 @@ impl Variant {
     }
 }
 
-/// The paper's three methods under its mass convention, the same three with
-/// lumped masses, and ours.
+/// The paper's three methods under its mass convention (its "same" is the
+/// per-spring copy), the same three with lumped masses (our `same`: the
+/// material converted per direction), and ours.
 pub const TABLE1_VARIANTS: [Variant; 8] = [
     Variant {
-        method: Method::Same,
+        method: Method::SameSpring,
         mass: MassConvention::PerNode,
     },
     Variant {
@@ -139,7 +140,7 @@ pub fn table1_scene(
             ny,
             variant.mass,
             integrator,
-            reference.material,
+            scene.material_at(nx, ny),
             options.dt_margin,
         )?;
         let problem = LodProblem::new(scene, reference.clone(), nx, ny, variant.mass, integrator, dt)?;

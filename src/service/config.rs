@@ -619,8 +619,7 @@ fn cloth_instance(r: &RawInstance, at: &str, p: &mut Problems) -> Option<(Instan
     if let Some(reference) = r.reference {
         match reference.grid() {
             Some((nx, ny)) if side_ok(nx, ny) => {
-                scene.nx = nx;
-                scene.ny = ny;
+                scene.set_resolution(nx, ny);
             }
             _ => {
                 p.push(format!(

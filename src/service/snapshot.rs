@@ -67,10 +67,12 @@ pub struct Header {
     pub nodes: usize,
     /// When it was taken (Unix milliseconds).
     pub saved_unix_ms: u64,
-    /// The coefficients it ran with: (K, C) of the structural, shear and
-    /// bend springs (absent in files written before they were saved).
+    /// The coefficients it ran with: (K, C) per spring class, structural u,
+    /// structural v, shear, bend u, bend v (absent in files written before
+    /// they were saved; three pairs, structural, shear, bend, in files
+    /// written before u and v were told apart).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub material: Option<[[f64; 2]; 3]>,
+    pub material: Option<Vec<[f64; 2]>>,
     /// The time step it ran with (s).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub dt: Option<f64>,
@@ -144,7 +146,9 @@ pub fn encode(instance: &str, identity: u64, saved_unix_ms: u64, s: &Snapshot) -
         step: s.state.step,
         nodes: n,
         saved_unix_ms,
-        material: s.coefficients.map(|c| c.material.springs.map(|k| [k.k, k.c])),
+        material: s
+            .coefficients
+            .map(|c| c.material.springs.iter().map(|k| [k.k, k.c]).collect()),
         dt: s.coefficients.map(|c| c.dt),
     };
     let json = serde_json::to_vec(&header).unwrap_or_default();
@@ -220,12 +224,20 @@ pub fn decode(bytes: &[u8]) -> Result<Saved, String> {
                     "header: material coefficient {bad} is not a finite non-negative number"
                 ));
             }
-            Some(Coefficients {
-                material: Material {
-                    springs: m.map(|[k, c]| SpringCoeffs { k, c }),
+            let pairs: Vec<SpringCoeffs> = m.iter().map(|&[k, c]| SpringCoeffs { k, c }).collect();
+            let material = match pairs[..] {
+                [s, h, b] => Material::isotropic([s, h, b]),
+                [su, sv, h, bu, bv] => Material {
+                    springs: [su, sv, h, bu, bv],
                 },
-                dt,
-            })
+                _ => {
+                    return Err(format!(
+                        "header: material has {} coefficient pairs, expected 5 (or 3 in older files)",
+                        pairs.len()
+                    ))
+                }
+            };
+            Some(Coefficients { material, dt })
         }
         _ => return Err("header: material and dt come together".into()),
     };
@@ -332,8 +344,10 @@ mod tests {
                 material: Material {
                     springs: [
                         SpringCoeffs { k: 1234.5678, c: 0.1 },
+                        SpringCoeffs { k: 987.25, c: 0.125 },
                         SpringCoeffs { k: 1.0 / 3.0, c: 0.0 },
                         SpringCoeffs { k: 7e-3, c: 2.5e-4 },
+                        SpringCoeffs { k: 6e-3, c: 2e-4 },
                     ],
                 },
                 dt: 1.0 / 1200.0,

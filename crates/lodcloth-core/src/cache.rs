@@ -64,10 +64,12 @@ use serde::{Deserialize, Serialize};
 use crate::atomic::{self, FileError};
 use crate::hash::{fnv1a64, Fnv1a64};
 use crate::scene::MassConvention;
-use crate::sim::{Integrator, Material, SpringCoeffs, SpringKind};
+use crate::sim::{Integrator, Material, SpringClass, SpringCoeffs};
 
 /// Version written to and required in the `format` field.
-const FORMAT_VERSION: u32 = 1;
+/// 2: coefficients per spring class (u and v directions apart); format-1
+/// files, one value per kind, are refused and recomputed.
+const FORMAT_VERSION: u32 = 2;
 
 /// First line of every cache file.
 const HEADER: &str =
@@ -285,7 +287,7 @@ impl CacheEntry {
     /// Every problem that would make this entry unusable, as readable phrases.
     fn problems(&self) -> Vec<String> {
         let mut p = Vec::new();
-        for kind in SpringKind::ALL {
+        for kind in SpringClass::ALL {
             let s = self.material.get(kind);
             // `!(x > 0.0)` also rejects NaN. K = 0 is a spring type the
             // model does not have (surfaces have no shear springs); it must
@@ -416,9 +418,11 @@ struct KeyRepr {
 #[derive(Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct MaterialRepr {
-    structural: CoeffsRepr,
+    structural_u: CoeffsRepr,
+    structural_v: CoeffsRepr,
     shear: CoeffsRepr,
-    bend: CoeffsRepr,
+    bend_u: CoeffsRepr,
+    bend_v: CoeffsRepr,
 }
 
 #[derive(Debug, Serialize, Deserialize)]
@@ -458,9 +462,11 @@ fn encode(entry: &CacheEntry) -> Result<String, String> {
             dt: k.dt,
         },
         material: MaterialRepr {
-            structural: m.get(SpringKind::Structural).into(),
-            shear: m.get(SpringKind::Shear).into(),
-            bend: m.get(SpringKind::Bend).into(),
+            structural_u: m.get(SpringClass::StructuralU).into(),
+            structural_v: m.get(SpringClass::StructuralV).into(),
+            shear: m.get(SpringClass::Shear).into(),
+            bend_u: m.get(SpringClass::BendU).into(),
+            bend_v: m.get(SpringClass::BendV).into(),
         },
         notes: entry.notes.clone(),
     };
@@ -531,7 +537,13 @@ fn decode(bytes: &[u8], wanted: &CacheKey) -> Result<CacheEntry, String> {
     let m = repr.material;
     let entry = CacheEntry {
         material: Material {
-            springs: [m.structural.into(), m.shear.into(), m.bend.into()],
+            springs: [
+                m.structural_u.into(),
+                m.structural_v.into(),
+                m.shear.into(),
+                m.bend_u.into(),
+                m.bend_v.into(),
+            ],
         },
         key,
         created_unix: repr.created_unix,

@@ -136,11 +136,11 @@ fn the_file_is_readable_toml_with_a_trailing_checksum_line() {
     let text = fs::read_to_string(&path).expect("read");
     assert!(text.starts_with("# lodcloth coefficient cache"), "{text}");
     for needle in [
-        "format = 1",
+        "format = 2",
         "[key]",
         "scene = \"paper-1-top-edge\"",
         "dt = 0.0002",
-        "[material.structural]",
+        "[material.structural_u]",
         "k = 1000.0",
     ] {
         assert!(text.contains(needle), "missing {needle:?} in\n{text}");
@@ -244,8 +244,17 @@ fn check_corruption_is_detected_and_repaired(
 #[test]
 fn a_truncated_file_is_refused_and_recomputed() {
     check_corruption_is_detected_and_repaired("half the file", "checksum", |path, _| {
+        // Cut at the first line end past the middle: whole lines, no checksum.
         let bytes = fs::read(path).expect("read");
-        fs::write(path, &bytes[..bytes.len() / 2]).expect("truncate");
+        let half = bytes.len() / 2;
+        let end = half + bytes[half..].iter().position(|&b| b == b'\n').expect("a line end");
+        fs::write(path, &bytes[..=end]).expect("truncate");
+    });
+    check_corruption_is_detected_and_repaired("cut mid-line", "truncated", |path, _| {
+        let bytes = fs::read(path).expect("read");
+        let half = bytes.len() / 2;
+        let end = half + bytes[half..].iter().position(|&b| b == b'\n').expect("a line end");
+        fs::write(path, &bytes[..end - 1]).expect("truncate");
     });
     check_corruption_is_detected_and_repaired("last byte missing", "truncated", |path, _| {
         let bytes = fs::read(path).expect("read");
@@ -294,7 +303,7 @@ fn another_keys_valid_file_under_this_name_is_refused_and_recomputed() {
 
 #[test]
 fn invalid_values_under_a_valid_checksum_are_refused_and_recomputed() {
-    check_corruption_is_detected_and_repaired("negative stiffness", "structural stiffness k = -1000", |path, _| {
+    check_corruption_is_detected_and_repaired("negative stiffness", "structural_u stiffness k = -1000", |path, _| {
         // Someone edited the file and "fixed" the checksum.
         let text = fs::read_to_string(path).expect("read");
         let (body, _) = text.trim_end_matches('\n').rsplit_once('\n').expect("lines");
@@ -305,7 +314,7 @@ fn invalid_values_under_a_valid_checksum_are_refused_and_recomputed() {
     check_corruption_is_detected_and_repaired("unknown field", "invalid TOML", |path, _| {
         let text = fs::read_to_string(path).expect("read");
         let (body, _) = text.trim_end_matches('\n').rsplit_once('\n').expect("lines");
-        let body = body.replacen("format = 1", "format = 1\nsurprise = 2", 1);
+        let body = body.replacen("format = 2", "format = 2\nsurprise = 2", 1);
         let body = format!("{body}\n");
         let sum = fnv1a64(body.as_bytes());
         fs::write(path, format!("{body}# checksum = fnv1a64:{sum:016x}\n")).expect("write");
@@ -342,7 +351,8 @@ fn put_refuses_entries_that_get_would_reject() {
     assert!(listing(dir.path()).is_empty(), "nothing written");
     // An absent spring type (K = C = 0, as a surface's shear) round-trips.
     let mut surface = entry_for(key(), 1.0);
-    surface.material.springs[1] = lodcloth::sim::SpringCoeffs { k: 0.0, c: 0.0 };
+    surface.material.springs[lodcloth::sim::SpringClass::Shear.index()] =
+        lodcloth::sim::SpringCoeffs { k: 0.0, c: 0.0 };
     cache.put(&surface).expect("an absent type is valid");
     let back = cache.get(&key()).expect("readable").expect("present");
     assert_identical(&back, &surface);

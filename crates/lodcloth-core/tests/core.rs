@@ -16,6 +16,7 @@ mod energy;
 mod equilibrium;
 mod estimation;
 mod kernel;
+mod membrane;
 mod oscillator;
 mod scenes;
 mod stability;

@@ -134,7 +134,7 @@ fn dense_mass_scaled_stiffness(
     let dim = 3 * free.len();
     let mut a = vec![vec![0.0; dim]; dim];
     for g in &topology.groups {
-        let k = material.get(g.kind).k;
+        let k = material.get(g.class).k;
         for s in 0..g.len() {
             let (p, q) = (g.a[s] as usize, g.b[s] as usize);
             let (xp, xq) = (topology.rest_positions[p], topology.rest_positions[q]);

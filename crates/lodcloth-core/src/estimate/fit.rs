@@ -1,12 +1,13 @@
-//! `fit` (ours): choose the six coefficients that minimise the *simulated*
+//! `fit` (ours): choose the coefficients that minimise the *simulated*
 //! displacement error — the quantity Table 1 reports — instead of a proxy.
 //!
-//! Parameters are `θ = ln(p / p_start)` (six log-scale factors: stiffness and
-//! damping span decades and must stay positive). The residual vector holds
+//! Parameters are `θ = ln(p / p_start)` (eight log-scale factors: K of each
+//! spring class, so structural and bend stiffness per direction, and C of
+//! each kind; stiffness and damping span decades and must stay positive). The residual vector holds
 //! `(p_ref − p_sim)/O_max` for every coarse node and component at up to
 //! `max_frames` evenly spaced training frames, so the cost `|r|²` is the
 //! mean squared eq.-9 error of those frames. It is minimised with
-//! Levenberg–Marquardt on a forward-difference Jacobian: six coarse
+//! Levenberg–Marquardt on a forward-difference Jacobian: eight coarse
 //! re-simulations per iteration, run in parallel (rayon), plus two trial
 //! steps with different damping, also in parallel. argmin offers Gauss–Newton
 //! and derivative-free methods, but not LM with this kind of parallel
@@ -22,11 +23,29 @@
 
 use std::ops::Range;
 
-use nalgebra::{Matrix6, Vector6};
+use nalgebra::{SMatrix, SVector};
 use rayon::prelude::*;
 
 use super::{inverse, Distribution, EstimateError, LodProblem, Progress, ProgressFn};
-use crate::sim::{Material, SpringCoeffs};
+use crate::sim::{Material, SpringClass};
+
+/// Fitted parameters: K of each of the five spring classes (per direction),
+/// and C of each kind (u and v damping move together: the data rarely tells
+/// them apart, and each extra parameter costs a simulation per iteration).
+const FP: usize = 8;
+type VecF = SVector<f64, FP>;
+type MatF = SMatrix<f64, FP, FP>;
+
+/// `start` scaled by `exp(θ)`: θ₀…θ₄ scale K per class, θ₅…θ₇ scale C per kind.
+fn scaled(start: &Material, theta: &VecF) -> Material {
+    let mut m = *start;
+    for class in SpringClass::ALL {
+        let s = &mut m.springs[class.index()];
+        s.k *= theta[class.index()].exp();
+        s.c *= theta[5 + class.kind().index()].exp();
+    }
+    m
+}
 
 /// Options of [`fit`].
 #[derive(Debug, Clone, PartialEq)]
@@ -132,23 +151,6 @@ impl Objective<'_> {
     }
 }
 
-fn to_vector(m: &Material) -> Vector6<f64> {
-    Vector6::from_fn(|i, _| {
-        let co = m.springs[i % 3];
-        if i < 3 {
-            co.k
-        } else {
-            co.c
-        }
-    })
-}
-
-fn from_vector(v: &Vector6<f64>) -> Material {
-    Material {
-        springs: [0, 1, 2].map(|t| SpringCoeffs { k: v[t], c: v[t + 3] }),
-    }
-}
-
 fn cost(r: &[f64]) -> f64 {
     r.iter().map(|x| x * x).sum()
 }
@@ -186,12 +188,12 @@ impl<'a> Objective<'a> {
     /// stays zero).
     fn normal_equations(
         &self,
-        theta: &Vector6<f64>,
+        theta: &VecF,
         r: &[f64],
-        material_at: &(impl Fn(&Vector6<f64>) -> Material + Sync),
+        material_at: &(impl Fn(&VecF) -> Material + Sync),
         h: f64,
-    ) -> (Matrix6<f64>, Vector6<f64>) {
-        let cols: Vec<Option<Vec<f64>>> = (0..6)
+    ) -> (MatF, VecF) {
+        let cols: Vec<Option<Vec<f64>>> = (0..FP)
             .into_par_iter()
             .map(|j| {
                 for step in [h, -h] {
@@ -204,12 +206,12 @@ impl<'a> Objective<'a> {
                 None
             })
             .collect();
-        let mut jtj = Matrix6::<f64>::zeros();
-        let mut jtr = Vector6::<f64>::zeros();
-        for a in 0..6 {
+        let mut jtj = MatF::zeros();
+        let mut jtr = VecF::zeros();
+        for a in 0..FP {
             let Some(ca) = &cols[a] else { continue };
             jtr[a] = ca.iter().zip(r).map(|(x, y)| x * y).sum();
-            for b in a..6 {
+            for b in a..FP {
                 let Some(cb) = &cols[b] else { continue };
                 let v: f64 = ca.iter().zip(cb).map(|(x, y)| x * y).sum();
                 jtj[(a, b)] = v;
@@ -231,11 +233,13 @@ fn start_candidates(
         candidates.push(("given", m));
         return Ok(candidates);
     }
-    candidates.push(("same", problem.reference.material));
-    let mut sim = problem.simulation(problem.reference.material)?;
+    let same = problem.same_material();
+    candidates.push(("same", same));
+    let mut sim = problem.simulation(same)?;
     let mut quiet = |_: Progress| {};
     let obs = inverse::observe(&problem.reference, problem.correlation(), &mut sim, &mut quiet);
     let gkd = inverse::inverse_estimate(
+        &same,
         &problem.reference,
         problem.correlation(),
         problem.topology(),
@@ -244,36 +248,36 @@ fn start_candidates(
         &mut quiet,
     );
     candidates.push(("gkd", gkd.material));
-    let lsq = inverse::lsq_estimate(&problem.reference.material, problem.topology(), &obs, &mut quiet);
+    let lsq = inverse::lsq_estimate(&same, problem.topology(), &obs, &mut quiet);
     candidates.push(("lsq", lsq.material));
     Ok(candidates)
 }
 
 /// One accepted Levenberg–Marquardt step: the damping it was taken with,
 /// the new log-coefficients, their cost and residuals.
-type Accepted = (f64, Vector6<f64>, f64, Vec<f64>);
+type Accepted = (f64, VecF, f64, Vec<f64>);
 
 /// Levenberg–Marquardt damping from `mu` upward (two trials at a time, in
 /// parallel) until a step lowers `cost_now`; `None` when none does before
 /// the damping reaches 10⁸. `mu` is left where the search stopped.
 fn damped_step(
     objective: &Objective<'_>,
-    (jtj, jtr): (Matrix6<f64>, Vector6<f64>),
-    theta: &Vector6<f64>,
+    (jtj, jtr): (MatF, VecF),
+    theta: &VecF,
     cost_now: f64,
     mu: &mut f64,
-    material_at: &(impl Fn(&Vector6<f64>) -> Material + Sync),
+    material_at: &(impl Fn(&VecF) -> Material + Sync),
     evaluations: &mut usize,
 ) -> Option<Accepted> {
     while *mu < 1e8 {
-        let trials: Vec<(f64, Vector6<f64>, Option<Vec<f64>>)> = [*mu, 10.0 * *mu]
+        let trials: Vec<(f64, VecF, Option<Vec<f64>>)> = [*mu, 10.0 * *mu]
             .into_par_iter()
             .map(|m| {
                 let mut a = jtj;
-                for i in 0..6 {
+                for i in 0..FP {
                     a[(i, i)] += m * jtj[(i, i)].max(1e-12) + 1e-15;
                 }
-                let delta = a.cholesky().map_or(Vector6::zeros(), |ch| ch.solve(&(-jtr)));
+                let delta = a.cholesky().map_or(VecF::zeros(), |ch| ch.solve(&(-jtr)));
                 // At most a factor e per coefficient per iteration.
                 let delta = delta.map(|d| d.clamp(-1.0, 1.0));
                 let t = theta + delta;
@@ -316,7 +320,7 @@ pub fn fit(problem: &LodProblem, options: &FitOptions, progress: ProgressFn<'_>)
         // Nothing feasible to start from: report the reference's coefficients
         // with infinite error rather than guess.
         return Ok(FitReport {
-            material: problem.reference.material,
+            material: problem.same_material(),
             start: "none",
             candidates: candidate_rms,
             start_rms: f64::INFINITY,
@@ -330,12 +334,16 @@ pub fn fit(problem: &LodProblem, options: &FitOptions, progress: ProgressFn<'_>)
     };
     let (start, start_material) = candidates[best];
     // Coefficients that are exactly zero cannot move on a log scale.
-    let base = to_vector(&start_material).map(|x| x.max(1e-9));
+    let mut base = start_material;
+    for s in &mut base.springs {
+        s.k = s.k.max(1e-9);
+        s.c = s.c.max(1e-9);
+    }
     let mut r = scored[best].clone().expect("best candidate is feasible");
     let mut c = cost(&r);
     let start_rms = c.sqrt();
-    let mut theta = Vector6::<f64>::zeros();
-    let material_at = |theta: &Vector6<f64>| from_vector(&base.component_mul(&theta.map(f64::exp)));
+    let mut theta = VecF::zeros();
+    let material_at = |theta: &VecF| scaled(&base, theta);
     let mut mu = 1e-2;
     let mut history = Vec::new();
     let mut stop = "iteration limit";
@@ -348,7 +356,7 @@ pub fn fit(problem: &LodProblem, options: &FitOptions, progress: ProgressFn<'_>)
             total: options.max_iterations as u64,
         });
         let normal = objective.normal_equations(&theta, &r, &material_at, options.fd_step);
-        evaluations += 6;
+        evaluations += FP;
         let Some((m, t, ct, rt)) = damped_step(&objective, normal, &theta, c, &mut mu, &material_at, &mut evaluations)
         else {
             stop = "converged (no step lowers the cost)";

@@ -14,11 +14,13 @@
 //! loads, wind, gravity and drag of the coarse cloth
 //! ([`Simulation::external_forces`]). Pinned nodes carry no information.
 //!
-//! # Per-type bases
+//! # Per-class bases
 //! Eq. 1 is linear in the coefficients: the spring force on node i is
 //! `Σ_t K_t·G_t,i + C_t·H_t,i` with `G_t,i = Σ (L − L0)·u` (unit stiffness)
 //! and `H_t,i = Σ ((v_j − v_i)·u)·u` (unit damping) over node i's springs of
-//! type t.
+//! class t. Classes are the paper's three types split by grid direction
+//! ([`SpringClass`]: structural and bend along u and along v, shear), so
+//! every method below estimates per-direction coefficients.
 //!
 //! # BCD and GKD (the paper's methods, as we read them)
 //! The published text lost its equations; our reading, kept deliberately
@@ -39,41 +41,49 @@
 //! Rejected samples, counted per type and reason: springs near rest length
 //! (`|G_t|` below 1e-4 of the type's rest length: K is noise over ~0), no
 //! relative velocity (`|H_t|` below 1e-4 m/s: C undefined), and negative
-//! estimates (a spring force opposite to the elongation). A type with no
-//! accepted sample keeps the reference coefficient, and the report says so.
+//! estimates (a spring force opposite to the elongation). A class with no
+//! accepted sample keeps the level's `same` coefficient, and the report says so.
 //!
 //! # `lsq` (ours)
-//! One least-squares fit of the six coefficients to every free node, sample
+//! One least-squares fit of the ten coefficients to every free node, sample
 //! and component at once: `min |A·q − b|² + λ·s·|q − 1|²` where `q` are the
-//! coefficients relative to the reference's (so columns are comparably
-//! scaled), `s = tr(AᵀA)/6` and λ = 1e-9 (a whisper of ridge that only acts
+//! coefficients relative to the level's `same` (so columns are comparably
+//! scaled), `s = tr(AᵀA)/10` and λ = 1e-9 (a whisper of ridge that only acts
 //! in directions the data does not determine). The report gives the
 //! condition number of the column-equilibrated normal matrix and the
 //! relative residual. Non-positive solutions are not allowed: the offending
 //! coefficient is fixed at 1e-3× the reference and the rest re-solved
 //! (reported as `clamped`).
 
-use nalgebra::{Matrix6, Vector6};
+use nalgebra::{SMatrix, SVector};
 
 use super::reference::Reference;
 use super::{Progress, ProgressFn};
 use crate::lod::Correlation;
 use crate::sim::vec3::dot;
-use crate::sim::{Integrator, Material, Simulation, SpringCoeffs, SpringKind, Topology};
+use crate::sim::{Integrator, Material, Simulation, SpringClass, SpringCoeffs, Topology};
 
-/// Spring forces per type with unit coefficients, SoA per type.
+/// Spring classes ([`SpringClass`]): structural u, v, shear, bend u, v.
+const T: usize = 5;
+/// Coefficients estimated: K then C per class.
+const P: usize = 2 * T;
+
+type MatP = SMatrix<f64, P, P>;
+type VecP = SVector<f64, P>;
+
+/// Spring forces per class with unit coefficients, SoA per class.
 #[derive(Debug, Clone)]
 pub struct Bases {
-    /// `G_t`: Σ (L − L0)·u over type-t springs, per node (SoA, 3n).
-    pub elastic: [Vec<f64>; 3],
-    /// `H_t`: Σ ((v_j − v_i)·u)·u over type-t springs, per node (SoA, 3n).
-    pub damping: [Vec<f64>; 3],
+    /// `G_t`: Σ (L − L0)·u over class-t springs, per node (SoA, 3n).
+    pub elastic: [Vec<f64>; T],
+    /// `H_t`: Σ ((v_j − v_i)·u)·u over class-t springs, per node (SoA, 3n).
+    pub damping: [Vec<f64>; T],
 }
 
 impl Bases {
     /// Zeroed bases for `n` nodes.
     pub fn new(n: usize) -> Bases {
-        let z = || [vec![0.0; 3 * n], vec![0.0; 3 * n], vec![0.0; 3 * n]];
+        let z = || std::array::from_fn(|_| vec![0.0; 3 * n]);
         Bases {
             elastic: z(),
             damping: z(),
@@ -83,12 +93,12 @@ impl Bases {
     /// Evaluate at (pos, vel) on `topology`.
     pub fn compute(&mut self, topology: &Topology, pos: &[f64], vel: &[f64]) {
         let n = topology.n_nodes;
-        for t in 0..3 {
+        for t in 0..T {
             self.elastic[t].fill(0.0);
             self.damping[t].fill(0.0);
         }
         for g in &topology.groups {
-            let t = g.kind.index();
+            let t = g.class.index();
             let (ge, gd) = (&mut self.elastic[t], &mut self.damping[t]);
             for s in 0..g.len() {
                 let (a, b) = (g.a[s] as usize, g.b[s] as usize);
@@ -119,7 +129,7 @@ impl Bases {
         }
     }
 
-    /// Type-t force on node k for coefficients (K, C): `K·G + C·H`.
+    /// Class-t force on node k for coefficients (K, C): `K·G + C·H`.
     fn force(&self, t: usize, n: usize, k: usize, co: SpringCoeffs) -> [f64; 3] {
         [0, 1, 2].map(|c| co.k * self.elastic[t][c * n + k] + co.c * self.damping[t][c * n + k])
     }
@@ -231,23 +241,24 @@ fn pinned_mask(sim: &Simulation) -> Vec<bool> {
     pinned
 }
 
-/// Why inverse samples were rejected, per spring type.
+/// Why inverse samples were rejected, per spring class
+/// ([`SpringClass::index`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct Rejections {
-    /// Node-samples considered per type.
-    pub considered: [u64; 3],
+    /// Node-samples considered per class.
+    pub considered: [u64; T],
     /// `|G_t|` too small: springs near rest length (K and C both skipped).
-    pub near_rest: [u64; 3],
+    pub near_rest: [u64; T],
     /// `|H_t|` too small: no relative velocity (C skipped).
-    pub no_relative_velocity: [u64; 3],
+    pub no_relative_velocity: [u64; T],
     /// K estimate ≤ 0.
-    pub negative_k: [u64; 3],
+    pub negative_k: [u64; T],
     /// C estimate < 0.
-    pub negative_c: [u64; 3],
-    /// Accepted K and C values per type.
-    pub accepted_k: [u64; 3],
+    pub negative_c: [u64; T],
+    /// Accepted K and C values per class.
+    pub accepted_k: [u64; T],
     /// See `accepted_k`.
-    pub accepted_c: [u64; 3],
+    pub accepted_c: [u64; T],
 }
 
 /// Share distribution of the paper's inverse methods.
@@ -264,12 +275,13 @@ pub enum Distribution {
 pub struct InverseEstimate {
     /// The estimated coefficients.
     pub material: Material,
-    /// Samples rejected, by reason and spring type.
+    /// Samples rejected, by reason and spring class.
     pub rejections: Rejections,
-    /// Types that had no accepted K (or C) sample and kept the reference's value.
-    pub fallback_k: [bool; 3],
+    /// Classes that had no accepted K (or C) sample and kept the prior's
+    /// value (the level's `same`).
+    pub fallback_k: [bool; T],
     /// See `fallback_k`.
-    pub fallback_c: [bool; 3],
+    pub fallback_c: [bool; T],
 }
 
 /// Reference nodes and Gaussian weights around each coarse node (GKD).
@@ -278,7 +290,7 @@ fn gkd_neighbourhoods(reference: &Topology, coarse: &Topology) -> Vec<Vec<(u32, 
     // (no shear springs, irregular rings) √2 × the mean stretch spring.
     let diagonal = match coarse.grid {
         Some(shape) => shape.hx().hypot(shape.hy()),
-        None => std::f64::consts::SQRT_2 * mean_rest_lengths(coarse)[SpringKind::Structural.index()],
+        None => std::f64::consts::SQRT_2 * mean_rest_lengths(coarse)[SpringClass::StructuralU.index()],
     };
     let radius = 1.25 * diagonal;
     let sigma: f64 = 3.0;
@@ -299,8 +311,10 @@ fn gkd_neighbourhoods(reference: &Topology, coarse: &Topology) -> Vec<Vec<(u32, 
         .collect()
 }
 
-/// The paper's BCD or GKD estimate from observations.
+/// The paper's BCD or GKD estimate from observations; a class with no
+/// accepted sample keeps `prior`'s coefficient.
 pub fn inverse_estimate(
+    prior: &Material,
     reference: &Reference,
     correlation: &Correlation,
     coarse: &Topology,
@@ -317,16 +331,16 @@ pub fn inverse_estimate(
     };
     let mut fine = Bases::new(nf);
     let mut bases = Bases::new(n);
-    let mut mags = [vec![0.0; nf], vec![0.0; nf], vec![0.0; nf]];
+    let mut mags: [Vec<f64>; T] = std::array::from_fn(|_| vec![0.0; nf]);
     let mut rej = Rejections::default();
-    let mut sum_k = [0.0; 3];
-    let mut sum_c = [0.0; 3];
+    let mut sum_k = [0.0; T];
+    let mut sum_c = [0.0; T];
     let total = observations.samples.len() as u64;
     let free = &observations.free;
     for (oi, obs) in observations.samples.iter().enumerate() {
         let s = &reference.samples[obs.sample];
         fine.compute(&reference.topology, &s.cur, &obs.fine_vel);
-        for t in 0..3 {
+        for t in 0..T {
             let co = reference.material.springs[t];
             for j in 0..nf {
                 let f = fine.force(t, nf, j, co);
@@ -341,12 +355,12 @@ pub fn inverse_estimate(
             let shares = match distribution {
                 Distribution::Bcd => {
                     let e = correlation.entries()[k];
-                    let mut r = [0.0; 3];
+                    let mut r = [0.0; T];
                     for (&j, &w) in e.nodes.iter().zip(&e.weights) {
                         let j = j as usize;
-                        let sum = mags[0][j] + mags[1][j] + mags[2][j];
+                        let sum: f64 = mags.iter().map(|m| m[j]).sum();
                         if sum > 0.0 {
-                            for t in 0..3 {
+                            for t in 0..T {
                                 r[t] += w * mags[t][j] / sum;
                             }
                         }
@@ -354,24 +368,24 @@ pub fn inverse_estimate(
                     r
                 }
                 Distribution::Gkd => {
-                    let mut num = [0.0; 3];
+                    let mut num = [0.0; T];
                     let mut den = 0.0;
                     for &(j, w) in &neighbourhoods[k] {
                         let j = j as usize;
-                        for t in 0..3 {
+                        for t in 0..T {
                             num[t] += w * mags[t][j];
+                            den += w * mags[t][j];
                         }
-                        den += w * (mags[0][j] + mags[1][j] + mags[2][j]);
                     }
                     if den > 0.0 {
                         num.map(|x| x / den)
                     } else {
-                        [0.0; 3]
+                        [0.0; T]
                     }
                 }
             };
             let fs = [0, 1, 2].map(|c| obs.spring_force[c * n + k]);
-            for t in 0..3 {
+            for t in 0..T {
                 rej.considered[t] += 1;
                 let ft = fs.map(|x| shares[t] * x);
                 let g = [0, 1, 2].map(|c| bases.elastic[t][c * n + k]);
@@ -409,10 +423,10 @@ pub fn inverse_estimate(
             total,
         });
     }
-    let mut material = reference.material;
-    let mut fallback_k = [false; 3];
-    let mut fallback_c = [false; 3];
-    for t in 0..3 {
+    let mut material = *prior;
+    let mut fallback_k = [false; T];
+    let mut fallback_c = [false; T];
+    for t in 0..T {
         if rej.accepted_k[t] > 0 {
             material.springs[t].k = sum_k[t] / rej.accepted_k[t] as f64;
         } else {
@@ -432,15 +446,15 @@ pub fn inverse_estimate(
     }
 }
 
-fn mean_rest_lengths(topology: &Topology) -> [f64; 3] {
-    let mut sum = [0.0; 3];
-    let mut count = [0usize; 3];
+fn mean_rest_lengths(topology: &Topology) -> [f64; T] {
+    let mut sum = [0.0; T];
+    let mut count = [0usize; T];
     for g in &topology.groups {
-        let t = g.kind.index();
+        let t = g.class.index();
         sum[t] += g.rest.iter().sum::<f64>();
         count[t] += g.len();
     }
-    [0, 1, 2].map(|t| if count[t] > 0 { sum[t] / count[t] as f64 } else { 1.0 })
+    std::array::from_fn(|t| if count[t] > 0 { sum[t] / count[t] as f64 } else { 1.0 })
 }
 
 /// Result of the global least-squares fit.
@@ -455,28 +469,29 @@ pub struct LsqEstimate {
     /// Equations (node × component × sample) in the fit.
     pub equations: u64,
     /// Coefficients that came out non-positive and were fixed at 1e-3× the
-    /// reference's, in order K_st, K_sh, K_b, C_st, C_sh, C_b.
-    pub clamped: [bool; 6],
+    /// prior's, in the order of [`COEFFICIENT_NAMES`].
+    pub clamped: [bool; P],
 }
 
-/// The global least-squares fit (see the module docs).
+/// The global least-squares fit (see the module docs), relative to `prior`
+/// (the level's `same`).
 pub fn lsq_estimate(
-    reference_material: &Material,
+    prior_material: &Material,
     coarse: &Topology,
     observations: &Observations,
     progress: ProgressFn<'_>,
 ) -> LsqEstimate {
     let n = coarse.n_nodes;
-    let prior: [f64; 6] = [0, 1, 2, 3, 4, 5].map(|i| {
-        let co = reference_material.springs[i % 3];
-        if i < 3 {
+    let prior: [f64; P] = std::array::from_fn(|i| {
+        let co = prior_material.springs[i % T];
+        if i < T {
             co.k
         } else {
             co.c
         }
     });
-    let mut ata = Matrix6::<f64>::zeros();
-    let mut atb = Vector6::<f64>::zeros();
+    let mut ata = MatP::zeros();
+    let mut atb = VecP::zeros();
     let mut btb = 0.0;
     let mut equations = 0u64;
     let mut bases = Bases::new(n);
@@ -487,11 +502,11 @@ pub fn lsq_estimate(
             for k in (0..n).filter(|&k| observations.free[k]) {
                 let i = c * n + k;
                 let b = obs.spring_force[i];
-                let row = Vector6::from_fn(|j, _| {
-                    let basis = if j < 3 {
+                let row = VecP::from_fn(|j, _| {
+                    let basis = if j < T {
                         &bases.elastic[j]
                     } else {
-                        &bases.damping[j - 3]
+                        &bases.damping[j - T]
                     };
                     basis[i] * prior[j]
                 });
@@ -507,21 +522,21 @@ pub fn lsq_estimate(
             total,
         });
     }
-    let d = Vector6::from_fn(|i, _| ata[(i, i)].max(f64::MIN_POSITIVE).sqrt().recip());
-    let scaled = Matrix6::from_fn(|i, j| ata[(i, j)] * d[i] * d[j]);
+    let d = VecP::from_fn(|i, _| ata[(i, i)].max(f64::MIN_POSITIVE).sqrt().recip());
+    let scaled = MatP::from_fn(|i, j| ata[(i, j)] * d[i] * d[j]);
     let eig = scaled.symmetric_eigenvalues();
     let condition = eig.max() / eig.min().max(f64::MIN_POSITIVE);
-    let ridge = 1e-9 * ata.trace() / 6.0;
-    let mut fixed = [false; 6];
+    let ridge = 1e-9 * ata.trace() / P as f64;
+    let mut fixed = [false; P];
     let q_min = 1e-3;
-    let mut q = Vector6::from_element(1.0);
-    for _ in 0..6 {
+    let mut q = VecP::from_element(1.0);
+    for _ in 0..P {
         // Solve for the free coefficients with the fixed ones at q_min.
-        let mut m = ata + Matrix6::identity() * ridge;
-        let mut rhs = atb + Vector6::from_element(ridge);
-        for j in 0..6 {
+        let mut m = ata + MatP::identity() * ridge;
+        let mut rhs = atb + VecP::from_element(ridge);
+        for j in 0..P {
             if fixed[j] {
-                for i in 0..6 {
+                for i in 0..P {
                     rhs[i] -= m[(i, j)] * q_min;
                     m[(i, j)] = 0.0;
                     m[(j, i)] = 0.0;
@@ -532,9 +547,9 @@ pub fn lsq_estimate(
         }
         q = match m.cholesky() {
             Some(ch) => ch.solve(&rhs),
-            None => m.lu().solve(&rhs).unwrap_or_else(|| Vector6::from_element(1.0)),
+            None => m.lu().solve(&rhs).unwrap_or_else(|| VecP::from_element(1.0)),
         };
-        let worst = (0..6)
+        let worst = (0..P)
             .filter(|&j| !fixed[j] && q[j] <= q_min)
             .min_by(|&a, &b| q[a].total_cmp(&q[b]));
         match worst {
@@ -543,11 +558,11 @@ pub fn lsq_estimate(
         }
     }
     let resid2 = (q.transpose() * ata * q)[0] - 2.0 * q.dot(&atb) + btb;
-    let mut material = *reference_material;
-    for t in 0..3 {
+    let mut material = *prior_material;
+    for t in 0..T {
         material.springs[t] = SpringCoeffs {
             k: q[t] * prior[t],
-            c: q[t + 3] * prior[t + 3],
+            c: q[t + T] * prior[t + T],
         };
     }
     LsqEstimate {
@@ -559,5 +574,8 @@ pub fn lsq_estimate(
     }
 }
 
-/// Coefficient names in the order of the six-vector (K then C per type).
-pub const COEFFICIENT_NAMES: [&str; 6] = ["K_st", "K_sh", "K_b", "C_st", "C_sh", "C_b"];
+/// Coefficient names in the order of the least-squares vector (K then C per
+/// class, classes in [`SpringClass::index`] order).
+pub const COEFFICIENT_NAMES: [&str; P] = [
+    "K_st_u", "K_st_v", "K_sh", "K_b_u", "K_b_v", "C_st_u", "C_st_v", "C_sh", "C_b_u", "C_b_v",
+];

@@ -9,10 +9,17 @@
 //! and measures it against the reference.
 //!
 //! Methods:
-//! - `same`: the reference's coefficients unchanged;
+//! - `same`: the reference's material at the level's spacing (the membrane
+//!   its springs make, converted per direction: [`crate::sim::Membrane`]);
+//! - `same_spring`: the paper's "same", the reference's per-spring
+//!   coefficients unchanged;
 //! - `bcd`, `gkd`: the paper's inverse-Hooke methods ([`inverse`]);
-//! - `lsq`: one global least-squares fit of the six coefficients ([`inverse`]);
+//! - `lsq`: one global least-squares fit of the ten per-class coefficients
+//!   ([`inverse`]);
 //! - `fit`: minimise the simulated displacement error directly ([`fit`]).
+//!
+//! Every method but `same_spring` gives per-direction coefficients (one K and
+//! C per [`crate::sim::SpringClass`]).
 
 pub mod fit;
 pub mod inverse;
@@ -30,7 +37,9 @@ pub use reference::{RecordSpec, Reference, ReferenceError, Sample};
 
 use crate::lod::{Correlation, LodError};
 use crate::scene::{MassConvention, Scene, SceneError};
-use crate::sim::{Integrator, Loads, Material, SimError, SimParams, Simulation, StabilityCheck, State, Topology};
+use crate::sim::{
+    Integrator, Loads, Material, Membrane, SimError, SimParams, Simulation, StabilityCheck, State, Topology,
+};
 
 /// Progress of a long estimation stage.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -52,8 +61,14 @@ pub fn no_progress(_: Progress) {}
 /// An estimation method, usable by name everywhere (CLI, config, cache).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Method {
-    /// The reference's per-spring coefficients, unchanged.
+    /// The reference's material made at the level's spacing: the membrane
+    /// the reference's springs make ([`Membrane`]) converted to springs of
+    /// the level's cells, per direction. On square cells of a square-celled
+    /// reference this is the reference's per-spring coefficients.
     Same,
+    /// The paper's "same": the reference's per-spring coefficients copied
+    /// unchanged, whatever the level's cell shape.
+    SameSpring,
     /// The paper's inverse Hooke fit with barycentric shares (eq. 3).
     Bcd,
     /// The paper's inverse Hooke fit with Gaussian-kernel shares (eqs. 4–6).
@@ -67,12 +82,20 @@ pub enum Method {
 
 impl Method {
     /// Every method, cheapest first.
-    pub const ALL: [Method; 5] = [Method::Same, Method::Bcd, Method::Gkd, Method::Lsq, Method::Fit];
+    pub const ALL: [Method; 6] = [
+        Method::Same,
+        Method::SameSpring,
+        Method::Bcd,
+        Method::Gkd,
+        Method::Lsq,
+        Method::Fit,
+    ];
 
     /// Name used in config files, CLI and CSV.
     pub const fn name(self) -> &'static str {
         match self {
             Method::Same => "same",
+            Method::SameSpring => "same_spring",
             Method::Bcd => "bcd",
             Method::Gkd => "gkd",
             Method::Lsq => "lsq",
@@ -247,6 +270,21 @@ impl LodProblem {
         self.reference.frames.len()
     }
 
+    /// The `same` coefficients of this level: the reference's material
+    /// converted from the reference's cells to this level's, per direction
+    /// ([`Membrane::convert`]).
+    pub fn same_material(&self) -> Material {
+        let cells = |t: &Topology| t.grid.map_or((1.0, 1.0), |g| (g.hx(), g.hy()));
+        match (self.reference.topology.grid, self.topology.grid) {
+            (Some(_), Some(_)) => Membrane::convert(
+                &self.reference.material,
+                cells(&self.reference.topology),
+                cells(&self.topology),
+            ),
+            _ => self.reference.material,
+        }
+    }
+
     /// Coarse parameters with `material`.
     pub fn params(&self, material: Material) -> SimParams {
         SimParams {
@@ -413,11 +451,12 @@ impl LodProblem {
         options: &FitOptions,
         progress: ProgressFn<'_>,
     ) -> Result<Estimate, EstimateError> {
-        let reference_material = self.reference.material;
+        let same = self.same_material();
         let details = match method {
             Method::Same => Details::Same,
+            Method::SameSpring => Details::Same,
             Method::Bcd | Method::Gkd => {
-                let mut sim = self.simulation(reference_material)?;
+                let mut sim = self.simulation(same)?;
                 let obs = inverse::observe(&self.reference, &self.correlation, &mut sim, progress);
                 let dist = if method == Method::Bcd {
                     Distribution::Bcd
@@ -425,6 +464,7 @@ impl LodProblem {
                     Distribution::Gkd
                 };
                 Details::Inverse(inverse::inverse_estimate(
+                    &same,
                     &self.reference,
                     &self.correlation,
                     &self.topology,
@@ -434,19 +474,15 @@ impl LodProblem {
                 ))
             }
             Method::Lsq => {
-                let mut sim = self.simulation(reference_material)?;
+                let mut sim = self.simulation(same)?;
                 let obs = inverse::observe(&self.reference, &self.correlation, &mut sim, progress);
-                Details::Lsq(inverse::lsq_estimate(
-                    &reference_material,
-                    &self.topology,
-                    &obs,
-                    progress,
-                ))
+                Details::Lsq(inverse::lsq_estimate(&same, &self.topology, &obs, progress))
             }
             Method::Fit => Details::Fit(fit::fit(self, options, progress)?),
         };
         let material = match &details {
-            Details::Same => reference_material,
+            Details::Same if method == Method::SameSpring => self.reference.material,
+            Details::Same => same,
             Details::Inverse(e) => e.material,
             Details::Lsq(e) => e.material,
             Details::Fit(e) => e.material,

@@ -169,7 +169,16 @@ pub fn default_problem(
 ) -> Result<LodProblem, PlanError> {
     let integrator = scene.params.integrator;
     let mass = MassConvention::Lumped;
-    let (dt, _) = level_dt(scene, reference, nx, ny, mass, integrator, reference.material, 0.75)?;
+    let (dt, _) = level_dt(
+        scene,
+        reference,
+        nx,
+        ny,
+        mass,
+        integrator,
+        scene.material_at(nx, ny),
+        0.75,
+    )?;
     Ok(LodProblem::new(scene, reference.clone(), nx, ny, mass, integrator, dt)?)
 }
 

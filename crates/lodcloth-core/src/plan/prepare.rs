@@ -279,9 +279,18 @@ impl Preparer {
         let dt = match self.plan.dt {
             Some(dt) => dt,
             None => {
-                level_dt(scene, &reference, nx, ny, mass, integrator, reference.material, 0.75)
-                    .map_err(failed)?
-                    .0
+                level_dt(
+                    scene,
+                    &reference,
+                    nx,
+                    ny,
+                    mass,
+                    integrator,
+                    scene.material_at(nx, ny),
+                    0.75,
+                )
+                .map_err(failed)?
+                .0
             }
         };
         let problem =
@@ -389,7 +398,8 @@ impl Preparer {
             .map_err(|e| failed(e.to_string()))?;
         let frames = reference.frames.len();
         let (material, seconds, cached) = match method {
-            Method::Same => (model.sim.params().material, 0.0, false),
+            // A surface has no grid directions: both "same"s are its springs.
+            Method::Same | Method::SameSpring => (model.sim.params().material, 0.0, false),
             Method::Fit => self.surface_fit(scene, &mut model, &reference, points)?,
             Method::Bcd | Method::Gkd | Method::Lsq => {
                 let estimated = self.surface_inverse(scene, &model, points, method)?;
@@ -525,6 +535,7 @@ impl Preparer {
                         Distribution::Gkd
                     };
                     inverse::inverse_estimate(
+                        &reference.material,
                         &reference,
                         &correlation,
                         coarse.topology(),
@@ -705,7 +716,7 @@ impl Preparer {
 
     /// The quick start: the scene's own coefficients at the configured dt.
     fn quick_cloth(&self, scene: &Scene, nx: usize, ny: usize) -> Result<(Simulation, f64), String> {
-        self.cloth_at(scene, nx, ny, scene.params.material, self.plan.dt)
+        self.cloth_at(scene, nx, ny, scene.material_at(nx, ny), self.plan.dt)
     }
 
     /// A cloth level at rest with lumped masses and `material`; at `dt`, or

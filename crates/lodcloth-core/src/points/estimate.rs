@@ -18,7 +18,7 @@ use std::sync::Arc;
 
 use super::model::PointModel;
 use crate::sim::vec3::{dist, V3};
-use crate::sim::{Material, SimError, Simulation, SpringKind, StabilityCheck, State};
+use crate::sim::{Material, SimError, Simulation, SpringClass, SpringKind, StabilityCheck, State};
 
 /// The full cloud's motion, recorded at fixed frame times.
 #[derive(Debug, Clone)]
@@ -224,9 +224,13 @@ pub fn rescaled(
 ) -> Result<Option<Simulation>, SimError> {
     let s = &model.sim;
     let mut params = *s.params();
-    let springs = &mut params.material.springs;
-    springs[SpringKind::Structural.index()].k *= stretch;
-    springs[SpringKind::Bend.index()].k *= bend;
+    for class in SpringClass::ALL {
+        match class.kind() {
+            SpringKind::Structural => params.material.springs[class.index()].k *= stretch,
+            SpringKind::Bend => params.material.springs[class.index()].k *= bend,
+            SpringKind::Shear => {}
+        }
+    }
     let topology: Arc<_> = s.topology().clone();
     let sim = Simulation::new(
         topology.clone(),

@@ -204,9 +204,7 @@ impl PointModel {
         let mut sim_params = SimParams {
             dt: params.dt.unwrap_or(1e-4),
             integrator: params.integrator,
-            material: Material {
-                springs: [params.stretch, SpringCoeffs { k: 0.0, c: 0.0 }, params.bend],
-            },
+            material: Material::isotropic([params.stretch, SpringCoeffs { k: 0.0, c: 0.0 }, params.bend]),
             gravity: params.gravity,
             drag: params.drag,
             stiffness_adjustment: None,

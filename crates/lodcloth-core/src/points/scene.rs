@@ -366,7 +366,7 @@ impl SurfaceScene {
             target: Some(points),
         });
         let (stretch, bend) = match material {
-            Some(m) => (m.get(SpringKind::Structural), m.get(SpringKind::Bend)),
+            Some(m) => (m.of_kind(SpringKind::Structural), m.of_kind(SpringKind::Bend)),
             None => (self.params.stretch, self.params.bend),
         };
         let params = SurfaceParams {

@@ -18,7 +18,7 @@ use std::collections::{HashMap, HashSet};
 use super::knn::Knn;
 use super::local::{one_ring, OneRing, RingScratch};
 use crate::sim::vec3::{dist, V3};
-use crate::sim::{SpringGroup, SpringKind, Topology};
+use crate::sim::{SpringClass, SpringGroup, Topology};
 
 /// Why a surface could not be built.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -119,8 +119,8 @@ impl Surface {
                 .collect()
         };
         let groups = vec![
-            SpringGroup::from_pairs(SpringKind::Structural, &stretch, rest(&stretch)),
-            SpringGroup::from_pairs(SpringKind::Bend, &bend, rest(&bend)),
+            SpringGroup::from_pairs(SpringClass::StructuralU, &stretch, rest(&stretch)),
+            SpringGroup::from_pairs(SpringClass::BendU, &bend, rest(&bend)),
         ];
 
         let mut triangles = Vec::new();

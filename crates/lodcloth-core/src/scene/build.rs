@@ -7,7 +7,7 @@ use std::sync::Arc;
 use super::selector::{region_load, select, Selector};
 use super::{MassConvention, Scene, SceneError};
 use crate::problems::Problems;
-use crate::sim::{GridShape, Loads, NodeLoad, Pin, Simulation, State, Topology};
+use crate::sim::{GridShape, Loads, NodeLoad, Pin, SimParams, Simulation, State, Topology};
 
 impl Scene {
     /// Node masses at `nx × ny` under the scene's mass convention.
@@ -93,7 +93,8 @@ impl Scene {
         self.build_at(self.nx, self.ny)
     }
 
-    /// Build the scene at resolution `nx × ny`, starting at rest at t = 0.
+    /// Build the scene at resolution `nx × ny`, starting at rest at t = 0,
+    /// with the scene's material made at that resolution ([`Scene::material_at`]).
     pub fn build_at(&self, nx: usize, ny: usize) -> Result<Simulation, SceneError> {
         let mut p = Problems::default();
         p.grid_size("resolution", nx, ny);
@@ -107,7 +108,11 @@ impl Scene {
         let masses = self.masses(&topology);
         let loads = self.loads(&topology)?;
         let state = State::at_rest(&topology);
-        Simulation::new(topology, masses, self.params, loads, state, self.stability).map_err(|source| SceneError::Sim {
+        let params = SimParams {
+            material: self.material_at(nx, ny),
+            ..self.params
+        };
+        Simulation::new(topology, masses, params, loads, state, self.stability).map_err(|source| SceneError::Sim {
             origin: self.origin.clone(),
             nx,
             ny,

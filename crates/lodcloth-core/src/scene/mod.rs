@@ -28,7 +28,7 @@
 
 use std::path::Path;
 
-use crate::sim::{GridShape, Orientation, PinPath, Profile, SimParams, StabilityCheck, Wind};
+use crate::sim::{GridShape, Material, Membrane, Orientation, PinPath, Profile, SimParams, StabilityCheck, Wind};
 
 mod build;
 mod error;
@@ -38,8 +38,8 @@ mod validate;
 
 pub use error::SceneError;
 pub use raw::{
-    MassConvention, RawAdjustment, RawCloth, RawCoeffs, RawForce, RawLimit, RawOrientation, RawPin, RawPinPath,
-    RawProfile, RawRegion, RawScene, RawSelector, RawSimulation, RawSprings, RawStrain, RawWind,
+    MassConvention, RawAdjustment, RawCloth, RawCoeffs, RawForce, RawLimit, RawMaterial, RawModuli, RawOrientation,
+    RawPin, RawPinPath, RawProfile, RawRegion, RawScene, RawSelector, RawSimulation, RawSprings, RawStrain, RawWind,
 };
 pub use selector::{Edge, Selector};
 
@@ -66,7 +66,8 @@ pub struct Scene {
     /// Cloth height along j (m); positive. Row 0 is the top edge.
     pub height: f64,
     /// Reference resolution: nodes per row (2 to 4096); `nodes = [[i, j], …]`
-    /// selectors index this grid.
+    /// selectors index this grid. Change it with [`Scene::set_resolution`],
+    /// which keeps the material.
     pub nx: usize,
     /// Nodes per column at the reference resolution (2 to 4096).
     pub ny: usize,
@@ -76,7 +77,9 @@ pub struct Scene {
     pub areal_density: f64,
     /// How node masses follow from the areal density at each resolution.
     pub mass: MassConvention,
-    /// Integrator, dt, material, gravity, drag, strain control.
+    /// Integrator, dt, gravity, drag, strain control, and the material as
+    /// per-spring coefficients at the reference resolution `nx × ny`
+    /// ([`Scene::material_at`] for any other).
     pub params: SimParams,
     /// Run length (s).
     pub duration: f64,
@@ -127,6 +130,32 @@ impl Scene {
             width: self.width,
             height: self.height,
         }
+    }
+
+    /// The scene's material ([`Membrane`]): what its springs make on the
+    /// reference resolution's cells.
+    pub fn membrane(&self) -> Membrane {
+        let s = self.shape(self.nx, self.ny);
+        Membrane::from_springs(&self.params.material, s.hx(), s.hy())
+    }
+
+    /// The per-spring coefficients that make the scene's material at
+    /// resolution `nx × ny` (the level's `same`).
+    pub fn material_at(&self, nx: usize, ny: usize) -> Material {
+        if (nx, ny) == (self.nx, self.ny) {
+            return self.params.material;
+        }
+        let s = self.shape(nx, ny);
+        self.membrane().springs(s.hx(), s.hy())
+    }
+
+    /// Make `nx × ny` the reference resolution, keeping the material (the
+    /// springs are converted) and every selector's physical meaning
+    /// (`nodes = [[i, j], …]` became material coordinates when read).
+    pub fn set_resolution(&mut self, nx: usize, ny: usize) {
+        self.params.material = self.material_at(nx, ny);
+        self.nx = nx;
+        self.ny = ny;
     }
 
     /// Steps in a run of [`Scene::duration`].

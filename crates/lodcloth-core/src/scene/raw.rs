@@ -20,8 +20,11 @@ pub struct RawScene {
     pub description: String,
     /// `[cloth]`: size, reference resolution, orientation and mass.
     pub cloth: RawCloth,
-    /// `[springs]`: stiffness and damping of each spring kind.
-    pub springs: RawSprings,
+    /// `[springs]`: stiffness and damping of each spring kind at the
+    /// scene's own resolution. Exactly one of `[springs]` and `[material]`.
+    pub springs: Option<RawSprings>,
+    /// `[material]`: the resolution-independent membrane material.
+    pub material: Option<RawMaterial>,
     /// `[simulation]`: integrator, time step, run length and global forces.
     pub simulation: RawSimulation,
     /// `[strain]`: optional super-elasticity control; default none.
@@ -131,6 +134,38 @@ pub struct RawSprings {
     pub shear: RawCoeffs,
     /// Springs two nodes apart along rows and columns: resist bending.
     pub bend: RawCoeffs,
+}
+
+/// `[material]`: the cloth's membrane material, independent of any
+/// resolution ([`crate::sim::Membrane`]); every level's springs are made
+/// from it at that level's cell spacing.
+#[derive(Debug, Clone, Copy, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RawMaterial {
+    /// Stiffness moduli (N/m).
+    pub stiffness: RawModuli,
+    /// Damping moduli (N·s/m); exactly one of `damping` and `damping_time`.
+    pub damping: Option<RawModuli>,
+    /// Damping as a time τ (s): damping moduli = τ × stiffness moduli.
+    pub damping_time: Option<f64>,
+}
+
+/// Membrane moduli ([`crate::sim::Moduli`]).
+#[derive(Debug, Clone, Copy, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RawModuli {
+    /// Tension per unit width per unit strain along u (v held).
+    pub stretch_u: f64,
+    /// The same along v.
+    pub stretch_v: f64,
+    /// In-plane shear modulus.
+    pub shear: f64,
+    /// The part of `stretch_u` the bend springs carry; default 0.
+    #[serde(default)]
+    pub bend_u: f64,
+    /// The part of `stretch_v` the bend springs carry; default 0.
+    #[serde(default)]
+    pub bend_v: f64,
 }
 
 /// `[simulation]`: how time advances and which global forces act.

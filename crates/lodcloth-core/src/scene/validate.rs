@@ -7,15 +7,15 @@
 //! carries on with the value as given, so one mistake never hides another.
 
 use super::raw::{
-    RawCloth, RawCoeffs, RawForce, RawLimit, RawOrientation, RawPin, RawPinPath, RawProfile, RawScene, RawSelector,
-    RawSimulation, RawSprings, RawStrain, RawWind,
+    RawCloth, RawCoeffs, RawForce, RawLimit, RawMaterial, RawModuli, RawOrientation, RawPin, RawPinPath, RawProfile,
+    RawScene, RawSelector, RawSimulation, RawSprings, RawStrain, RawWind,
 };
 use super::selector::{Edge, Selector};
 use super::{Scene, SceneError, SceneForce, ScenePin};
 use crate::problems::Problems;
 use crate::sim::{
-    CgSettings, GridShape, Material, Orientation, PinPath, Profile, SimParams, SpringCoeffs, SpringKind,
-    StabilityCheck, StiffnessAdjustment, StrainLimit, Wind,
+    CgSettings, GridShape, Material, Membrane, Moduli, Orientation, PinPath, Profile, SimParams, SpringCoeffs,
+    SpringKind, StabilityCheck, StiffnessAdjustment, StrainLimit, Wind,
 };
 
 impl Scene {
@@ -24,7 +24,7 @@ impl Scene {
         let mut p = Problems::default();
         let c = &raw.cloth;
         p.cloth(c);
-        let material = p.material(&raw.springs);
+        let material = p.material(&raw, reference_shape(c));
         let s = &raw.simulation;
         let cg = p.simulation(s);
         let (stiffness_adjustment, strain_limit) = p.strain(&raw.strain);
@@ -80,6 +80,10 @@ impl Scene {
 /// The grid that `nodes = [[i, j], …]` selectors index: the scene's own
 /// resolution, at least 2 × 2 so a too-small `cloth.nx`/`ny` (already a
 /// problem of its own) does not also break every node list.
+/// Largest stiffness (N/m) or damping (N·s/m) a scene may give: far beyond
+/// any fabric (the stiffest shipped scene is 2e3 N/m), far below overflow.
+const MAX_COEFFICIENT: f64 = 1e12;
+
 fn reference_shape(c: &RawCloth) -> GridShape {
     GridShape {
         nx: c.nx.max(2),
@@ -95,24 +99,113 @@ impl Problems {
     fn cloth(&mut self, c: &RawCloth) {
         self.positive("cloth.width", c.width);
         self.positive("cloth.height", c.height);
+        // Springs are made from the material at every level's spacing, scaled
+        // by the cells' aspect ratio (squared for the diagonals): keep it sane.
+        let aspect = c.width / c.height;
+        if c.width > 0.0 && c.height > 0.0 && !(1e-3..=1e3).contains(&aspect) {
+            self.push(format!(
+                "cloth.width: width / height must be within 1:1000 and 1000:1, got {} m wide and {} m high",
+                c.width, c.height
+            ));
+        }
         self.positive("cloth.areal_density", c.areal_density);
         self.grid_size("cloth", c.nx, c.ny);
     }
 
+    /// `[springs]` (K and C of each kind at the reference resolution) or
+    /// `[material]` (membrane moduli, made into springs at `shape`).
+    fn material(&mut self, raw: &RawScene, shape: GridShape) -> Material {
+        match (&raw.springs, &raw.material) {
+            (Some(s), None) => self.springs(s),
+            (None, Some(m)) => self.membrane(m).springs(shape.hx(), shape.hy()),
+            (Some(_), Some(_)) => {
+                self.push("springs, material: give the cloth's material once, as [springs] or as [material]".into());
+                Material::isotropic([SpringCoeffs { k: 0.0, c: 0.0 }; 3])
+            }
+            (None, None) => {
+                self.push(
+                    "springs: missing; give [springs] (per-spring K and C) or [material] (membrane moduli)".into(),
+                );
+                Material::isotropic([SpringCoeffs { k: 0.0, c: 0.0 }; 3])
+            }
+        }
+    }
+
+    /// `[material]`: every modulus finite and ≥ 0, bend shares within the
+    /// stretch, one damping form.
+    fn membrane(&mut self, m: &RawMaterial) -> Membrane {
+        let mut moduli = |at: &str, unit: &str, r: &RawModuli| {
+            for (name, v) in [
+                ("stretch_u", r.stretch_u),
+                ("stretch_v", r.stretch_v),
+                ("shear", r.shear),
+                ("bend_u", r.bend_u),
+                ("bend_v", r.bend_v),
+            ] {
+                self.coefficient(&format!("material.{at}.{name}"), v, unit);
+            }
+            for (bend, stretch, axis) in [(r.bend_u, r.stretch_u, "u"), (r.bend_v, r.stretch_v, "v")] {
+                if bend > stretch {
+                    self.push(format!(
+                        "material.{at}.bend_{axis}: the bend springs' share of the stretch cannot exceed \
+                         stretch_{axis} = {stretch}, got {bend}"
+                    ));
+                }
+            }
+            Moduli {
+                stretch_u: r.stretch_u,
+                stretch_v: r.stretch_v,
+                shear: r.shear,
+                bend_u: r.bend_u,
+                bend_v: r.bend_v,
+            }
+        };
+        let stiffness = moduli("stiffness", "N/m", &m.stiffness);
+        let damping = match (&m.damping, m.damping_time) {
+            (Some(d), None) => moduli("damping", "N·s/m", d),
+            (None, Some(t)) => {
+                self.in_closed("material.damping_time", t, 0.0, 1.0, "s");
+                let s = stiffness;
+                Moduli {
+                    stretch_u: t * s.stretch_u,
+                    stretch_v: t * s.stretch_v,
+                    shear: t * s.shear,
+                    bend_u: t * s.bend_u,
+                    bend_v: t * s.bend_v,
+                }
+            }
+            _ => {
+                self.push("material: give damping once, as damping = { … } (N·s/m) or damping_time (s)".into());
+                stiffness
+            }
+        };
+        Membrane { stiffness, damping }
+    }
+
+    /// A stiffness or damping value: finite, ≥ 0, and at most
+    /// [`MAX_COEFFICIENT`], so that the springs made from it at any other
+    /// spacing (scaled by cell aspect ratios up to 4095) stay finite.
+    fn coefficient(&mut self, path: &str, x: f64, unit: &str) {
+        self.non_negative(path, x);
+        if x.is_finite() && x > MAX_COEFFICIENT {
+            self.push(format!(
+                "{path}: must be at most {MAX_COEFFICIENT:e} {unit} (every level's springs are made from it), got {x}"
+            ));
+        }
+    }
+
     /// `[springs]`: K and C of each kind, structural, shear, bend.
-    fn material(&mut self, r: &RawSprings) -> Material {
+    fn springs(&mut self, r: &RawSprings) -> Material {
         let mut coeffs = |name: &str, r: RawCoeffs| {
-            self.non_negative(&format!("springs.{name}.k"), r.k);
-            self.non_negative(&format!("springs.{name}.c"), r.c);
+            self.coefficient(&format!("springs.{name}.k"), r.k, "N/m");
+            self.coefficient(&format!("springs.{name}.c"), r.c, "N·s/m");
             SpringCoeffs { k: r.k, c: r.c }
         };
-        Material {
-            springs: [
-                coeffs("structural", r.structural),
-                coeffs("shear", r.shear),
-                coeffs("bend", r.bend),
-            ],
-        }
+        Material::isotropic([
+            coeffs("structural", r.structural),
+            coeffs("shear", r.shear),
+            coeffs("bend", r.bend),
+        ])
     }
 
     /// `[simulation]`: dt against the run length, gravity, drag and the CG

@@ -25,7 +25,7 @@
 //! twice ((x₊ − 2x + x₋)/dt² at dt ≈ 1e-4 s); in f32 that second difference
 //! would be rounding noise of the order of gravity itself.
 
-use super::params::{Material, SpringKind};
+use super::params::{Material, SpringClass, SpringKind};
 use super::topology::{SpringGroup, Topology};
 
 /// Springs processed together by the kernel (8 f64 = one AVX-512 or two AVX2 registers).
@@ -163,7 +163,7 @@ fn all_springs<const ADJ: bool>(
     let (fy, fz) = rest.split_at_mut(n);
     let mut f = [fx, fy, fz];
     let coef = |group: &SpringGroup| {
-        let sc = material.get(group.kind);
+        let sc = material.get(group.class);
         Coef {
             k: sc.k,
             c: sc.c,
@@ -171,7 +171,7 @@ fn all_springs<const ADJ: bool>(
         }
     };
 
-    let mut acc = [Acc::EMPTY; 3];
+    let mut acc = [Acc::EMPTY; 5];
     let KernelScratch {
         out,
         gather,
@@ -186,7 +186,7 @@ fn all_springs<const ADJ: bool>(
             continue;
         };
         let coef = coef(group);
-        let acc = &mut acc[group.kind.index()];
+        let acc = &mut acc[group.class.index()];
         // One padded run when the group has one (masked slots between
         // rows), else its runs one by one.
         let padded = group
@@ -232,7 +232,7 @@ fn all_springs<const ADJ: bool>(
                 gather,
                 cap: *gather_len,
             };
-            gather_group::<ADJ>(group, p, v, coef(group), &mut f, ws, &mut acc[group.kind.index()]);
+            gather_group::<ADJ>(group, p, v, coef(group), &mut f, ws, &mut acc[group.class.index()]);
         }
     }
 
@@ -240,16 +240,21 @@ fn all_springs<const ADJ: bool>(
         elastic_energy: 0.0,
         max_strain: [0.0; 3],
     };
-    for kind in SpringKind::ALL {
-        let a = &acc[kind.index()];
-        totals.elastic_energy += 0.5 * material.get(kind).k * a.ext2.iter().sum::<f64>();
+    let mut longest = [f64::NEG_INFINITY; 3];
+    for class in SpringClass::ALL {
+        let a = &acc[class.index()];
+        totals.elastic_energy += 0.5 * material.get(class).k * a.ext2.iter().sum::<f64>();
         let m = a
             .max_ratio
             .iter()
             .fold(f64::NEG_INFINITY, |a, &b| if b > a { b } else { a });
+        let l = &mut longest[class.kind().index()];
+        *l = l.max(m);
+    }
+    for kind in SpringKind::ALL {
         // No spring of this kind: report 0.
-        if m > f64::NEG_INFINITY {
-            totals.max_strain[kind.index()] = m - 1.0;
+        if longest[kind.index()] > f64::NEG_INFINITY {
+            totals.max_strain[kind.index()] = longest[kind.index()] - 1.0;
         }
     }
     totals
@@ -661,8 +666,10 @@ mod tests {
         let material = Material {
             springs: [
                 SpringCoeffs { k: 40.0, c: 0.3 },
+                SpringCoeffs { k: 31.0, c: 0.2 },
                 SpringCoeffs { k: 9.0, c: 0.07 },
                 SpringCoeffs { k: 2.5, c: 0.02 },
+                SpringCoeffs { k: 1.5, c: 0.03 },
             ],
         };
         let isas: Vec<Isa> = Isa::supported().collect();

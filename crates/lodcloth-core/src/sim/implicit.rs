@@ -99,7 +99,7 @@ pub(crate) fn step(
     // Linearise every spring at x₀.
     let mut s = 0;
     for g in &topo.groups {
-        let co = inp.material.get(g.kind);
+        let co = inp.material.get(g.class);
         for i in 0..g.len() {
             let (a, b) = (g.a[i] as usize, g.b[i] as usize);
             let d = [

@@ -7,6 +7,7 @@
 mod forces;
 mod implicit;
 mod loads;
+mod membrane;
 mod params;
 mod simd;
 mod stability;
@@ -19,8 +20,10 @@ use std::sync::Arc;
 
 pub use forces::SpringTotals;
 pub use loads::{Loads, NodeLoad, Pin, PinPath, Profile, Tether, Wind};
+pub use membrane::{Membrane, Moduli};
 pub use params::{
-    CgSettings, Integrator, Material, SimParams, SpringCoeffs, SpringKind, StiffnessAdjustment, StrainLimit,
+    CgSettings, Integrator, Material, SimParams, SpringClass, SpringCoeffs, SpringKind, StiffnessAdjustment,
+    StrainLimit,
 };
 pub use stability::{amplification, dt_limit, modal_estimate, ModalEstimate};
 pub use state::State;
@@ -686,13 +689,13 @@ fn validate_params(p: &SimParams) -> Result<(), SimError> {
     if !(p.dt.is_finite() && p.dt > 0.0) {
         return Err(invalid("dt", p.dt, "the time step must be positive and finite"));
     }
-    for kind in SpringKind::ALL {
-        let c = p.material.get(kind);
+    for class in SpringClass::ALL {
+        let c = p.material.get(class);
         if !(c.k.is_finite() && c.k >= 0.0) {
-            return Err(invalid(format!("{kind}.k"), c.k, "stiffness must be finite and ≥ 0"));
+            return Err(invalid(format!("{class}.k"), c.k, "stiffness must be finite and ≥ 0"));
         }
         if !(c.c.is_finite() && c.c >= 0.0) {
-            return Err(invalid(format!("{kind}.c"), c.c, "damping must be finite and ≥ 0"));
+            return Err(invalid(format!("{class}.c"), c.c, "damping must be finite and ≥ 0"));
         }
     }
     if let Some((c, &g)) = p.gravity.iter().enumerate().find(|(_, g)| !g.is_finite()) {

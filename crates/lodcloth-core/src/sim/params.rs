@@ -5,8 +5,9 @@ use std::fmt;
 
 /// The three spring types of a mass-spring cloth (Sung 2018 §3, Provot 1995).
 ///
-/// The discriminant is the index into per-type arrays such as
-/// [`Material::springs`] and [`crate::sim::StepReport::max_strain`].
+/// The discriminant is the index into per-kind arrays such as
+/// [`crate::sim::StepReport::max_strain`] and [`StrainLimit::kinds`];
+/// coefficients are per [`SpringClass`] (a kind and its grid direction).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum SpringKind {
     /// 4-neighbour springs along rows and columns: resist stretching.
@@ -42,6 +43,89 @@ impl fmt::Display for SpringKind {
     }
 }
 
+/// The five coefficient slots of a [`Material`]: each [`SpringKind`] and, for
+/// the kinds that lie along a grid direction, that direction.
+///
+/// On a grid whose cells are not square a spring along u and one along v are
+/// different springs (lengths hx and hy), so a resolution-independent material
+/// ([`super::Membrane`]) gives them different K and C. Shear springs follow the
+/// diagonal, which is the same in both diagonal directions. Springs with no
+/// grid direction (point-sampled surfaces) use the `U` slots; their materials
+/// are isotropic (u = v).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum SpringClass {
+    /// Structural springs along u (rows, spacing hx).
+    StructuralU = 0,
+    /// Structural springs along v (columns, spacing hy).
+    StructuralV = 1,
+    /// Shear springs (both diagonals).
+    Shear = 2,
+    /// Bend springs along u (two cells, 2·hx).
+    BendU = 3,
+    /// Bend springs along v (two cells, 2·hy).
+    BendV = 4,
+}
+
+impl SpringClass {
+    /// All classes, in index order.
+    pub const ALL: [SpringClass; 5] = [
+        SpringClass::StructuralU,
+        SpringClass::StructuralV,
+        SpringClass::Shear,
+        SpringClass::BendU,
+        SpringClass::BendV,
+    ];
+
+    /// Index into [`Material::springs`].
+    pub const fn index(self) -> usize {
+        self as usize
+    }
+
+    /// The spring kind.
+    pub const fn kind(self) -> SpringKind {
+        match self {
+            SpringClass::StructuralU | SpringClass::StructuralV => SpringKind::Structural,
+            SpringClass::Shear => SpringKind::Shear,
+            SpringClass::BendU | SpringClass::BendV => SpringKind::Bend,
+        }
+    }
+
+    /// The class of `kind` along u (shear: the shear class).
+    pub const fn along_u(kind: SpringKind) -> SpringClass {
+        match kind {
+            SpringKind::Structural => SpringClass::StructuralU,
+            SpringKind::Shear => SpringClass::Shear,
+            SpringKind::Bend => SpringClass::BendU,
+        }
+    }
+
+    /// The class of `kind` along v (shear: the shear class).
+    pub const fn along_v(kind: SpringKind) -> SpringClass {
+        match kind {
+            SpringKind::Structural => SpringClass::StructuralV,
+            SpringKind::Shear => SpringClass::Shear,
+            SpringKind::Bend => SpringClass::BendV,
+        }
+    }
+
+    /// Lower-case name used in files, CSV headers and logs.
+    pub const fn name(self) -> &'static str {
+        match self {
+            SpringClass::StructuralU => "structural_u",
+            SpringClass::StructuralV => "structural_v",
+            SpringClass::Shear => "shear",
+            SpringClass::BendU => "bend_u",
+            SpringClass::BendV => "bend_v",
+        }
+    }
+}
+
+impl fmt::Display for SpringClass {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
 /// Stiffness and damping of one spring type (Sung 2018 eq. 1).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SpringCoeffs {
@@ -51,21 +135,43 @@ pub struct SpringCoeffs {
     pub c: f64,
 }
 
-/// Material coefficients: one [`SpringCoeffs`] per [`SpringKind`].
+/// Per-spring coefficients: one [`SpringCoeffs`] per [`SpringClass`].
 ///
 /// These are *per-spring* coefficients, as in the paper: the same values on a
-/// coarser mesh give a different (stiffer or softer) cloth, which is exactly
-/// the incoherence that coefficient estimation corrects.
+/// coarser mesh, or on cells of another aspect ratio, give a different cloth.
+/// [`super::Membrane`] is the resolution-independent material they are made
+/// from at each level's spacing.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Material {
-    /// Indexed by [`SpringKind::index`].
-    pub springs: [SpringCoeffs; 3],
+    /// Indexed by [`SpringClass::index`].
+    pub springs: [SpringCoeffs; 5],
 }
 
 impl Material {
-    /// Coefficients of one kind.
-    pub fn get(&self, kind: SpringKind) -> SpringCoeffs {
-        self.springs[kind.index()]
+    /// The same coefficients along u and v for each kind, indexed by
+    /// [`SpringKind::index`].
+    pub const fn isotropic(kinds: [SpringCoeffs; 3]) -> Material {
+        let [s, h, b] = kinds;
+        Material {
+            springs: [s, s, h, b, b],
+        }
+    }
+
+    /// Coefficients of one class.
+    pub fn get(&self, class: SpringClass) -> SpringCoeffs {
+        self.springs[class.index()]
+    }
+
+    /// Coefficients of one kind along u (the kind's only value when the
+    /// material is isotropic).
+    pub fn of_kind(&self, kind: SpringKind) -> SpringCoeffs {
+        self.get(SpringClass::along_u(kind))
+    }
+
+    /// True when u and v coefficients are equal for every kind.
+    pub fn is_isotropic(&self) -> bool {
+        let s = &self.springs;
+        s[0] == s[1] && s[3] == s[4]
     }
 }
 

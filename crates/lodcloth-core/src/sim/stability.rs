@@ -50,7 +50,7 @@ pub fn modal_estimate(
     // Gershgorin: row i of M^{-1}K has |diag| + Σ|offdiag| ≤ 2 Σ_j k_ij / m_i.
     let mut ksum = vec![0.0; n];
     for g in &topology.groups {
-        let k = material.get(g.kind).k;
+        let k = material.get(g.class).k;
         for s in 0..g.len() {
             ksum[g.a[s] as usize] += k;
             ksum[g.b[s] as usize] += k;
@@ -109,8 +109,8 @@ pub fn modal_estimate(
             }
         }
     };
-    let stiff = |gi: usize| material.get(topology.groups[gi].kind).k;
-    let damp = |gi: usize| material.get(topology.groups[gi].kind).c;
+    let stiff = |gi: usize| material.get(topology.groups[gi].class).k;
+    let damp = |gi: usize| material.get(topology.groups[gi].class).c;
 
     let mut seed = 0x9E37_79B9_7F4A_7C15u64;
     let mut rnd = move || {

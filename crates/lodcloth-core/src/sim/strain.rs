@@ -147,7 +147,7 @@ fn full_pass(
     for g in &topology.groups {
         let group_first = first;
         first += g.len();
-        if !limit.kinds[g.kind.index()] {
+        if !limit.kinds[g.kind().index()] {
             continue;
         }
         let Some(offset) = g.stencil_offset else {

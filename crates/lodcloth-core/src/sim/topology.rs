@@ -8,7 +8,7 @@
 //! contiguous slices, which the compiler vectorises; any other topology (point
 //! clouds) falls back to gathering by index.
 
-use super::params::SpringKind;
+use super::params::{SpringClass, SpringKind};
 
 /// A contiguous stretch of springs `k → k + offset` for `k in start..start+len`,
 /// covering entries `first..first+len` of its group's arrays.
@@ -22,11 +22,11 @@ pub struct Run {
     pub first: u32,
 }
 
-/// Springs of one kind (and on grids, one stencil direction).
+/// Springs of one class (and on grids, one stencil direction).
 #[derive(Debug, Clone, PartialEq)]
 pub struct SpringGroup {
-    /// Spring type: selects K and C.
-    pub kind: SpringKind,
+    /// Spring class (kind and grid direction): selects K and C.
+    pub class: SpringClass,
     /// First endpoint of each spring.
     pub a: Vec<u32>,
     /// Second endpoint of each spring.
@@ -63,10 +63,10 @@ pub struct Padded {
 
 impl SpringGroup {
     /// A group from arbitrary node pairs and rest lengths (no stencil).
-    pub fn from_pairs(kind: SpringKind, pairs: &[(u32, u32)], rest: Vec<f64>) -> SpringGroup {
+    pub fn from_pairs(class: SpringClass, pairs: &[(u32, u32)], rest: Vec<f64>) -> SpringGroup {
         assert_eq!(pairs.len(), rest.len(), "one rest length per spring");
         SpringGroup {
-            kind,
+            class,
             a: pairs.iter().map(|p| p.0).collect(),
             b: pairs.iter().map(|p| p.1).collect(),
             inv_rest: rest.iter().map(|r| 1.0 / r).collect(),
@@ -75,6 +75,11 @@ impl SpringGroup {
             runs: Vec::new(),
             padded: None,
         }
+    }
+
+    /// Spring kind (the class without its direction).
+    pub fn kind(&self) -> SpringKind {
+        self.class.kind()
     }
 
     /// Number of springs.
@@ -142,7 +147,8 @@ pub struct Topology {
     pub rest_positions: Vec<[f64; 3]>,
     /// Lumped rest area of every node (m²): the node's share of the surface.
     pub node_areas: Vec<f64>,
-    /// Spring groups in a fixed order (structural, shear, bend on grids).
+    /// Spring groups in a fixed order (on grids: structural u, v; shear
+    /// both diagonals; bend u, v).
     pub groups: Vec<SpringGroup>,
     /// Triangles of the rest mesh, counter-clockwise seen from the side the
     /// normal points to.
@@ -188,17 +194,17 @@ impl Topology {
         // (kind, di, dj): every spring joins (i, j) to (i + di, j + dj).
         // The anti-diagonal shear (i+1, j)–(i, j+1) is written with a = (i+1, j)
         // so that b = a + nx − 1 stays a forward offset.
-        let stencils: [(SpringKind, isize, usize); 6] = [
-            (SpringKind::Structural, 1, 0),
-            (SpringKind::Structural, 0, 1),
-            (SpringKind::Shear, 1, 1),
-            (SpringKind::Shear, -1, 1),
-            (SpringKind::Bend, 2, 0),
-            (SpringKind::Bend, 0, 2),
+        let stencils: [(SpringClass, isize, usize); 6] = [
+            (SpringClass::StructuralU, 1, 0),
+            (SpringClass::StructuralV, 0, 1),
+            (SpringClass::Shear, 1, 1),
+            (SpringClass::Shear, -1, 1),
+            (SpringClass::BendU, 2, 0),
+            (SpringClass::BendV, 0, 2),
         ];
         let mut groups = Vec::with_capacity(stencils.len());
-        for (kind, di, dj) in stencils {
-            groups.push(grid_group(&shape, &rest_positions, kind, di, dj));
+        for (class, di, dj) in stencils {
+            groups.push(grid_group(&shape, &rest_positions, class, di, dj));
         }
 
         let mut triangles = Vec::with_capacity(2 * (nx - 1) * (ny - 1));
@@ -232,7 +238,7 @@ impl Topology {
     pub fn spring_count_of(&self, kind: SpringKind) -> usize {
         self.groups
             .iter()
-            .filter(|g| g.kind == kind)
+            .filter(|g| g.kind() == kind)
             .map(SpringGroup::len)
             .sum()
     }
@@ -254,7 +260,7 @@ impl Topology {
 }
 
 /// One stencil direction of a grid: springs (i, j) → (i + di, j + dj).
-fn grid_group(shape: &GridShape, rest_positions: &[[f64; 3]], kind: SpringKind, di: isize, dj: usize) -> SpringGroup {
+fn grid_group(shape: &GridShape, rest_positions: &[[f64; 3]], class: SpringClass, di: isize, dj: usize) -> SpringGroup {
     let GridShape { nx, ny, .. } = *shape;
     let span = di.unsigned_abs();
     let offset = (dj * nx) as isize + di;
@@ -263,7 +269,7 @@ fn grid_group(shape: &GridShape, rest_positions: &[[f64; 3]], kind: SpringKind, 
     // Columns where `a` may sit: for di ≥ 0, i in 0..nx−di; for di < 0, i in |di|..nx.
     let (i_lo, i_hi) = if di >= 0 { (0, nx - span) } else { (span, nx) };
     let mut group = SpringGroup {
-        kind,
+        class,
         a: Vec::new(),
         b: Vec::new(),
         rest: Vec::new(),
@@ -346,7 +352,7 @@ mod tests {
         for g in &t.groups {
             let offset = g.stencil_offset.expect("grid groups are stencils");
             let Some(pd) = &g.padded else {
-                assert_eq!(g.runs.len(), 1, "{:?} has several runs but no padded one", g.kind);
+                assert_eq!(g.runs.len(), 1, "{:?} has several runs but no padded one", g.class);
                 continue;
             };
             assert_eq!(pd.live.iter().sum::<f64>() as usize, g.len());
@@ -399,15 +405,15 @@ mod tests {
         let t = Topology::grid(s, Orientation::Horizontal);
         let (hx, hy) = (s.hx(), s.hy());
         for g in &t.groups {
-            let expected = match (g.kind, g.stencil_offset) {
-                (SpringKind::Structural, Some(1)) => hx,
-                (SpringKind::Structural, _) => hy,
-                (SpringKind::Shear, _) => hx.hypot(hy),
-                (SpringKind::Bend, Some(2)) => 2.0 * hx,
-                (SpringKind::Bend, _) => 2.0 * hy,
+            let expected = match g.class {
+                SpringClass::StructuralU => hx,
+                SpringClass::StructuralV => hy,
+                SpringClass::Shear => hx.hypot(hy),
+                SpringClass::BendU => 2.0 * hx,
+                SpringClass::BendV => 2.0 * hy,
             };
             for &r in &g.rest {
-                assert!((r - expected).abs() < 1e-12, "{:?}: {r} vs {expected}", g.kind);
+                assert!((r - expected).abs() < 1e-12, "{:?}: {r} vs {expected}", g.class);
             }
         }
         assert!((t.area() - 2.0).abs() < 1e-12);

@@ -8,8 +8,8 @@
 use std::sync::Arc;
 
 use lodcloth::sim::{
-    CgSettings, GridShape, Integrator, Loads, Material, Orientation, Pin, PinPath, SimParams, Simulation, SpringCoeffs,
-    SpringGroup, SpringKind, StabilityCheck, State, StepReport, Topology,
+    CgSettings, GridShape, Integrator, Loads, Material, Orientation, Pin, PinPath, SimParams, Simulation, SpringClass,
+    SpringCoeffs, SpringGroup, SpringKind, StabilityCheck, State, StepReport, Topology,
 };
 
 /// SplitMix64: a tiny deterministic generator, so no test depends on a seed
@@ -58,20 +58,16 @@ impl Rng {
 
 /// The same coefficients for every spring kind.
 pub fn uniform_material(k: f64, c: f64) -> Material {
-    Material {
-        springs: [SpringCoeffs { k, c }; 3],
-    }
+    Material::isotropic([SpringCoeffs { k, c }; 3])
 }
 
 /// Per-kind coefficients: (structural, shear, bend) as (k, c) pairs.
 pub fn material(st: (f64, f64), sh: (f64, f64), be: (f64, f64)) -> Material {
-    Material {
-        springs: [
-            SpringCoeffs { k: st.0, c: st.1 },
-            SpringCoeffs { k: sh.0, c: sh.1 },
-            SpringCoeffs { k: be.0, c: be.1 },
-        ],
-    }
+    Material::isotropic([
+        SpringCoeffs { k: st.0, c: st.1 },
+        SpringCoeffs { k: sh.0, c: sh.1 },
+        SpringCoeffs { k: be.0, c: be.1 },
+    ])
 }
 
 /// Parameters with no gravity, no drag and no strain control.
@@ -123,7 +119,7 @@ pub fn pairs_topology(rest_positions: Vec<[f64; 3]>, pairs: &[(u32, u32)], kind:
         n_nodes: n,
         rest_positions,
         node_areas: vec![0.0; n],
-        groups: vec![SpringGroup::from_pairs(kind, pairs, rest)],
+        groups: vec![SpringGroup::from_pairs(SpringClass::along_u(kind), pairs, rest)],
         triangles: Vec::new(),
         grid: None,
     }
@@ -137,7 +133,7 @@ pub fn as_gather_topology(topology: &Topology) -> Topology {
         .iter()
         .map(|g| {
             let pairs: Vec<(u32, u32)> = g.a.iter().zip(&g.b).map(|(&a, &b)| (a, b)).collect();
-            SpringGroup::from_pairs(g.kind, &pairs, g.rest.clone())
+            SpringGroup::from_pairs(g.class, &pairs, g.rest.clone())
         })
         .collect();
     Topology {
@@ -248,7 +244,7 @@ pub fn scalar_spring_forces(
 ) -> Vec<[f64; 3]> {
     let mut f = vec![[0.0; 3]; topology.n_nodes];
     for g in &topology.groups {
-        let co = material.get(g.kind);
+        let co = material.get(g.class);
         for s in 0..g.len() {
             let (a, b) = (g.a[s] as usize, g.b[s] as usize);
             let (xa, xb) = (state.position(a), state.position(b));
@@ -273,7 +269,7 @@ pub fn scalar_spring_forces(
 pub fn scalar_elastic_energy(topology: &Topology, material: &Material, state: &State) -> f64 {
     let mut e = 0.0;
     for g in &topology.groups {
-        let k = material.get(g.kind).k;
+        let k = material.get(g.class).k;
         for s in 0..g.len() {
             let l = dist(state.position(g.a[s] as usize), state.position(g.b[s] as usize));
             e += 0.5 * k * (l - g.rest[s]).powi(2);
@@ -285,7 +281,7 @@ pub fn scalar_elastic_energy(topology: &Topology, material: &Material, state: &S
 /// Largest strain L / L0 − 1 over the springs of the given kinds, evaluated directly.
 pub fn scalar_max_strain(topology: &Topology, state: &State, kinds: [bool; 3]) -> f64 {
     let mut worst = f64::NEG_INFINITY;
-    for g in topology.groups.iter().filter(|g| kinds[g.kind.index()]) {
+    for g in topology.groups.iter().filter(|g| kinds[g.kind().index()]) {
         for s in 0..g.len() {
             let l = dist(state.position(g.a[s] as usize), state.position(g.b[s] as usize));
             worst = worst.max(l / g.rest[s] - 1.0);
