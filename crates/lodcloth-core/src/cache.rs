@@ -506,13 +506,22 @@ fn decode(bytes: &[u8], wanted: &CacheKey) -> Result<CacheEntry, String> {
             "checksum mismatch: the file says {stored}, its content hashes to {actual} (torn or edited file)"
         ));
     }
-    let repr: FileRepr = toml::from_str(body).map_err(|e| format!("invalid TOML: {}", e.to_string().trim_end()))?;
-    if repr.format != FORMAT_VERSION {
-        return Err(format!(
-            "format {} is not the supported format {FORMAT_VERSION}",
-            repr.format
-        ));
+    // The format first: a file from another version has other fields, and
+    // saying so beats a parse error about the first field that differs.
+    #[derive(Deserialize)]
+    struct FormatOnly {
+        format: u32,
     }
+    if let Ok(FormatOnly { format }) = toml::from_str::<FormatOnly>(body) {
+        if format != FORMAT_VERSION {
+            return Err(format!(
+                "written in cache format {format}, this build reads format {FORMAT_VERSION} \
+                 (format 2: coefficients per spring class)"
+            ));
+        }
+    }
+    let repr: FileRepr =
+        toml::from_str(body).map_err(|e| format!("invalid TOML: {}", e.to_string().trim_end().replace('\n', " ")))?;
     let k = repr.key;
     let scene_hash = (k.scene_hash.len() == 16)
         .then(|| u64::from_str_radix(&k.scene_hash, 16).ok())

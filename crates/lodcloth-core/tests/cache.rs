@@ -319,6 +319,20 @@ fn invalid_values_under_a_valid_checksum_are_refused_and_recomputed() {
         let sum = fnv1a64(body.as_bytes());
         fs::write(path, format!("{body}# checksum = fnv1a64:{sum:016x}\n")).expect("write");
     });
+    // A file of the previous format (one value per spring kind), intact:
+    // refused by its format, not by the first field that differs.
+    check_corruption_is_detected_and_repaired("format 1", "cache format 1", |path, _| {
+        let text = fs::read_to_string(path).expect("read");
+        let (body, _) = text.trim_end_matches('\n').rsplit_once('\n').expect("lines");
+        let body = body.replacen("format = 2", "format = 1", 1).replacen(
+            "[material.structural_u]",
+            "[material.structural]",
+            1,
+        );
+        let body = format!("{body}\n");
+        let sum = fnv1a64(body.as_bytes());
+        fs::write(path, format!("{body}# checksum = fnv1a64:{sum:016x}\n")).expect("write");
+    });
 }
 
 #[test]

@@ -16,15 +16,27 @@ pub struct ModalEstimate {
     /// Damping rate 2ζω of the highest mode (1/s): the Rayleigh quotient of
     /// the damping matrix (spring C plus drag) with that mode.
     pub damping_rate: f64,
+    /// ω of the most damped mode (the top mode of the damping matrix; rad/s):
+    /// the stiffest mode's twin when damping is proportional to stiffness,
+    /// another mode when it is not.
+    pub damped_omega: f64,
+    /// Damping rate of that mode (1/s).
+    pub damped_rate: f64,
     /// Power iterations used.
     pub iterations: u32,
 }
 
 impl ModalEstimate {
-    /// Predicted largest stable dt of `integrator` on the highest mode
-    /// (∞ for implicit Euler, 0 for undamped explicit Euler).
+    /// Predicted largest stable dt of `integrator`: the smaller of its limits
+    /// on the highest mode and on the most damped mode (∞ for implicit Euler,
+    /// 0 for undamped explicit Euler).
     pub fn dt_limit(&self, integrator: Integrator) -> f64 {
-        dt_limit(integrator, self.omega_max, self.damping_rate)
+        let stiffest = dt_limit(integrator, self.omega_max, self.damping_rate);
+        if self.damped_rate > self.damping_rate {
+            stiffest.min(dt_limit(integrator, self.damped_omega, self.damped_rate))
+        } else {
+            stiffest
+        }
     }
 }
 
@@ -112,69 +124,87 @@ pub fn modal_estimate(
     let stiff = |gi: usize| material.get(topology.groups[gi].class).k;
     let damp = |gi: usize| material.get(topology.groups[gi].class).c;
 
-    let mut seed = 0x9E37_79B9_7F4A_7C15u64;
-    let mut rnd = move || {
-        seed ^= seed << 13;
-        seed ^= seed >> 7;
-        seed ^= seed << 17;
-        (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-    };
-    let mut w: Vec<[f64; 3]> = (0..n)
-        .map(|i| if pinned[i] { [0.0; 3] } else { [rnd(), rnd(), rnd()] })
-        .collect();
-    let mut y = vec![[0.0; 3]; n];
     let norm = |v: &[[f64; 3]]| {
         v.iter()
             .map(|p| p[0] * p[0] + p[1] * p[1] + p[2] * p[2])
             .sum::<f64>()
             .sqrt()
     };
-    let mut lambda = 0.0;
-    let mut iterations = 0;
-    // Near-degenerate top modes make the vector converge slowly, but the
-    // Rayleigh quotient is then an average of almost-equal eigenvalues.
-    let max_iter = 600;
-    while iterations < max_iter {
-        iterations += 1;
-        let nw = norm(&w);
-        if nw == 0.0 {
-            break;
-        }
-        for v in w.iter_mut() {
-            *v = v.map(|x| x / nw);
-        }
-        apply(&w, &mut y, &stiff, 0);
-        let rq: f64 = w
-            .iter()
-            .zip(&y)
-            .map(|(a, b)| a[0] * b[0] + a[1] * b[1] + a[2] * b[2])
-            .sum();
-        std::mem::swap(&mut w, &mut y);
-        let converged = (rq - lambda).abs() <= 1e-7 * rq.abs();
-        lambda = rq;
-        if converged && iterations > 20 {
-            break;
-        }
-    }
-    // Damping Rayleigh quotient with the (normalised) top mode.
-    let nw = norm(&w);
-    let damping_rate = if nw > 0.0 {
-        for v in w.iter_mut() {
-            *v = v.map(|x| x / nw);
-        }
-        apply(&w, &mut y, &damp, 1);
+    let rayleigh = |w: &[[f64; 3]], y: &mut [[f64; 3]], coef: &dyn Fn(usize) -> f64, which: usize| -> f64 {
+        apply(w, y, coef, which);
         w.iter()
-            .zip(&y)
+            .zip(y.iter())
             .map(|(a, b)| a[0] * b[0] + a[1] * b[1] + a[2] * b[2])
-            .sum::<f64>()
-            + drag
+            .sum()
+    };
+    // The top eigenpair of M^{-1/2} L M^{-1/2} for `coef` by power iteration
+    // (normalised vector, Rayleigh quotient, iterations).
+    let top = |coef: &dyn Fn(usize) -> f64, which: usize| -> (Vec<[f64; 3]>, f64, u32) {
+        let mut seed = 0x9E37_79B9_7F4A_7C15u64;
+        let mut rnd = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        let mut w: Vec<[f64; 3]> = (0..n)
+            .map(|i| if pinned[i] { [0.0; 3] } else { [rnd(), rnd(), rnd()] })
+            .collect();
+        let mut y = vec![[0.0; 3]; n];
+        let mut lambda = 0.0;
+        let mut iterations = 0;
+        // Near-degenerate top modes make the vector converge slowly, but the
+        // Rayleigh quotient is then an average of almost-equal eigenvalues.
+        let max_iter = 600;
+        while iterations < max_iter {
+            iterations += 1;
+            let nw = norm(&w);
+            if nw == 0.0 {
+                break;
+            }
+            for v in w.iter_mut() {
+                *v = v.map(|x| x / nw);
+            }
+            let rq = rayleigh(&w, &mut y, coef, which);
+            std::mem::swap(&mut w, &mut y);
+            let converged = (rq - lambda).abs() <= 1e-7 * rq.abs();
+            lambda = rq;
+            if converged && iterations > 20 {
+                break;
+            }
+        }
+        let nw = norm(&w);
+        if nw > 0.0 {
+            for v in w.iter_mut() {
+                *v = v.map(|x| x / nw);
+            }
+        }
+        (w, lambda, iterations)
+    };
+    let mut y = vec![[0.0; 3]; n];
+    // The stiffest mode, and the damping it feels (Rayleigh quotient of C).
+    let (w, lambda, iterations) = top(&stiff, 0);
+    let damping_rate = if norm(&w) > 0.0 {
+        rayleigh(&w, &mut y, &damp, 1) + drag
     } else {
         drag
+    };
+    // The most damped mode, and its stiffness: where damping is not
+    // proportional to stiffness (estimates that raise C of one spring class
+    // far more than its K) it is another mode, and an explicit integrator
+    // can go unstable on it first (RK4's real-axis bound 2.785/dt).
+    let (wc, rate, _) = top(&damp, 1);
+    let (damped_omega, damped_rate) = if norm(&wc) > 0.0 {
+        (rayleigh(&wc, &mut y, &stiff, 0).max(0.0).sqrt(), rate + drag)
+    } else {
+        (0.0, drag)
     };
     ModalEstimate {
         omega_gershgorin,
         omega_max: lambda.max(0.0).sqrt(),
         damping_rate,
+        damped_omega,
+        damped_rate,
         iterations,
     }
 }
