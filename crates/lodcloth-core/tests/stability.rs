@@ -49,11 +49,6 @@ fn tiny_perturbation(nx: usize) -> State {
 }
 
 /// Stable when the energy stays below 1e6 × its start over `steps` steps.
-fn stays_bounded(nx: usize, integrator: Integrator, dt: f64, steps: usize) -> bool {
-    stays_bounded_of(fabric(), nx, integrator, dt, steps)
-}
-
-/// [`stays_bounded`] of another material.
 fn stays_bounded_of(material: Material, nx: usize, integrator: Integrator, dt: f64, steps: usize) -> bool {
     let mut sim = free_cloth_of(material, nx, integrator, dt, tiny_perturbation(nx));
     let p = sim.params().material;
