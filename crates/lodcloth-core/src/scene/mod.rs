@@ -15,6 +15,12 @@
 //! its selector picks; a pin region that holds no node at a level is an
 //! error naming the pin and the level, never a silent change of constraint.
 //!
+//! The fabric is one material at every level: `[material]` gives it as
+//! membrane moduli ([`crate::sim::Membrane`]); `[springs]` gives per-spring
+//! coefficients at the scene's own resolution, read as the membrane those
+//! springs make on its cells. A level's springs are made from it at the
+//! level's spacing ([`Scene::material_at`]), per direction.
+//!
 //! # Layout
 //! - `mod.rs` — the validated [`Scene`], reading it from a file or text.
 //! - `raw.rs` — the serde types as read from TOML ([`RawScene`] and its parts).
