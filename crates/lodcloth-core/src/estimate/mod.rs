@@ -9,8 +9,8 @@
 //! and measures it against the reference.
 //!
 //! Methods:
-//! - `same`: the reference's material at the level's spacing (the membrane
-//!   its springs make, converted per direction: [`crate::sim::Membrane`]);
+//! - `same`: the scene's material at the level's spacing (the membrane its
+//!   springs make, converted per direction: [`crate::sim::Membrane`]);
 //! - `same_spring`: the paper's "same", the reference's per-spring
 //!   coefficients unchanged;
 //! - `bcd`, `gkd`: the paper's inverse-Hooke methods ([`inverse`]);
@@ -37,9 +37,7 @@ pub use reference::{RecordSpec, Reference, ReferenceError, Sample};
 
 use crate::lod::{Correlation, LodError};
 use crate::scene::{MassConvention, Scene, SceneError};
-use crate::sim::{
-    Integrator, Loads, Material, Membrane, SimError, SimParams, Simulation, StabilityCheck, State, Topology,
-};
+use crate::sim::{Integrator, Loads, Material, SimError, SimParams, Simulation, StabilityCheck, State, Topology};
 
 /// Progress of a long estimation stage.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -61,9 +59,9 @@ pub fn no_progress(_: Progress) {}
 /// An estimation method, usable by name everywhere (CLI, config, cache).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Method {
-    /// The reference's material made at the level's spacing: the membrane
-    /// the reference's springs make ([`Membrane`]) converted to springs of
-    /// the level's cells, per direction. On square cells of a square-celled
+    /// The scene's material made at the level's spacing: the membrane the
+    /// scene's springs make ([`crate::sim::Membrane`]) converted to springs
+    /// of the level's cells, per direction. On square cells of a square-celled
     /// reference this is the reference's per-spring coefficients.
     Same,
     /// The paper's "same": the reference's per-spring coefficients copied
@@ -270,19 +268,11 @@ impl LodProblem {
         self.reference.frames.len()
     }
 
-    /// The `same` coefficients of this level: the reference's material
-    /// converted from the reference's cells to this level's, per direction
-    /// ([`Membrane::convert`]).
+    /// The `same` coefficients of this level: the scene's material made at
+    /// this level's spacing, per direction ([`Scene::material_at`]; the
+    /// reference ran the same material at the scene's own resolution).
     pub fn same_material(&self) -> Material {
-        let cells = |t: &Topology| t.grid.map_or((1.0, 1.0), |g| (g.hx(), g.hy()));
-        match (self.reference.topology.grid, self.topology.grid) {
-            (Some(_), Some(_)) => Membrane::convert(
-                &self.reference.material,
-                cells(&self.reference.topology),
-                cells(&self.topology),
-            ),
-            _ => self.reference.material,
-        }
+        self.scene.material_at(self.nx, self.ny)
     }
 
     /// Coarse parameters with `material`.
