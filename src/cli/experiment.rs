@@ -11,11 +11,13 @@ use anyhow::{bail, Context, Result};
 use clap::Subcommand;
 use tracing::info;
 
+mod readings;
+
 use lodcloth::cache::CoefficientCache;
-use lodcloth::estimate::{FitOptions, Method, RecordSpec, Reference};
+use lodcloth::estimate::{FitOptions, Method, Reading, RecordSpec, Reference};
 use lodcloth::experiments::generalise::{suite, SuiteOptions, SuiteRow};
 use lodcloth::experiments::lod::{
-    lod_plan, pareto, switch_test, table1_scene, Horizon, Table1Options, Table1Row, TABLE1_VARIANTS,
+    lod_plan, pareto, switch_test, table1_scene, Horizon, Table1Options, Table1Row, Variant, TABLE1_VARIANTS,
 };
 use lodcloth::output::{error_map_svg, line_chart_svg, ClothPanel, Series, PALETTE};
 use lodcloth::plan::{default_problem, record_reference, Estimator, GridLevel};
@@ -79,6 +81,10 @@ pub struct Common {
     /// Fraction of the run `fit` trains on (the rest is held out).
     #[arg(long, default_value_t = 0.5)]
     train_fraction: f64,
+    /// How BCD and GKD read the paper's lost equations 3–8 (see
+    /// `experiment readings`).
+    #[arg(long, default_value_t = Reading::DEFAULT, value_parser = parse_reading)]
+    reading: Reading,
     /// Small and fast, for CI: 24×24 references, 3 s runs, short fits.
     #[arg(long)]
     quick: bool,
@@ -157,6 +163,7 @@ impl Common {
             train: Some(0..end),
             max_frames: self.fit_frames,
             max_iterations: self.fit_iterations,
+            reading: self.reading,
             ..FitOptions::default()
         })
     }
@@ -244,6 +251,19 @@ pub enum Experiment {
         #[arg(long, value_delimiter = ',', default_values_t = ["same", "bcd", "gkd", "fit"].map(String::from).to_vec())]
         methods: Vec<String>,
     },
+    /// The paper's BCD and GKD under every reading of its lost equations
+    /// 3–8, with per-node masses over its levels, scored against the trend
+    /// of its Table 1 (same > BCD > GKD, and by how much).
+    Readings {
+        #[command(flatten)]
+        common: Common,
+        /// Levels, as for `table1` (default: the paper's 60…40).
+        #[arg(long, value_delimiter = ',')]
+        levels: Vec<GridLevel>,
+        /// Readings compared (default: all).
+        #[arg(long, value_delimiter = ',', value_parser = parse_reading)]
+        readings: Vec<Reading>,
+    },
     /// Switch reference ↔ a coarse level mid-run and measure the jump.
     SwitchTest {
         #[command(flatten)]
@@ -322,6 +342,26 @@ pub fn run(experiment: Experiment) -> Result<()> {
             let level = level.unwrap_or(GridLevel::Long(if common.quick { 16 } else { 40 }));
             generalise_cmd(&common, level, &parse_methods(&methods)?)
         }
+        Experiment::Readings {
+            mut common,
+            levels,
+            readings,
+        } => {
+            common.apply_quick();
+            let levels = if !levels.is_empty() {
+                levels
+            } else if common.quick {
+                longs(&[16, 12])
+            } else {
+                longs(&[60, 56, 52, 48, 44, 40])
+            };
+            let readings = if readings.is_empty() {
+                Reading::ALL.to_vec()
+            } else {
+                readings
+            };
+            readings::readings_cmd(&common, &levels, &readings)
+        }
         Experiment::SwitchTest {
             mut common,
             level,
@@ -334,6 +374,10 @@ pub fn run(experiment: Experiment) -> Result<()> {
             switch_cmd(&common, level, method, at, window)
         }
     }
+}
+
+fn parse_reading(name: &str) -> Result<Reading, lodcloth::names::UnknownName> {
+    lodcloth::names::parse_arg(name)
 }
 
 fn parse_methods(names: &[String]) -> Result<Vec<Method>> {
@@ -387,7 +431,13 @@ fn table1(common: &Common, levels: &[GridLevel]) -> Result<()> {
     let options = Table1Options {
         levels: levels.to_vec(),
         spec,
-        variants: TABLE1_VARIANTS.to_vec(),
+        variants: TABLE1_VARIANTS
+            .iter()
+            .map(|&v| Variant {
+                reading: common.reading,
+                ..v
+            })
+            .collect(),
         fit: common.fit(frames)?,
         dt_margin: 0.75,
         map_level,
@@ -422,7 +472,16 @@ fn write_table1(
     common: &Common,
 ) -> Result<()> {
     fs::write(out.join("table1.csv"), table1_csv(rows)).context("writing table1.csv")?;
-    let labels: Vec<String> = TABLE1_VARIANTS.iter().map(|v| v.label()).collect();
+    let labels: Vec<String> = TABLE1_VARIANTS
+        .iter()
+        .map(|&v| {
+            Variant {
+                reading: common.reading,
+                ..v
+            }
+            .label()
+        })
+        .collect();
     let mut md = table1_by_level(rows, &labels, levels, scenes, common);
     md.push_str(&table1_by_scene(rows, ref_costs));
     fs::write(out.join("table1.md"), md).context("writing table1.md")?;

@@ -4,7 +4,7 @@
 
 use std::sync::Arc;
 
-use lodcloth::estimate::{no_progress, Details, FitOptions, LodProblem, Method, RecordSpec, Reference};
+use lodcloth::estimate::{no_progress, Details, FitOptions, LodProblem, Method, Reading, RecordSpec, Reference};
 use lodcloth::scene::{MassConvention, Scene};
 use lodcloth::sim::{Integrator, Material, SpringClass, SpringCoeffs};
 
@@ -341,4 +341,115 @@ profile = { kind = "sine", frequency = 1.5 }
     let p = assert_lsq_recovers_the_scenes_springs(&s);
     // At its own resolution `same` is the scene's springs, exactly.
     assert_eq!(p.same_material(), truth);
+}
+
+/// The readings of BCD that carry the reference's own spring forces over
+/// ([`Reading::ReferenceRatios`], [`Reading::ReferenceLsq`]) at the
+/// reference's own resolution: every coarse node is a fine node (weight 1,
+/// mass ratio 1), so with no damping eq. 7 is `K·G·G/|G|² = K` at every
+/// node and sample, and both averages give back every class's K. The
+/// readings that split the observed force by shares cannot: shares are
+/// ratios of force magnitudes, not of the forces' projections.
+#[test]
+fn reference_force_readings_recover_every_stiffness_at_the_same_resolution() {
+    let mut s = scene(8, "symplectic_euler", 2e-4);
+    for class in SpringClass::ALL {
+        s.params.material.springs[class.index()].c = 0.0;
+    }
+    let reference = record(&s, 2000, 10, 20);
+    let p = LodProblem::new(
+        &s,
+        reference.clone(),
+        s.nx,
+        s.ny,
+        MassConvention::Lumped,
+        Integrator::SymplecticEuler,
+        2e-4,
+    )
+    .unwrap();
+    let truth = reference.material;
+    for reading in [Reading::ReferenceRatios, Reading::ReferenceLsq] {
+        let options = FitOptions {
+            reading,
+            ..FitOptions::default()
+        };
+        let est = p.estimate(Method::Bcd, &options, &mut no_progress).unwrap();
+        for class in SpringClass::ALL {
+            let (got, want) = (est.material.get(class), truth.get(class));
+            assert!(
+                (got.k / want.k - 1.0).abs() < 1e-9,
+                "{reading}: {class} K {} against {}",
+                got.k,
+                want.k
+            );
+            assert!(got.c.abs() < 1e-9 * want.k, "{reading}: {class} C {}", got.c);
+        }
+    }
+    let shares = p
+        .estimate(Method::Bcd, &FitOptions::default(), &mut no_progress)
+        .unwrap();
+    let worst = relative_errors(&shares.material, &truth)[..5]
+        .iter()
+        .fold(0.0f64, |a, &b| a.max(b));
+    assert!(worst > 1e-3, "the observed-share reading recovered K to {worst}");
+}
+
+/// The fit's guard returns its start, bit for bit, when the fit gains less
+/// than `min_gain` on the training frames or worsens their short horizon
+/// beyond `short_tolerance`; with the defaults this level's fit is kept.
+#[test]
+fn the_fit_guard_returns_the_start_when_the_gain_is_not_earned() {
+    let s = scene(16, "symplectic_euler", 2e-4);
+    let reference = record(&s, 3000, 10, 20);
+    let p = LodProblem::new(
+        &s,
+        reference,
+        10,
+        10,
+        MassConvention::Lumped,
+        Integrator::SymplecticEuler,
+        4e-4,
+    )
+    .unwrap();
+    let same = p.same_material();
+    let fit = |options: FitOptions| {
+        let options = FitOptions {
+            train: Some(0..p.frames() / 2),
+            max_frames: 40,
+            start: Some(same),
+            ..options
+        };
+        let est = p.estimate(Method::Fit, &options, &mut no_progress).unwrap();
+        let Details::Fit(report) = est.details else {
+            panic!("fit details")
+        };
+        (est.material, report)
+    };
+    let (kept, report) = fit(FitOptions::default());
+    assert_ne!(
+        kept, same,
+        "the default guard should keep this fit ({:?})",
+        report.kept_start
+    );
+    assert!(report.kept_start.is_none());
+    assert!(report.short_fitted <= 1.05 * report.short_start);
+    let gain = 1.0 - report.rms / report.start_rms;
+    let (material, report) = fit(FitOptions {
+        min_gain: gain + 0.01,
+        ..FitOptions::default()
+    });
+    assert_eq!(material, same);
+    assert!(report
+        .kept_start
+        .as_deref()
+        .is_some_and(|k| k.contains("lowered the training rms")));
+    let (material, report) = fit(FitOptions {
+        short_tolerance: 0.0,
+        ..FitOptions::default()
+    });
+    assert_eq!(material, same);
+    assert!(report
+        .kept_start
+        .as_deref()
+        .is_some_and(|k| k.contains("short-horizon")));
 }

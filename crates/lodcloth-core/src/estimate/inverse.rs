@@ -38,6 +38,23 @@
 //!    K: `C_t = (F_t − K_t·G_t)·H_t / |H_t|²`.
 //! 4. Per type, the averages of the accepted per-node, per-sample values.
 //!
+//! # Readings of the lost equations ([`Reading`])
+//! The prose admits other readings; each is selectable and
+//! `lodcloth experiment readings` scores them all against the paper's
+//! Table 1 trend. Three choices, each with the reading above first:
+//! - **shares** from the *type totals* `|F_t,j|` (springs of a type on
+//!   opposite sides of a node cancel) or from the *spring magnitudes*
+//!   `Σ_{s∈t,j} |f_s|` (every spring's own force, no cancellation);
+//! - **force** per type at the coarse node: the *observed* `R_t·F_spring`
+//!   (step 2), or the *reference's* own type-t spring forces carried to the
+//!   coarse node (`m_k·Σ w_j F_t,j / Σ w_j m_j` with the BCD or GKD weights;
+//!   no shares, no observed acceleration);
+//! - **averaging**: the mean of per-node, per-sample *ratios* (step 4), or
+//!   one *least-squares* ratio per type over every node and sample
+//!   (`K_t = Σ F_t·G_t / Σ |G_t|²`, then `C_t = Σ (F_t − K_t G_t)·H_t /
+//!   Σ |H_t|²`): eqs. 7–8 solved for the whole run at once, so nodes near
+//!   rest weigh little instead of being rejected.
+//!
 //! Rejected samples, counted per type and reason: springs near rest length
 //! (`|G_t|` below 1e-4 of the type's rest length: K is noise over ~0), no
 //! relative velocity (`|H_t|` below 1e-4 m/s: C undefined), and negative
@@ -158,6 +175,8 @@ pub struct Observation {
 pub struct Observations {
     /// Per coarse node: not pinned.
     pub free: Vec<bool>,
+    /// Coarse node masses (kg).
+    pub masses: Vec<f64>,
     /// One observation per reference sample.
     pub samples: Vec<Observation>,
 }
@@ -230,7 +249,11 @@ pub fn observe(
             total,
         });
     }
-    Observations { free, samples: out }
+    Observations {
+        free,
+        masses,
+        samples: out,
+    }
 }
 
 fn pinned_mask(sim: &Simulation) -> Vec<bool> {
@@ -251,7 +274,8 @@ pub struct Rejections {
     pub near_rest: [u64; T],
     /// `|H_t|` too small: no relative velocity (C skipped).
     pub no_relative_velocity: [u64; T],
-    /// K estimate ≤ 0.
+    /// K estimate ≤ 0 (with a least-squares [`Reading`]: 1 when the
+    /// class's one ratio came out non-positive).
     pub negative_k: [u64; T],
     /// C estimate < 0.
     pub negative_c: [u64; T],
@@ -268,6 +292,111 @@ pub enum Distribution {
     Bcd,
     /// Gaussian Kernel-based Distribution (eqs. 4–6).
     Gkd,
+}
+
+/// How BCD and GKD read the paper's lost equations 3–8 (module docs,
+/// "Readings"): where the shares come from, which force is split, and how
+/// per-sample values become one coefficient.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Reading {
+    /// Shares from type totals, observed force, mean of ratios.
+    TotalsRatios,
+    /// Shares from every spring's own force magnitude, observed force, mean
+    /// of ratios.
+    SpringsRatios,
+    /// Shares from type totals, observed force, one least-squares ratio.
+    TotalsLsq,
+    /// Shares from spring magnitudes, observed force, least squares.
+    SpringsLsq,
+    /// The reference's type forces carried over, mean of ratios.
+    ReferenceRatios,
+    /// The reference's type forces carried over, least squares.
+    ReferenceLsq,
+}
+
+impl Reading {
+    /// The reading BCD and GKD use unless told otherwise.
+    pub const DEFAULT: Reading = Reading::TotalsRatios;
+
+    /// Every reading, the default first.
+    pub const ALL: [Reading; 6] = [
+        Reading::TotalsRatios,
+        Reading::SpringsRatios,
+        Reading::TotalsLsq,
+        Reading::SpringsLsq,
+        Reading::ReferenceRatios,
+        Reading::ReferenceLsq,
+    ];
+
+    /// Name on the command line, in CSV and in cache keys.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Reading::TotalsRatios => "totals_ratios",
+            Reading::SpringsRatios => "springs_ratios",
+            Reading::TotalsLsq => "totals_lsq",
+            Reading::SpringsLsq => "springs_lsq",
+            Reading::ReferenceRatios => "reference_ratios",
+            Reading::ReferenceLsq => "reference_lsq",
+        }
+    }
+
+    fn spring_shares(self) -> bool {
+        matches!(self, Reading::SpringsRatios | Reading::SpringsLsq)
+    }
+
+    fn reference_forces(self) -> bool {
+        matches!(self, Reading::ReferenceRatios | Reading::ReferenceLsq)
+    }
+
+    fn least_squares(self) -> bool {
+        matches!(self, Reading::TotalsLsq | Reading::SpringsLsq | Reading::ReferenceLsq)
+    }
+}
+
+impl Default for Reading {
+    fn default() -> Reading {
+        Reading::DEFAULT
+    }
+}
+
+impl crate::names::Named for Reading {
+    const ALL: &'static [Reading] = &Reading::ALL;
+    fn name(self) -> &'static str {
+        Reading::name(self)
+    }
+}
+
+impl std::fmt::Display for Reading {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// Per-class force magnitudes of every spring at each node (SoA per class,
+/// one value per node): `Σ |K_t (L − L0) + C_t (Δv·u)|` over the node's
+/// class-t springs.
+fn spring_magnitudes(topology: &Topology, material: &Material, pos: &[f64], vel: &[f64], out: &mut [Vec<f64>; T]) {
+    let n = topology.n_nodes;
+    for m in out.iter_mut() {
+        m.fill(0.0);
+    }
+    for g in &topology.groups {
+        let t = g.class.index();
+        let co = material.springs[t];
+        for s in 0..g.len() {
+            let (a, b) = (g.a[s] as usize, g.b[s] as usize);
+            let d = [0, 1, 2].map(|c| pos[c * n + b] - pos[c * n + a]);
+            let len = dot(d, d).sqrt();
+            if len < 1e-12 {
+                continue;
+            }
+            let u = d.map(|x| x / len);
+            let dv = [0, 1, 2].map(|c| vel[c * n + b] - vel[c * n + a]);
+            let f = (co.k * (len - g.rest[s]) + co.c * dot(dv, u)).abs();
+            out[t][a] += f;
+            out[t][b] += f;
+        }
+    }
 }
 
 /// Result of BCD/GKD.
@@ -311,8 +440,20 @@ fn gkd_neighbourhoods(reference: &Topology, coarse: &Topology) -> Vec<Vec<(u32, 
         .collect()
 }
 
-/// The paper's BCD or GKD estimate from observations; a class with no
-/// accepted sample keeps `prior`'s coefficient.
+/// Per-class sums of one least-squares reading (eqs. 7–8 over the whole run).
+#[derive(Debug, Clone, Copy, Default)]
+struct LsqSums {
+    fg: f64,
+    gg: f64,
+    fh: f64,
+    gh: f64,
+    hh: f64,
+}
+
+/// The paper's BCD or GKD estimate from observations, read as `reading`
+/// says (module docs); a class with no accepted sample keeps `prior`'s
+/// coefficient.
+#[allow(clippy::too_many_arguments)]
 pub fn inverse_estimate(
     prior: &Material,
     reference: &Reference,
@@ -320,14 +461,20 @@ pub fn inverse_estimate(
     coarse: &Topology,
     observations: &Observations,
     distribution: Distribution,
+    reading: Reading,
     progress: ProgressFn<'_>,
 ) -> InverseEstimate {
     let n = coarse.n_nodes;
     let nf = reference.topology.n_nodes;
     let rest_len = mean_rest_lengths(coarse);
-    let neighbourhoods = match distribution {
+    // The fine nodes each coarse node draws on, with their weights.
+    let weights: Vec<Vec<(u32, f64)>> = match distribution {
         Distribution::Gkd => gkd_neighbourhoods(&reference.topology, coarse),
-        Distribution::Bcd => Vec::new(),
+        Distribution::Bcd => correlation
+            .entries()
+            .iter()
+            .map(|e| e.nodes.iter().zip(&e.weights).map(|(&j, &w)| (j, w)).collect())
+            .collect(),
     };
     let mut fine = Bases::new(nf);
     let mut bases = Bases::new(n);
@@ -335,16 +482,27 @@ pub fn inverse_estimate(
     let mut rej = Rejections::default();
     let mut sum_k = [0.0; T];
     let mut sum_c = [0.0; T];
+    let mut sums = [LsqSums::default(); T];
     let total = observations.samples.len() as u64;
     let free = &observations.free;
     for (oi, obs) in observations.samples.iter().enumerate() {
         let s = &reference.samples[obs.sample];
         fine.compute(&reference.topology, &s.cur, &obs.fine_vel);
-        for t in 0..T {
-            let co = reference.material.springs[t];
-            for j in 0..nf {
-                let f = fine.force(t, nf, j, co);
-                mags[t][j] = (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt();
+        if reading.spring_shares() {
+            spring_magnitudes(
+                &reference.topology,
+                &reference.material,
+                &s.cur,
+                &obs.fine_vel,
+                &mut mags,
+            );
+        } else if !reading.reference_forces() {
+            for t in 0..T {
+                let co = reference.material.springs[t];
+                for j in 0..nf {
+                    let f = fine.force(t, nf, j, co);
+                    mags[t][j] = dot(f, f).sqrt();
+                }
             }
         }
         bases.compute(coarse, &obs.pos, &obs.vel);
@@ -352,44 +510,73 @@ pub fn inverse_estimate(
             if !free[k] {
                 continue;
             }
-            let shares = match distribution {
-                Distribution::Bcd => {
-                    let e = correlation.entries()[k];
-                    let mut r = [0.0; T];
-                    for (&j, &w) in e.nodes.iter().zip(&e.weights) {
-                        let j = j as usize;
-                        let sum: f64 = mags.iter().map(|m| m[j]).sum();
-                        if sum > 0.0 {
-                            for t in 0..T {
-                                r[t] += w * mags[t][j] / sum;
+            // The type-t force the coarse node's springs must supply.
+            let forces: [[f64; 3]; T] = if reading.reference_forces() {
+                let mut f = [[0.0; 3]; T];
+                let mut mass = 0.0;
+                for &(j, w) in &weights[k] {
+                    let j = j as usize;
+                    mass += w * reference.masses[j];
+                    for (t, ft) in f.iter_mut().enumerate() {
+                        let fj = fine.force(t, nf, j, reference.material.springs[t]);
+                        for c in 0..3 {
+                            ft[c] += w * fj[c];
+                        }
+                    }
+                }
+                let scale = if mass > 0.0 { observations.masses[k] / mass } else { 0.0 };
+                f.map(|ft| ft.map(|x| x * scale))
+            } else {
+                let shares = match distribution {
+                    // eq. 3: the blend of the three nodes' shares.
+                    Distribution::Bcd => {
+                        let mut r = [0.0; T];
+                        for &(j, w) in &weights[k] {
+                            let j = j as usize;
+                            let sum: f64 = mags.iter().map(|m| m[j]).sum();
+                            if sum > 0.0 {
+                                for t in 0..T {
+                                    r[t] += w * mags[t][j] / sum;
+                                }
                             }
                         }
+                        r
                     }
-                    r
-                }
-                Distribution::Gkd => {
-                    let mut num = [0.0; T];
-                    let mut den = 0.0;
-                    for &(j, w) in &neighbourhoods[k] {
-                        let j = j as usize;
-                        for t in 0..T {
-                            num[t] += w * mags[t][j];
-                            den += w * mags[t][j];
+                    // eqs. 4–6: kernel-weighted type forces over the total.
+                    Distribution::Gkd => {
+                        let mut num = [0.0; T];
+                        let mut den = 0.0;
+                        for &(j, w) in &weights[k] {
+                            let j = j as usize;
+                            for t in 0..T {
+                                num[t] += w * mags[t][j];
+                                den += w * mags[t][j];
+                            }
+                        }
+                        if den > 0.0 {
+                            num.map(|x| x / den)
+                        } else {
+                            [0.0; T]
                         }
                     }
-                    if den > 0.0 {
-                        num.map(|x| x / den)
-                    } else {
-                        [0.0; T]
-                    }
-                }
+                };
+                let fs = [0, 1, 2].map(|c| obs.spring_force[c * n + k]);
+                shares.map(|r| fs.map(|x| r * x))
             };
-            let fs = [0, 1, 2].map(|c| obs.spring_force[c * n + k]);
             for t in 0..T {
                 rej.considered[t] += 1;
-                let ft = fs.map(|x| shares[t] * x);
+                let ft = forces[t];
                 let g = [0, 1, 2].map(|c| bases.elastic[t][c * n + k]);
                 let h = [0, 1, 2].map(|c| bases.damping[t][c * n + k]);
+                if reading.least_squares() {
+                    let e = &mut sums[t];
+                    e.fg += dot(ft, g);
+                    e.gg += dot(g, g);
+                    e.fh += dot(ft, h);
+                    e.gh += dot(g, h);
+                    e.hh += dot(h, h);
+                    continue;
+                }
                 let gg = dot(g, g);
                 if gg.sqrt() < 1e-4 * rest_len[t] {
                     rej.near_rest[t] += 1;
@@ -422,6 +609,26 @@ pub fn inverse_estimate(
             done: oi as u64 + 1,
             total,
         });
+    }
+    if reading.least_squares() {
+        // One ratio per class: accepted as one sample each when positive.
+        for t in 0..T {
+            let e = sums[t];
+            let kt = e.fg / e.gg;
+            if !(e.gg > 0.0 && kt > 0.0 && kt.is_finite()) {
+                rej.negative_k[t] += 1;
+                continue;
+            }
+            rej.accepted_k[t] = 1;
+            sum_k[t] = kt;
+            let ct = (e.fh - kt * e.gh) / e.hh;
+            if !(e.hh > 0.0 && ct >= 0.0 && ct.is_finite()) {
+                rej.negative_c[t] += 1;
+                continue;
+            }
+            rej.accepted_c[t] = 1;
+            sum_c[t] = ct;
+        }
     }
     let mut material = *prior;
     let mut fallback_k = [false; T];

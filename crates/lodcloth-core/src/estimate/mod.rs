@@ -31,7 +31,7 @@ use std::ops::Range;
 use std::sync::Arc;
 
 pub use fit::{FitOptions, FitReport};
-pub use inverse::{Distribution, InverseEstimate, LsqEstimate, Rejections};
+pub use inverse::{Distribution, InverseEstimate, LsqEstimate, Reading, Rejections};
 pub use metric::{ErrorAccumulator, ErrorReport};
 pub use reference::{RecordSpec, Reference, ReferenceError, Sample};
 
@@ -460,6 +460,7 @@ impl LodProblem {
                     &self.topology,
                     &obs,
                     dist,
+                    options.reading,
                     progress,
                 ))
             }

@@ -84,8 +84,16 @@ impl Estimator {
             reference: (problem.scene.nx, problem.scene.ny),
             target: (problem.nx, problem.ny),
             method: format!(
-                "{method}[{};train={}..{};frames={};iter={}]",
-                self.tag, train.start, train.end, fit.max_frames, fit.max_iterations
+                "{method}[{};train={}..{};frames={};iter={};reading={};guard={},{},{}]",
+                self.tag,
+                train.start,
+                train.end,
+                fit.max_frames,
+                fit.max_iterations,
+                fit.reading,
+                fit.min_gain,
+                fit.short_tolerance,
+                fit.guard_window
             ),
             mass: problem.mass.name().to_string(),
             integrator: problem.integrator.name().to_string(),
@@ -237,13 +245,14 @@ pub fn notes(details: &Details) -> String {
             e.clamped.iter().filter(|&&c| c).count()
         ),
         Details::Fit(f) => format!(
-            "start {} (train rms {:.3}%), train rms {:.3}% after {} iterations, {} runs, {}",
+            "start {} (train rms {:.3}%), train rms {:.3}% after {} iterations, {} runs, {}{}",
             f.start,
             100.0 * f.start_rms,
             100.0 * f.rms,
             f.iterations,
             f.evaluations,
-            f.stop
+            f.stop,
+            f.kept_start.as_ref().map_or(String::new(), |k| format!("; {k}"))
         ),
     }
 }

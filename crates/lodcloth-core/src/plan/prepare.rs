@@ -541,6 +541,7 @@ impl Preparer {
                         coarse.topology(),
                         &observations,
                         distribution,
+                        inverse::Reading::default(),
                         &mut no_progress,
                     )
                     .material
@@ -555,7 +556,10 @@ impl Preparer {
             }
             Ok((material, t.elapsed().as_secs_f64()))
         };
-        let key_method = format!("{method}[surface;samples-per-frame=1;span=1]");
+        let key_method = format!(
+            "{method}[surface;samples-per-frame=1;span=1;reading={}]",
+            inverse::Reading::default()
+        );
         self.surface_cached(scene, points, key_method, integrator, dt, &mut estimate)
     }
 
