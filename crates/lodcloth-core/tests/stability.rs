@@ -115,14 +115,16 @@ fn measured_stability_thresholds_of_symplectic_euler_and_rk4_are_within_15_perce
 /// the bend springs' C far more than their K, as BCD did on a strain-limited
 /// scene): the most damped mode is not the stiffest one, and RK4 goes
 /// unstable on it first. The prediction takes both modes; the stiffest
-/// mode's limit alone is shown to miss.
+/// mode's limit alone is shown to miss. This cloth stays in its rest
+/// shape, so the rest-shape limit is the one that must be tight; the limit
+/// the library steps by (every configuration) must be safe.
 #[test]
 fn damping_dominated_cloths_go_unstable_where_their_most_damped_mode_predicts() {
     let nx = 10;
     let damped = material((40.0, 0.0), (8.0, 0.0), (2.0, 0.06));
     let probe = free_cloth_of(damped, nx, Integrator::Rk4, 1e-6, tiny_perturbation(nx));
     let m = *probe.modal();
-    let predicted = probe.dt_limit();
+    let predicted = m.rest_shape_dt_limit(Integrator::Rk4);
     let stiffest_only = lodcloth::sim::dt_limit(Integrator::Rk4, m.omega_max, m.damping_rate);
     let measured = measured_threshold_of(damped, nx, Integrator::Rk4, predicted);
     eprintln!(
@@ -138,6 +140,67 @@ fn damping_dominated_cloths_go_unstable_where_their_most_damped_mode_predicts() 
         stiffest_only > 1.3 * measured,
         "the stiffest mode alone should over-predict here: {stiffest_only:e} vs {measured:e}"
     );
+    assert!(probe.dt_limit() <= measured, "{} > {measured}", probe.dt_limit());
+}
+
+/// Dampers act along their springs. Fold a cloth of dampers alone (K = 0)
+/// onto a line and every spring, along u, v or a diagonal, damps the same
+/// direction: the most damped mode's rate nearly doubles over the flat
+/// rest shape's. RK4 must stay stable there at the library's limit (the
+/// every-configuration bound), and goes unstable well below the rest
+/// shape's limit, the one the library used before.
+#[test]
+fn a_folded_cloth_of_dampers_stays_stable_at_the_predicted_limit() {
+    let nx = 8;
+    let dampers = material((0.0, 0.05), (0.0, 0.05), (0.0, 0.05));
+    let topo = grid(nx, nx, SIZE, SIZE, Orientation::Horizontal);
+    let h = SIZE / (nx - 1) as f64;
+    let n = topo.n_nodes;
+    let folded = |dt: f64| {
+        let mut rng = Rng::new(7);
+        let mut state = State::at_rest(&topo);
+        for k in 0..n {
+            let (i, j) = (k % nx, k / nx);
+            // Distinct points on the x axis; every spring lies along x.
+            state.pos[k] = (i as f64 + 0.37 * j as f64) * h;
+            state.pos[n + k] = 0.0;
+            state.pos[2 * n + k] = 0.0;
+            state.vel[k] = 1e-3 * rng.uniform(-1.0, 1.0);
+        }
+        free_cloth_of(dampers, nx, Integrator::Rk4, dt, state)
+    };
+    let stable = |dt: f64| {
+        let mut sim = folded(dt);
+        let ke0 = kinetic(&sim);
+        (0..3000).all(|_| sim.step().finite && kinetic(&sim) <= 10.0 * ke0)
+    };
+    let probe = folded(1e-6);
+    let (library, rest_shape) = (probe.dt_limit(), probe.modal().rest_shape_dt_limit(Integrator::Rk4));
+    let (mut lo, mut hi) = (0.25 * rest_shape, 2.0 * rest_shape);
+    assert!(stable(lo) && !stable(hi));
+    for _ in 0..12 {
+        let mid = 0.5 * (lo + hi);
+        if stable(mid) {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    let measured = 0.5 * (lo + hi);
+    eprintln!("folded: measured {measured:.4e} s, library limit {library:.4e} s, rest-shape limit {rest_shape:.4e} s");
+    assert!(library <= measured, "library limit {library:e} > measured {measured:e}");
+    assert!(
+        measured < 0.8 * rest_shape,
+        "the rest-shape limit should fail here: {measured:e} vs {rest_shape:e}"
+    );
+}
+
+fn kinetic(sim: &Simulation) -> f64 {
+    let n = sim.topology().n_nodes;
+    let v = &sim.state().vel;
+    (0..n)
+        .map(|k| 0.5 * sim.masses()[k] * (v[k].powi(2) + v[n + k].powi(2) + v[2 * n + k].powi(2)))
+        .sum()
 }
 
 #[test]
