@@ -38,6 +38,12 @@ pub enum PlanError {
     Invalid(String),
 }
 
+/// The estimators' behaviour, in the cache key: raise it with any change
+/// that alters what an estimator returns for the same inputs (2: BCD/GKD
+/// readings, the fit's guard against `same`, `same` bit for bit on square
+/// cells), so no cache serves an estimate made by other code.
+pub const ESTIMATORS_VERSION: u32 = 2;
+
 /// Runs estimators, through the on-disk coefficient cache when there is one.
 #[derive(Debug, Clone, Default)]
 pub struct Estimator {
@@ -84,7 +90,7 @@ impl Estimator {
             reference: (problem.scene.nx, problem.scene.ny),
             target: (problem.nx, problem.ny),
             method: format!(
-                "{method}[{};train={}..{};frames={};iter={};reading={};guard={},{},{}]",
+                "{method}[v{ESTIMATORS_VERSION};{};train={}..{};frames={};iter={};reading={};guard={},{},{}]",
                 self.tag,
                 train.start,
                 train.end,

@@ -557,7 +557,8 @@ impl Preparer {
             Ok((material, t.elapsed().as_secs_f64()))
         };
         let key_method = format!(
-            "{method}[surface;samples-per-frame=1;span=1;reading={}]",
+            "{method}[v{};surface;samples-per-frame=1;span=1;reading={}]",
+            super::estimator::ESTIMATORS_VERSION,
             inverse::Reading::default()
         );
         self.surface_cached(scene, points, key_method, integrator, dt, &mut estimate)
