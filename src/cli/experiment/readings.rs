@@ -112,6 +112,16 @@ fn score(rows: &[Table1Row], levels: &[GridLevel], reading: Reading) -> TrendSco
     s
 }
 
+/// `x` to two decimals, or `otherwise` when it is not finite (no level in
+/// the paper's table, or a diverged run).
+fn finite_or(x: f64, otherwise: &str) -> String {
+    if x.is_finite() {
+        format!("{x:.2}")
+    } else {
+        otherwise.to_string()
+    }
+}
+
 /// Best first: the most levels in the paper's order, then the closest ratios.
 fn ranked(rows: &[Table1Row], levels: &[GridLevel], readings: &[Reading]) -> Vec<TrendScore> {
     let mut scores: Vec<TrendScore> = readings.iter().map(|&r| score(rows, levels, r)).collect();
@@ -231,13 +241,13 @@ fn write(out: &Path, rows: &[Table1Row], levels: &[GridLevel], readings: &[Readi
     for s in &scores {
         let _ = writeln!(
             md,
-            "| {} | {}/{n} | {}/{n} | {}/{n} | {:.2} | {:.2} |",
+            "| {} | {}/{n} | {}/{n} | {}/{n} | {} | {} |",
             s.reading,
             s.same_above_bcd,
             s.bcd_above_gkd,
             s.both,
-            s.bcd_over_same,
-            s.ratio_distance,
+            finite_or(s.bcd_over_same, "a run diverged"),
+            finite_or(s.ratio_distance, "—"),
             n = s.levels
         );
     }
