@@ -355,6 +355,41 @@ mod tests {
         }
     }
 
+    /// Coefficients a fit produced (the daemon smoke test's paper-1 at
+    /// 16×16) that serde_json's default float parser read back one ulp off,
+    /// so a resumed level never re-attached its prediction.
+    #[test]
+    fn a_fits_coefficients_read_back_bit_for_bit() {
+        let mut s = sample();
+        let material = Material {
+            springs: [
+                SpringCoeffs {
+                    k: 410.94006003970014,
+                    c: 0.042396524507370484,
+                },
+                SpringCoeffs {
+                    k: 412.90646105173084,
+                    c: 0.042396524507370484,
+                },
+                SpringCoeffs {
+                    k: 60.33903523924886,
+                    c: 0.005710287456269357,
+                },
+                SpringCoeffs {
+                    k: 8.034992096202258,
+                    c: 0.0007642313924615084,
+                },
+                SpringCoeffs {
+                    k: 8.003923469337847,
+                    c: 0.0007642313924615084,
+                },
+            ],
+        };
+        s.coefficients = Some(Coefficients { material, dt: 0.001 });
+        let back = decode(&encode("paper-1", 1, 0, &s)).expect("decodes").snapshot;
+        assert_eq!(back.coefficients.map(|c| c.material), Some(material));
+    }
+
     #[test]
     fn a_snapshot_reads_back_bit_for_bit() {
         let s = sample();
