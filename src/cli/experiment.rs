@@ -536,6 +536,15 @@ fn table1_csv(rows: &[Table1Row]) -> String {
     csv
 }
 
+/// The paper's same / BCD / GKD at `level`, or a dash where its table has
+/// no row.
+fn paper_cell(level: GridLevel) -> String {
+    PAPER_TABLE1
+        .iter()
+        .find(|p| Some(p.0) == level.square())
+        .map_or("—".to_string(), |p| format!("{} / {} / {}", p.1, p.2, p.3))
+}
+
 /// The mean over scenes of `f` for one level and variant.
 fn mean_of(rows: &[Table1Row], level: GridLevel, label: &str, f: impl Fn(&Table1Row) -> f64) -> f64 {
     let v: Vec<f64> = rows
@@ -614,10 +623,7 @@ fn table1_by_level(
                     format!("{:.2}", 100.0 * v)
                 })
                 .collect();
-            let paper = PAPER_TABLE1
-                .iter()
-                .find(|p| Some(p.0) == level.square())
-                .map_or("—".to_string(), |p| format!("{} / {} / {}", p.1, p.2, p.3));
+            let paper = paper_cell(level);
             let _ = writeln!(
                 md,
                 "| {name} | {:.0}% | {} | {paper} |",

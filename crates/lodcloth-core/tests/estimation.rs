@@ -62,12 +62,10 @@ fn relative_errors(got: &Material, want: &Material) -> [f64; 10] {
     e
 }
 
-/// `lsq` at the scene's own resolution, against a symplectic reference:
-/// m·(x₊ − 2x + x₋)/dt² equals the force at (x, (x − x₋)/dt) exactly, so the
-/// only error left is rounding and every coefficient must come back.
-fn assert_lsq_recovers_the_scenes_springs(s: &Scene) -> LodProblem {
-    let reference = record(s, 3000, 10, 10);
-    let p = LodProblem::new(
+/// `s` at its own resolution against `reference`: lumped masses, symplectic
+/// Euler at 2e-4 s.
+fn own_resolution(s: &Scene, reference: &Arc<Reference>) -> LodProblem {
+    LodProblem::new(
         s,
         reference.clone(),
         s.nx,
@@ -76,7 +74,15 @@ fn assert_lsq_recovers_the_scenes_springs(s: &Scene) -> LodProblem {
         Integrator::SymplecticEuler,
         2e-4,
     )
-    .unwrap();
+    .unwrap()
+}
+
+/// `lsq` at the scene's own resolution, against a symplectic reference:
+/// m·(x₊ − 2x + x₋)/dt² equals the force at (x, (x − x₋)/dt) exactly, so the
+/// only error left is rounding and every coefficient must come back.
+fn assert_lsq_recovers_the_scenes_springs(s: &Scene) -> LodProblem {
+    let reference = record(s, 3000, 10, 10);
+    let p = own_resolution(s, &reference);
     let est = p
         .estimate(Method::Lsq, &FitOptions::default(), &mut no_progress)
         .unwrap();
@@ -357,16 +363,7 @@ fn reference_force_readings_recover_every_stiffness_at_the_same_resolution() {
         s.params.material.springs[class.index()].c = 0.0;
     }
     let reference = record(&s, 2000, 10, 20);
-    let p = LodProblem::new(
-        &s,
-        reference.clone(),
-        s.nx,
-        s.ny,
-        MassConvention::Lumped,
-        Integrator::SymplecticEuler,
-        2e-4,
-    )
-    .unwrap();
+    let p = own_resolution(&s, &reference);
     let truth = reference.material;
     for reading in [Reading::ReferenceRatios, Reading::ReferenceLsq] {
         let options = FitOptions {

@@ -16,7 +16,7 @@ use lodcloth::output::{line_chart_svg, Series, PALETTE};
 use lodcloth::plan::GridLevel;
 use lodcloth::scene::MassConvention;
 
-use super::{log_line, mean_of, reference_for, table1_csv, Common, PAPER_TABLE1, SHORT_WINDOW};
+use super::{log_line, mean_of, paper_cell, reference_for, table1_csv, Common, PAPER_TABLE1, SHORT_WINDOW};
 
 /// How one reading follows the paper's Table 1 over the levels measured.
 #[derive(Debug, Clone)]
@@ -210,10 +210,7 @@ fn write(out: &Path, rows: &[Table1Row], levels: &[GridLevel], readings: &[Readi
                 )
             })
             .collect();
-        let paper = PAPER_TABLE1
-            .iter()
-            .find(|p| Some(p.0) == level.square())
-            .map_or("—".to_string(), |p| format!("{} / {} / {}", p.1, p.2, p.3));
+        let paper = paper_cell(level);
         let _ = writeln!(
             md,
             "| {}×{} | {:.0}% | {:.2} | {} | {paper} |",
