@@ -7,7 +7,7 @@
 use std::sync::Arc;
 
 use lodcloth::estimate::{FitOptions, Method, RecordSpec, Reference};
-use lodcloth::experiments::generalise::{suite, SuiteOptions};
+use lodcloth::experiments::generalise::{suite, twin_floor, SuiteOptions};
 use lodcloth::experiments::lod::{lod_plan, Horizon};
 use lodcloth::plan::{Estimator, GridLevel};
 use lodcloth::scene::Scene;
@@ -114,7 +114,27 @@ fn the_suite_scores_each_scene_at_its_aspect_and_carries_corrections_as_ratios()
             // the identity and the score is the scene's own, exactly.
             assert_eq!(t, r.own, "{}: same carried over", r.scene);
         }
+        assert!(r.floor.mean.is_finite() && r.floor.mean < r.own.mean, "{}: floor {:?}", r.scene, r.floor);
     }
+}
+
+/// The chaos floor's twin is the reference run again: unperturbed it
+/// reproduces the recording to its f32 storage (so the floor measures the
+/// perturbation and nothing else in the set-up), and on this damped,
+/// non-chaotic cloth its error answers a stiffness change linearly.
+#[test]
+fn the_chaos_floors_twin_reproduces_the_reference_and_answers_its_perturbation() {
+    let s = scene("wide-cotton", 2.0, 1.0, 17, 9, 1.0);
+    let r = record(&s);
+    let frames = r.frames.len();
+    let held_out = frames / 2..frames;
+    let floor = |eps: f64| twin_floor(&s, &r, held_out.clone(), eps).expect("twin runs");
+    let exact = floor(0.0);
+    assert!(exact.mean < 1e-6 && exact.p95 < 1e-6, "unperturbed twin: {exact:?}");
+    let (small, large) = (floor(1e-4), floor(1e-2));
+    assert!(small.mean > 10.0 * exact.mean, "1e-4: {small:?} against {exact:?}");
+    let slope = large.mean / small.mean;
+    assert!((50.0..200.0).contains(&slope), "100× the perturbation gave {slope}× the floor");
 }
 
 #[test]

@@ -15,7 +15,7 @@ mod readings;
 
 use lodcloth::cache::CoefficientCache;
 use lodcloth::estimate::{FitOptions, Method, Reading, RecordSpec, Reference};
-use lodcloth::experiments::generalise::{suite, SuiteOptions, SuiteRow};
+use lodcloth::experiments::generalise::{suite, SuiteOptions, SuiteRow, TWIN_PERTURBATION};
 use lodcloth::experiments::lod::{
     lod_plan, pareto, switch_test, table1_scene, Horizon, Table1Options, Table1Row, Variant, TABLE1_VARIANTS,
 };
@@ -983,7 +983,8 @@ fn suite_csv(rows: &[SuiteRow]) -> String {
     let mut csv = format!(
         "scene,level,reduction,method,{COEFFICIENT_HEADER},estimate_s,\
          mean,p95,last_quarter,short_mean,short_p95,\
-         transferred_mean,transferred_p95,transferred_last_quarter,transferred_short_mean,transferred_short_p95\n",
+         transferred_mean,transferred_p95,transferred_last_quarter,transferred_short_mean,transferred_short_p95,\
+         floor_mean,floor_p95,floor_last_quarter\n",
     );
     for r in rows {
         let t = r.transferred;
@@ -992,7 +993,7 @@ fn suite_csv(rows: &[SuiteRow]) -> String {
         };
         let _ = writeln!(
             csv,
-            "\"{}\",{}x{},{:.4},{},{},{:.1},{:.6},{:.6},{:.6},{:.6},{:.6},{},{},{},{},{}",
+            "\"{}\",{}x{},{:.4},{},{},{:.1},{:.6},{:.6},{:.6},{:.6},{:.6},{},{},{},{},{},{:.6},{:.6},{:.6}",
             r.scene.replace('"', "'"),
             r.nx,
             r.ny,
@@ -1010,6 +1011,9 @@ fn suite_csv(rows: &[SuiteRow]) -> String {
             opt(|h| h.last_quarter),
             opt(|h| h.short_mean),
             opt(|h| h.short_p95),
+            r.floor.mean,
+            r.floor.p95,
+            r.floor.last_quarter,
         );
     }
     csv
@@ -1022,20 +1026,21 @@ fn suite_md(rows: &[SuiteRow], methods: &[Method], level: GridLevel, common: &Co
     let mut md = format!(
         "Held-out error (% of O_max) at level {level} (N along each cloth's longer side), trained on the first {:.0} % of each run. \
          Long horizon: one run from rest (Sung eq. 9); short: restarted from the reference every {SHORT_WINDOW} s. \
-         'Other scenes': the geometric mean of the other scenes' K and C corrections (estimate / reference) applied to this scene's reference coefficients.\n\n\
+         'Other scenes': the median of the other scenes' K and C corrections (estimate / reference) applied to this scene's reference coefficients. \
+         Chaos floor: the reference itself with every K × (1 + {TWIN_PERTURBATION:e}), long horizon; a long-horizon error near it is chaos, not the level.\n\n\
          Command: `lodcloth experiment generalise{}`\n\n",
         100.0 * common.train_fraction,
         if common.quick { " --quick" } else { "" }
     );
     let _ = writeln!(
         md,
-        "| scene | level | method | mean | p95 | last quarter | short-horizon mean | short p95 | other scenes: mean | other scenes: short mean |"
+        "| scene | level | method | mean | p95 | last quarter | short-horizon mean | short p95 | other scenes: mean | other scenes: short mean | chaos floor: mean |"
     );
-    let _ = writeln!(md, "|---|---|---|---|---|---|---|---|---|---|");
+    let _ = writeln!(md, "|---|---|---|---|---|---|---|---|---|---|---|");
     for r in rows {
         let _ = writeln!(
             md,
-            "| {} | {}×{} | {} | {} | {} | {} | {} | {} | {} | {} |",
+            "| {} | {}×{} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
             r.scene,
             r.nx,
             r.ny,
@@ -1047,6 +1052,7 @@ fn suite_md(rows: &[SuiteRow], methods: &[Method], level: GridLevel, common: &Co
             pct(r.own.short_p95),
             r.transferred.map_or("—".into(), |t| pct(t.mean)),
             r.transferred.map_or("—".into(), |t| pct(t.short_mean)),
+            pct(r.floor.mean),
         );
     }
     let _ = writeln!(

@@ -9,14 +9,27 @@
 //! the suite's fabrics differ (cotton, canvas, knit) — but the *correction*
 //! an estimator applies to the reference's coefficients at a level: the
 //! ratio K_level / K_reference and C_level / C_reference per spring type.
-//! A held-out scene gets the geometric mean of the other scenes' ratios
-//! applied to its own reference coefficients.
+//! A held-out scene gets the median of the other scenes' ratios (per
+//! coefficient, in log space) applied to its own reference coefficients.
+//! The median, not the mean: a fit's correction is sometimes particular to
+//! its scene's motion (the shaken curtain's fit cuts shear K 30-fold so the
+//! coarse cloth folds, the cantilevered canvas cuts its cross-direction K
+//! 17-fold), and one such scene would move a mean for every other scene.
+//! The median carries what most scenes agree on.
+//!
+//! The chaos floor ([`twin_floor`]): the reference itself re-run with every
+//! stiffness changed by one part in a million, scored like any model. On a
+//! scene whose motion is chaotic (a cloth turning about one pin, a flag in
+//! gusts) this twin drifts from the reference as any model must, so the
+//! long-horizon error of a level cannot be read below it; the short horizon
+//! is the measure there.
 
+use std::ops::Range;
 use std::sync::Arc;
 
 use crate::estimate::{no_progress, ErrorReport, FitOptions, LodProblem, Method, Reference};
 use crate::plan::{default_problem, stable_problem, Estimator, GridLevel, PlanError};
-use crate::scene::Scene;
+use crate::scene::{MassConvention, Scene};
 use crate::sim::{Material, SpringCoeffs};
 
 /// Options of [`suite`].
@@ -52,6 +65,22 @@ pub struct HeldOut {
     pub short_p95: f64,
 }
 
+/// The chaos floor of one scene ([`twin_floor`]), fractions of O_max over
+/// the held-out frames, long horizon.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Floor {
+    /// Mean over nodes and held-out frames.
+    pub mean: f64,
+    /// 95th percentile over nodes and held-out frames.
+    pub p95: f64,
+    /// Mean over the last quarter of the held-out frames.
+    pub last_quarter: f64,
+}
+
+/// The relative change of every stiffness in the chaos floor's twin: far
+/// below any estimate's change and any level's discretisation error.
+pub const TWIN_PERTURBATION: f64 = 1e-6;
+
 /// One scene × estimator of the suite.
 #[derive(Debug, Clone)]
 pub struct SuiteRow {
@@ -74,6 +103,9 @@ pub struct SuiteRow {
     /// The other scenes' corrections applied to this scene's reference
     /// coefficients, scored on the same frames; `None` for a lone scene.
     pub transferred: Option<HeldOut>,
+    /// The scene's chaos floor on the same frames (the same for every
+    /// method of the scene).
+    pub floor: Floor,
 }
 
 /// Run the suite: `scenes` with their recorded references.
@@ -99,6 +131,14 @@ pub fn suite(
     for p in &problems {
         let frames = p.frames();
         let train_end = train_end(frames, options.train_fraction);
+        let floor = twin_floor(&p.scene, &p.reference, train_end..frames, TWIN_PERTURBATION)?;
+        log(format!(
+            "{} chaos floor (the reference with K × (1 + {TWIN_PERTURBATION:e})): held-out mean {:.2}%  p95 {:.2}%  last quarter {:.2}%",
+            p.scene.name,
+            100.0 * floor.mean,
+            100.0 * floor.p95,
+            100.0 * floor.last_quarter
+        ));
         let fit = FitOptions {
             train: Some(0..train_end),
             ..options.fit.clone()
@@ -128,6 +168,7 @@ pub fn suite(
                 estimate_seconds: est.seconds,
                 own,
                 transferred: None,
+                floor,
             });
         }
     }
@@ -169,21 +210,23 @@ fn train_end(frames: usize, fraction: f64) -> usize {
     ((frames as f64 * fraction).round() as usize).clamp(1, frames - 1)
 }
 
-/// `base` scaled per spring type and coefficient by the geometric mean of
-/// `estimated / reference` over `pairs` (`base` itself when there are none).
-/// A zero coefficient on either side carries no ratio.
+/// `base` scaled per spring type and coefficient by the median of
+/// `estimated / reference` over `pairs` (`base` itself when there are none;
+/// the geometric mean of the middle two for an even count). A zero
+/// coefficient on either side carries no ratio.
 fn corrected(base: Material, pairs: &[(Material, Material)]) -> Material {
     let ratio = |f: &dyn Fn(&Material, usize) -> f64, t: usize| -> f64 {
-        let logs: Vec<f64> = pairs
+        let mut logs: Vec<f64> = pairs
             .iter()
             .map(|(e, r)| (f(e, t), f(r, t)))
             .filter(|&(e, r)| e > 0.0 && r > 0.0)
             .map(|(e, r)| (e / r).ln())
             .collect();
-        if logs.is_empty() {
-            1.0
-        } else {
-            (logs.iter().sum::<f64>() / logs.len() as f64).exp()
+        logs.sort_by(f64::total_cmp);
+        match logs.len() {
+            0 => 1.0,
+            n if n % 2 == 1 => logs[n / 2].exp(),
+            n => (0.5 * (logs[n / 2 - 1] + logs[n / 2])).exp(),
         }
     };
     let k = |m: &Material, t: usize| m.springs[t].k;
@@ -194,6 +237,41 @@ fn corrected(base: Material, pairs: &[(Material, Material)]) -> Material {
             c: base.springs[t].c * ratio(&c, t),
         }),
     }
+}
+
+/// The chaos floor: `reference` re-run at its own resolution, integrator,
+/// dt and masses with every stiffness scaled by `1 + perturbation`, scored
+/// against the recording on `frames` (long horizon). With no perturbation
+/// it reproduces the recording to its f32 storage.
+pub fn twin_floor(
+    scene: &Scene,
+    reference: &Arc<Reference>,
+    frames: Range<usize>,
+    perturbation: f64,
+) -> Result<Floor, PlanError> {
+    let grid = reference.topology.grid.as_ref().ok_or_else(|| {
+        PlanError::Invalid(format!("{}: the chaos floor needs a grid reference", scene.name))
+    })?;
+    let (nx, ny) = (grid.nx, grid.ny);
+    let twin = LodProblem::new(
+        scene,
+        reference.clone(),
+        nx,
+        ny,
+        MassConvention::Lumped,
+        reference.integrator,
+        reference.dt,
+    )?;
+    let mut material = reference.material;
+    for s in &mut material.springs {
+        s.k *= 1.0 + perturbation;
+    }
+    let report = twin.score(material, frames, &mut no_progress)?;
+    Ok(Floor {
+        mean: report.mean,
+        p95: report.p95,
+        last_quarter: report.last_quarter,
+    })
 }
 
 /// `material` on `problem`'s held-out frames (from `train_end`), long and
@@ -228,7 +306,7 @@ mod tests {
     }
 
     #[test]
-    fn corrections_carry_as_geometric_mean_ratios() {
+    fn corrections_carry_as_median_ratios() {
         let reference_a = material([400.0, 60.0, 8.0], [0.04, 0.006, 0.0008]);
         let reference_b = material([2000.0, 600.0, 200.0], [0.2, 0.06, 0.02]);
         // Scene a's estimator doubled every K and halved every C; scene b's
@@ -242,5 +320,13 @@ mod tests {
             assert!((m.springs[t].c / base.springs[t].c - 1.0).abs() < 1e-12);
         }
         assert_eq!(corrected(base, &[]), base);
+        // A third scene that multiplied every K by 1000 is an outlier: the
+        // median of (2, 8, 1000) is 8, where the mean would be 20.
+        let est_c = material([400_000.0, 60_000.0, 8000.0], [0.04, 0.006, 0.0008]);
+        let m = corrected(base, &[(est_a, reference_a), (est_b, reference_b), (est_c, reference_a)]);
+        for t in 0..5 {
+            assert!((m.springs[t].k / base.springs[t].k - 8.0).abs() < 1e-9);
+            assert!((m.springs[t].c / base.springs[t].c - 1.0).abs() < 1e-12);
+        }
     }
 }

@@ -41,8 +41,9 @@ pub enum PlanError {
 /// The estimators' behaviour, in the cache key: raise it with any change
 /// that alters what an estimator returns for the same inputs (2: BCD/GKD
 /// readings, the fit's guard against `same`, `same` bit for bit on square
-/// cells), so no cache serves an estimate made by other code.
-pub const ESTIMATORS_VERSION: u32 = 2;
+/// cells; 3: the fit's Broyden Jacobian and BCD start), so no cache serves
+/// an estimate made by other code.
+pub const ESTIMATORS_VERSION: u32 = 3;
 
 /// Runs estimators, through the on-disk coefficient cache when there is one.
 #[derive(Debug, Clone, Default)]
