@@ -984,7 +984,7 @@ fn suite_csv(rows: &[SuiteRow]) -> String {
         "scene,level,reduction,method,{COEFFICIENT_HEADER},estimate_s,\
          mean,p95,last_quarter,short_mean,short_p95,\
          transferred_mean,transferred_p95,transferred_last_quarter,transferred_short_mean,transferred_short_p95,\
-         floor_mean,floor_p95,floor_last_quarter\n",
+         floor_mean,floor_p95,floor_last_quarter,floor_min,floor_max\n",
     );
     for r in rows {
         let t = r.transferred;
@@ -993,7 +993,7 @@ fn suite_csv(rows: &[SuiteRow]) -> String {
         };
         let _ = writeln!(
             csv,
-            "\"{}\",{}x{},{:.4},{},{},{:.1},{:.6},{:.6},{:.6},{:.6},{:.6},{},{},{},{},{},{:.6},{:.6},{:.6}",
+            "\"{}\",{}x{},{:.4},{},{},{:.1},{:.6},{:.6},{:.6},{:.6},{:.6},{},{},{},{},{},{:.6},{:.6},{:.6},{:.6},{:.6}",
             r.scene.replace('"', "'"),
             r.nx,
             r.ny,
@@ -1014,6 +1014,8 @@ fn suite_csv(rows: &[SuiteRow]) -> String {
             r.floor.mean,
             r.floor.p95,
             r.floor.last_quarter,
+            r.floor.min,
+            r.floor.max,
         );
     }
     csv
@@ -1027,14 +1029,14 @@ fn suite_md(rows: &[SuiteRow], methods: &[Method], level: GridLevel, common: &Co
         "Held-out error (% of O_max) at level {level} (N along each cloth's longer side), trained on the first {:.0} % of each run. \
          Long horizon: one run from rest (Sung eq. 9); short: restarted from the reference every {SHORT_WINDOW} s. \
          'Other scenes': the median of the other scenes' K and C corrections (estimate / reference) applied to this scene's reference coefficients. \
-         Chaos floor: the reference itself with every K × (1 + {TWIN_PERTURBATION:e}), long horizon; a long-horizon error near it is chaos, not the level.\n\n\
+         Chaos floor: three twins of the reference itself (every K × (1 ± {TWIN_PERTURBATION:e}), every C × (1 + {TWIN_PERTURBATION:e})), long horizon, their mean and range; a long-horizon error near it is chaos, not the level.\n\n\
          Command: `lodcloth experiment generalise{}`\n\n",
         100.0 * common.train_fraction,
         if common.quick { " --quick" } else { "" }
     );
     let _ = writeln!(
         md,
-        "| scene | level | method | mean | p95 | last quarter | short-horizon mean | short p95 | other scenes: mean | other scenes: short mean | chaos floor: mean |"
+        "| scene | level | method | mean | p95 | last quarter | short-horizon mean | short p95 | other scenes: mean | other scenes: short mean | chaos floor: mean (range) |"
     );
     let _ = writeln!(md, "|---|---|---|---|---|---|---|---|---|---|---|");
     for r in rows {
@@ -1052,7 +1054,7 @@ fn suite_md(rows: &[SuiteRow], methods: &[Method], level: GridLevel, common: &Co
             pct(r.own.short_p95),
             r.transferred.map_or("—".into(), |t| pct(t.mean)),
             r.transferred.map_or("—".into(), |t| pct(t.short_mean)),
-            pct(r.floor.mean),
+            format!("{} ({}–{})", pct(r.floor.mean), pct(r.floor.min), pct(r.floor.max)),
         );
     }
     let _ = writeln!(

@@ -41,9 +41,10 @@ pub enum PlanError {
 /// The estimators' behaviour, in the cache key: raise it with any change
 /// that alters what an estimator returns for the same inputs (2: BCD/GKD
 /// readings, the fit's guard against `same`, `same` bit for bit on square
-/// cells; 3: the fit's Broyden Jacobian and BCD start), so no cache serves
+/// cells; 3: a Broyden-updated Jacobian, withdrawn; 4: BCD among the fit's
+/// starts, its tolerance 1 %), so no cache serves
 /// an estimate made by other code.
-pub const ESTIMATORS_VERSION: u32 = 3;
+pub const ESTIMATORS_VERSION: u32 = 4;
 
 /// Runs estimators, through the on-disk coefficient cache when there is one.
 #[derive(Debug, Clone, Default)]
@@ -91,12 +92,13 @@ impl Estimator {
             reference: (problem.scene.nx, problem.scene.ny),
             target: (problem.nx, problem.ny),
             method: format!(
-                "{method}[v{ESTIMATORS_VERSION};{};train={}..{};frames={};iter={};reading={};guard={},{},{}]",
+                "{method}[v{ESTIMATORS_VERSION};{};train={}..{};frames={};iter={};tol={};reading={};guard={},{},{}]",
                 self.tag,
                 train.start,
                 train.end,
                 fit.max_frames,
                 fit.max_iterations,
+                fit.tolerance,
                 fit.reading,
                 fit.min_gain,
                 fit.short_tolerance,
