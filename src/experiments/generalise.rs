@@ -12,9 +12,9 @@
 //! A held-out scene gets the median of the other scenes' ratios (per
 //! coefficient, in log space) applied to its own reference coefficients.
 //! The median, not the mean: a fit's correction is sometimes particular to
-//! its scene's motion (the shaken curtain's fit cuts shear K 30-fold so the
-//! coarse cloth folds, the cantilevered canvas cuts its cross-direction K
-//! 17-fold), and one such scene would move a mean for every other scene.
+//! its scene's motion (the shaken curtain's fit cuts shear K five-fold so
+//! the coarse cloth folds, the cantilevered canvas cuts its cross-direction
+//! K 16-fold), and one such scene would move a mean for every other scene.
 //! The median carries what most scenes agree on.
 //!
 //! The chaos floor ([`twin_floor`]): the reference itself re-run with its
