@@ -72,8 +72,8 @@ pub struct FitOptions {
     pub max_frames: usize,
     /// Levenberg–Marquardt iterations at most.
     pub max_iterations: usize,
-    /// Stop when an iteration lowers the cost by less than this fraction.
-    /// 1 %: the guard asks a fit for 1 % below `same` in all, and steps of
+    /// Stop when an iteration lowers the cost by less than this fraction,
+    /// or when the linearised model predicts less for the next step. 1 %: the guard asks a fit for 1 % below `same` in all, and steps of
     /// less were a third of the iterations of Table 1's longest fits
     /// (60–52 nodes a side, 60–100 s) for held-out changes within the chaos
     /// floor. Broyden-updated Jacobians between finite-difference ones were
@@ -316,30 +316,46 @@ fn start_candidates(
 /// the new log-coefficients, their cost and residuals.
 type Accepted = (f64, VecF, f64, Vec<f64>);
 
+/// The Levenberg–Marquardt step at damping `mu` (Marquardt's diagonal
+/// scaling), at most a factor e per coefficient, and the cost reduction the
+/// linearised model predicts for it, `−2 δᵀJᵀr − δᵀJᵀJδ`.
+fn lm_step((jtj, jtr): &(MatF, VecF), mu: f64) -> (VecF, f64) {
+    let mut a = *jtj;
+    for i in 0..FP {
+        a[(i, i)] += mu * jtj[(i, i)].max(1e-12) + 1e-15;
+    }
+    let delta = a.cholesky().map_or(VecF::zeros(), |ch| ch.solve(&(-jtr)));
+    let delta = delta.map(|d| d.clamp(-1.0, 1.0));
+    let predicted = -2.0 * delta.dot(jtr) - (jtj * delta).dot(&delta);
+    (delta, predicted)
+}
+
 /// Levenberg–Marquardt damping from `mu` upward (two trials at a time, in
 /// parallel) until a step lowers `cost_now`; `None` when none does before
-/// the damping reaches 10⁸. `mu` is left where the search stopped.
+/// the damping reaches 10⁸, or as soon as the linearised model predicts
+/// less than `min_predicted` for the larger step of a round (more damping
+/// only shrinks the prediction, so no later round could earn the
+/// tolerance; this spares the runs of a search that can only end in
+/// "converged"). `mu` is left where the search stopped.
+#[allow(clippy::too_many_arguments)]
 fn damped_step(
     objective: &Objective<'_>,
-    (jtj, jtr): (MatF, VecF),
+    normal: (MatF, VecF),
     theta: &VecF,
     cost_now: f64,
+    min_predicted: f64,
     mu: &mut f64,
     material_at: &(impl Fn(&VecF) -> Material + Sync),
     evaluations: &mut usize,
 ) -> Option<Accepted> {
     while *mu < 1e8 {
+        if lm_step(&normal, *mu).1 < min_predicted {
+            return None;
+        }
         let trials: Vec<(f64, VecF, Option<Vec<f64>>)> = [*mu, 10.0 * *mu]
             .into_par_iter()
             .map(|m| {
-                let mut a = jtj;
-                for i in 0..FP {
-                    a[(i, i)] += m * jtj[(i, i)].max(1e-12) + 1e-15;
-                }
-                let delta = a.cholesky().map_or(VecF::zeros(), |ch| ch.solve(&(-jtr)));
-                // At most a factor e per coefficient per iteration.
-                let delta = delta.map(|d| d.clamp(-1.0, 1.0));
-                let t = theta + delta;
+                let t = theta + lm_step(&normal, m).0;
                 (m, t, objective.residuals(&material_at(&t)))
             })
             .collect();
@@ -419,9 +435,11 @@ pub fn fit(problem: &LodProblem, options: &FitOptions, progress: ProgressFn<'_>)
         });
         let normal = objective.normal_equations(&theta, &r, &material_at, options.fd_step);
         evaluations += FP;
-        let Some((m, t, ct, rt)) = damped_step(&objective, normal, &theta, c, &mut mu, &material_at, &mut evaluations)
+        let min_predicted = options.tolerance * c;
+        let Some((m, t, ct, rt)) =
+            damped_step(&objective, normal, &theta, c, min_predicted, &mut mu, &material_at, &mut evaluations)
         else {
-            stop = "converged (no step lowers the cost)";
+            stop = "converged (no step lowers the cost, or none is predicted to gain the tolerance)";
             break;
         };
         let gain = (c - ct) / c;
