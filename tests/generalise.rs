@@ -114,7 +114,12 @@ fn the_suite_scores_each_scene_at_its_aspect_and_carries_corrections_as_ratios()
             // the identity and the score is the scene's own, exactly.
             assert_eq!(t, r.own, "{}: same carried over", r.scene);
         }
-        assert!(r.floor.mean.is_finite() && r.floor.mean < r.own.mean, "{}: floor {:?}", r.scene, r.floor);
+        assert!(
+            r.floor.mean.is_finite() && r.floor.mean < r.own.mean,
+            "{}: floor {:?}",
+            r.scene,
+            r.floor
+        );
     }
 }
 
@@ -134,7 +139,10 @@ fn the_chaos_floors_twin_reproduces_the_reference_and_answers_its_perturbation()
     let (small, large) = (floor(1e-4), floor(1e-2));
     assert!(small.mean > 10.0 * exact.mean, "1e-4: {small:?} against {exact:?}");
     let slope = large.mean / small.mean;
-    assert!((50.0..200.0).contains(&slope), "100× the perturbation gave {slope}× the floor");
+    assert!(
+        (50.0..200.0).contains(&slope),
+        "100× the perturbation gave {slope}× the floor"
+    );
 }
 
 #[test]

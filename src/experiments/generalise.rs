@@ -262,9 +262,11 @@ pub fn twin_floor(
     frames: Range<usize>,
     perturbation: f64,
 ) -> Result<Floor, PlanError> {
-    let grid = reference.topology.grid.as_ref().ok_or_else(|| {
-        PlanError::Invalid(format!("{}: the chaos floor needs a grid reference", scene.name))
-    })?;
+    let grid = reference
+        .topology
+        .grid
+        .as_ref()
+        .ok_or_else(|| PlanError::Invalid(format!("{}: the chaos floor needs a grid reference", scene.name)))?;
     let (nx, ny) = (grid.nx, grid.ny);
     let twin = LodProblem::new(
         scene,
@@ -347,7 +349,10 @@ mod tests {
         // A third scene that multiplied every K by 1000 is an outlier: the
         // median of (2, 8, 1000) is 8, where the mean would be 20.
         let est_c = material([400_000.0, 60_000.0, 8000.0], [0.04, 0.006, 0.0008]);
-        let m = corrected(base, &[(est_a, reference_a), (est_b, reference_b), (est_c, reference_a)]);
+        let m = corrected(
+            base,
+            &[(est_a, reference_a), (est_b, reference_b), (est_c, reference_a)],
+        );
         for t in 0..5 {
             assert!((m.springs[t].k / base.springs[t].k - 8.0).abs() < 1e-9);
             assert!((m.springs[t].c / base.springs[t].c - 1.0).abs() < 1e-12);

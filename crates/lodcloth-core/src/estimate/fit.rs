@@ -436,9 +436,16 @@ pub fn fit(problem: &LodProblem, options: &FitOptions, progress: ProgressFn<'_>)
         let normal = objective.normal_equations(&theta, &r, &material_at, options.fd_step);
         evaluations += FP;
         let min_predicted = options.tolerance * c;
-        let Some((m, t, ct, rt)) =
-            damped_step(&objective, normal, &theta, c, min_predicted, &mut mu, &material_at, &mut evaluations)
-        else {
+        let Some((m, t, ct, rt)) = damped_step(
+            &objective,
+            normal,
+            &theta,
+            c,
+            min_predicted,
+            &mut mu,
+            &material_at,
+            &mut evaluations,
+        ) else {
             stop = "converged (no step lowers the cost, or none is predicted to gain the tolerance)";
             break;
         };
