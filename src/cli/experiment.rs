@@ -1042,7 +1042,7 @@ fn suite_md(rows: &[SuiteRow], methods: &[Method], level: GridLevel, common: &Co
     for r in rows {
         let _ = writeln!(
             md,
-            "| {} | {}×{} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+            "| {} | {}×{} | {} | {} | {} | {} | {} | {} | {} | {} | {} ({}–{}) |",
             r.scene,
             r.nx,
             r.ny,
@@ -1054,7 +1054,9 @@ fn suite_md(rows: &[SuiteRow], methods: &[Method], level: GridLevel, common: &Co
             pct(r.own.short_p95),
             r.transferred.map_or("—".into(), |t| pct(t.mean)),
             r.transferred.map_or("—".into(), |t| pct(t.short_mean)),
-            format!("{} ({}–{})", pct(r.floor.mean), pct(r.floor.min), pct(r.floor.max)),
+            pct(r.floor.mean),
+            pct(r.floor.min),
+            pct(r.floor.max),
         );
     }
     let _ = writeln!(

@@ -23,6 +23,42 @@ async fn within<T>(seconds: u64, what: &str, f: impl std::future::Future<Output 
     }
 }
 
+/// The browser the tests drive: `LODCLOTH_CHROMIUM`, else Debian's
+/// `chromium`.
+fn executable() -> String {
+    std::env::var("LODCLOTH_CHROMIUM").unwrap_or_else(|_| "chromium".into())
+}
+
+/// Whether the browser starts (`--version`). When it does not, a test that
+/// needs it is not run: this says so on the terminal itself (not in the
+/// test's captured output, which a passing test never shows) and how to run
+/// it, and returns `false` — unless `LODCLOTH_REQUIRE_BROWSER` is set, as
+/// `.ci/run` sets it, where a missing browser fails the test.
+pub fn available(test: &str) -> bool {
+    use std::io::Write as _;
+    let exe = executable();
+    let runs = Command::new(&exe)
+        .arg("--version")
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .status()
+        .is_ok_and(|s| s.success());
+    if runs {
+        return true;
+    }
+    assert!(
+        std::env::var_os("LODCLOTH_REQUIRE_BROWSER").is_none(),
+        "{test}: LODCLOTH_REQUIRE_BROWSER is set but `{exe} --version` does not run"
+    );
+    let _ = writeln!(
+        std::io::stderr(),
+        "\n*** NOT RUN: {test} needs a headless browser and `{exe} --version` does not run.\n\
+         *** Install Debian's chromium (`apt-get install chromium`) or name one with LODCLOTH_CHROMIUM=…,\n\
+         *** then run `cargo test --release --test bus -- {test}`. CI (`bash .ci/run`) always runs it.\n"
+    );
+    false
+}
+
 /// A headless Chromium with one page, driven over CDP.
 pub struct Browser {
     child: Child,
@@ -34,7 +70,7 @@ pub struct Browser {
 
 impl Browser {
     pub async fn open(url: &str) -> Browser {
-        let exe = std::env::var("LODCLOTH_CHROMIUM").unwrap_or_else(|_| "chromium".into());
+        let exe = executable();
         let profile = tempfile::tempdir().expect("profile dir");
         // SwiftShader gives WebGL without a GPU; the network flags keep
         // Chromium off everything but loopback.
