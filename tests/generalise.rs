@@ -90,6 +90,7 @@ fn the_suite_scores_each_scene_at_its_aspect_and_carries_corrections_as_ratios()
         },
         train_fraction: 0.5,
         short_window: 0.05,
+        floor_perturbation: 1e-6,
     };
     let rows = suite(&scenes, &options, &no_cache(), &mut |_| {}).expect("suite runs");
     assert_eq!(rows.len(), 4);

@@ -250,6 +250,10 @@ pub enum Experiment {
         /// Methods compared.
         #[arg(long, value_delimiter = ',', default_values_t = ["same", "bcd", "gkd", "fit"].map(String::from).to_vec())]
         methods: Vec<String>,
+        /// Relative change of the chaos floor's twins' coefficients (a
+        /// larger one, e.g. 1e-3, shows where the drift saturates).
+        #[arg(long, default_value_t = TWIN_PERTURBATION)]
+        floor_perturbation: f64,
     },
     /// The paper's BCD and GKD under every reading of its lost equations
     /// 3–8, with per-node masses over its levels, scored against the trend
@@ -337,10 +341,11 @@ pub fn run(experiment: Experiment) -> Result<()> {
             mut common,
             level,
             methods,
+            floor_perturbation,
         } => {
             common.apply_quick();
             let level = level.unwrap_or(GridLevel::Long(if common.quick { 16 } else { 40 }));
-            generalise_cmd(&common, level, &parse_methods(&methods)?)
+            generalise_cmd(&common, level, &parse_methods(&methods)?, floor_perturbation)
         }
         Experiment::Readings {
             mut common,
@@ -953,7 +958,7 @@ fn switch_cmd(common: &Common, level: GridLevel, method: Method, at: f64, window
     Ok(())
 }
 
-fn generalise_cmd(common: &Common, level: GridLevel, methods: &[Method]) -> Result<()> {
+fn generalise_cmd(common: &Common, level: GridLevel, methods: &[Method], floor_perturbation: f64) -> Result<()> {
     let out = common.out("out/generalise")?;
     let spec = common.spec()?;
     let defaults: Vec<&str> = PAPER_SCENES.iter().chain(&SUITE_SCENES).copied().collect();
@@ -969,10 +974,11 @@ fn generalise_cmd(common: &Common, level: GridLevel, methods: &[Method]) -> Resu
         fit: common.fit(frames)?,
         train_fraction: common.train_fraction,
         short_window: SHORT_WINDOW,
+        floor_perturbation,
     };
     let rows = suite(&pairs, &options, &common.estimator()?, &mut log_line)?;
     fs::write(out.join("generalise.csv"), suite_csv(&rows)).context("writing generalise.csv")?;
-    let md = suite_md(&rows, methods, level, common);
+    let md = suite_md(&rows, methods, level, common, floor_perturbation);
     fs::write(out.join("generalise.md"), &md).context("writing generalise.md")?;
     suite_chart(&out, &rows, methods)?;
     println!("{md}");
@@ -1023,13 +1029,13 @@ fn suite_csv(rows: &[SuiteRow]) -> String {
 
 /// Per scene, each method's held-out mean / p95 / last quarter, long and
 /// short horizon, own and transferred; then the means over the scenes.
-fn suite_md(rows: &[SuiteRow], methods: &[Method], level: GridLevel, common: &Common) -> String {
+fn suite_md(rows: &[SuiteRow], methods: &[Method], level: GridLevel, common: &Common, eps: f64) -> String {
     let pct = |x: f64| format!("{:.2}", 100.0 * x);
     let mut md = format!(
         "Held-out error (% of O_max) at level {level} (N along each cloth's longer side), trained on the first {:.0} % of each run. \
          Long horizon: one run from rest (Sung eq. 9); short: restarted from the reference every {SHORT_WINDOW} s. \
          'Other scenes': the median of the other scenes' K and C corrections (estimate / reference) applied to this scene's reference coefficients. \
-         Chaos floor: three twins of the reference itself (every K × (1 ± {TWIN_PERTURBATION:e}), every C × (1 + {TWIN_PERTURBATION:e})), long horizon, their mean and range; a long-horizon error near it is chaos, not the level.\n\n\
+         Chaos floor: three twins of the reference itself (every K × (1 ± {eps:e}), every C × (1 + {eps:e})), long horizon, their mean and range; a long-horizon error near it is chaos, not the level.\n\n\
          Command: `lodcloth experiment generalise{}`\n\n",
         100.0 * common.train_fraction,
         if common.quick { " --quick" } else { "" }

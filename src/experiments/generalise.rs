@@ -51,6 +51,9 @@ pub struct SuiteOptions {
     pub train_fraction: f64,
     /// Window of the short-horizon measure (s).
     pub short_window: f64,
+    /// Relative change of the chaos floor's twins' coefficients
+    /// ([`TWIN_PERTURBATION`] by default).
+    pub floor_perturbation: f64,
 }
 
 /// Held-out statistics of one model on one scene (fractions of O_max).
@@ -123,6 +126,12 @@ pub fn suite(
     estimator: &Estimator,
     log: &mut dyn FnMut(String),
 ) -> Result<Vec<SuiteRow>, PlanError> {
+    if !(options.floor_perturbation >= 0.0 && options.floor_perturbation < 0.5) {
+        return Err(PlanError::Invalid(format!(
+            "the chaos floor's perturbation must be in [0, 0.5), got {}",
+            options.floor_perturbation
+        )));
+    }
     if !(options.train_fraction > 0.0 && options.train_fraction < 1.0) {
         return Err(PlanError::Invalid(format!(
             "the training fraction must be in (0, 1), got {}",
@@ -139,9 +148,10 @@ pub fn suite(
     for p in &problems {
         let frames = p.frames();
         let train_end = train_end(frames, options.train_fraction);
-        let floor = twin_floor(&p.scene, &p.reference, train_end..frames, TWIN_PERTURBATION)?;
+        let eps = options.floor_perturbation;
+        let floor = twin_floor(&p.scene, &p.reference, train_end..frames, eps)?;
         log(format!(
-            "{} chaos floor (three twins of the reference, coefficients × (1 ± {TWIN_PERTURBATION:e})): held-out mean {:.2}% ({:.2}–{:.2}%)  p95 {:.2}%  last quarter {:.2}%",
+            "{} chaos floor (three twins of the reference, coefficients × (1 ± {eps:e})): held-out mean {:.2}% ({:.2}–{:.2}%)  p95 {:.2}%  last quarter {:.2}%",
             p.scene.name,
             100.0 * floor.mean,
             100.0 * floor.min,
