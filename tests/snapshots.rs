@@ -29,6 +29,9 @@ fn read(dir: &Path, instance: &str) -> snapshot::Saved {
         .expect("a snapshot file")
 }
 
+/// The test daemon's scene (paper scene 1) loops every 6 s.
+const LOOP_S: f64 = 6.0;
+
 fn max_abs_diff(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max)
 }
@@ -149,8 +152,13 @@ async fn a_restarted_daemon_resumes_each_instance_where_it_was() {
             "frame {} is not at the saved level",
             s.frame
         );
+        // The scene loops every 6 s: a snapshot taken near the end of a
+        // loop may resume into the next one (how far the first run got
+        // depends on how long the switch's estimate took).
+        let same_loop = s.episode == saved.episode && s.time >= saved.state.time - 1e-9;
+        let next_loop = s.episode == saved.episode + 1;
         assert!(
-            s.episode == saved.episode && s.time >= saved.state.time - 1e-9 && s.frame >= saved.frame,
+            (same_loop || next_loop) && s.frame >= saved.frame,
             "a state from before the snapshot: episode {}, t = {}, frame {} (saved: {}, {}, {})",
             s.episode,
             s.time,
@@ -163,18 +171,33 @@ async fn a_restarted_daemon_resumes_each_instance_where_it_was() {
     }
     // Continuity: a fresh start would be at rest at t ≈ 0; the first state
     // is within a fraction of a second of the saved one and close to it.
-    assert!(
-        first.time - saved.state.time < 0.5,
-        "first state {} s after the snapshot",
+    let gap = if first.episode == saved.episode {
         first.time - saved.state.time
-    );
-    let pos = unpack_positions(&first.positions).expect("positions");
-    let moved = max_abs_diff(&pos, &saved.state.pos);
-    let dt = first.time - saved.state.time;
-    assert!(
-        moved <= 0.01 + 2.0 * speed * dt,
-        "{moved} m from the saved positions after {dt} s"
-    );
+    } else {
+        first.time + LOOP_S - saved.state.time
+    };
+    assert!(gap < 0.5, "first state {gap} s after the snapshot");
+    if first.episode == saved.episode {
+        let pos = unpack_positions(&first.positions).expect("positions");
+        let moved = max_abs_diff(&pos, &saved.state.pos);
+        // The first state a client sees can come a few tenths of a second
+        // after the snapshot (the restarted daemon steps while the client
+        // connects), in which the cloth moves at up to the larger of its
+        // speed at the save and its speed at that first state (the next
+        // state received tells it). A daemon that had restarted from any
+        // other state (rest, another level's) would be far from the save
+        // *and* slow there.
+        let next = resumed
+            .iter()
+            .find(|s| s.frame > first.frame)
+            .expect("a state after the first");
+        let next_pos = unpack_positions(&next.positions).expect("positions");
+        let speed_then = max_abs_diff(&next_pos, &pos) / (next.time - first.time);
+        assert!(
+            moved <= 0.01 + 2.0 * speed.max(speed_then) * gap,
+            "{moved} m from the saved positions after {gap} s (max speed {speed} m/s at the save, {speed_then} m/s then)"
+        );
+    }
     let info_a = wait_info(&c, "a").await;
     assert_eq!(
         Level::from_wire(info_a.level.as_ref().expect("level")),
