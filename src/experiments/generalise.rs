@@ -88,8 +88,8 @@ pub struct Floor {
     pub max: f64,
 }
 
-/// The relative change of every stiffness in the chaos floor's twin: far
-/// below any estimate's change and any level's discretisation error.
+/// The default relative change of the chaos floor's twins' coefficients:
+/// far below any estimate's change and any level's discretisation error.
 pub const TWIN_PERTURBATION: f64 = 1e-6;
 
 /// One scene × estimator of the suite.

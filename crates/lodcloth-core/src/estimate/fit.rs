@@ -73,10 +73,10 @@ pub struct FitOptions {
     /// Levenberg–Marquardt iterations at most.
     pub max_iterations: usize,
     /// Stop when an iteration lowers the cost by less than this fraction,
-    /// or when the linearised model predicts less for the next step. 1 %: the guard asks a fit for 1 % below `same` in all, and steps of
-    /// less were a third of the iterations of Table 1's longest fits
-    /// (60–52 nodes a side, 60–100 s) for held-out changes within the chaos
-    /// floor. Broyden-updated Jacobians between finite-difference ones were
+    /// or when the linearised model predicts less for the next step. 1 %:
+    /// the guard asks a fit for 1 % below `same` in all, and smaller steps
+    /// made up much of Table 1's longest fits (60–52 nodes a side, 60–100 s)
+    /// for held-out changes within the chaos floor. Broyden-updated Jacobians between finite-difference ones were
     /// tried (2026-11-25) and cost more runs, not fewer: on this chaotic
     /// objective their steps failed often and each failure paid for a
     /// fresh Jacobian anyway (paper-1 at 52×52: 96 runs against 63).

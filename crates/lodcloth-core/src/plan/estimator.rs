@@ -43,8 +43,7 @@ pub enum PlanError {
 /// readings, the fit's guard against `same`, `same` bit for bit on square
 /// cells; 3: a Broyden-updated Jacobian, withdrawn; 4: BCD among the fit's
 /// starts, its tolerance 1 %; 5: the fit stops on a predicted gain below its
-/// tolerance), so no cache serves
-/// an estimate made by other code.
+/// tolerance), so no cache serves an estimate made by other code.
 pub const ESTIMATORS_VERSION: u32 = 5;
 
 /// Runs estimators, through the on-disk coefficient cache when there is one.
