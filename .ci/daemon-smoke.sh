@@ -1,11 +1,14 @@
 #!/usr/bin/env bash
 # Start `lodcloth serve` (config/default.toml, peer on tcp/127.0.0.1:7450),
-# drive it with the Rust CLI clients and the Python example client, then stop
-# it with SIGTERM and require a clean exit.
+# drive it with the Rust CLI clients and the Python client package
+# (clients/python, pip-installed by .ci/run into /tmp/lodcloth-pyvenv, or the
+# venv named by LODCLOTH_PYVENV), then stop it with SIGTERM and require a
+# clean exit.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 BIN=target/release/lodcloth
-PY="/tmp/lodcloth-pyvenv/bin/python examples/python/lodcloth_client.py"
+PYVENV="${LODCLOTH_PYVENV:-/tmp/lodcloth-pyvenv}"
+PY="$PYVENV/bin/lodcloth-py"
 LOG=out/ci-serve.log
 mkdir -p out
 "$BIN" serve > "$LOG" 2>&1 &
@@ -37,14 +40,23 @@ grep -q '<canvas id="view"' <<< "$(curl -fsS http://127.0.0.1:8090/)"
 kill -TERM $VIEW
 wait $VIEW
 VIEW=
+# The Python client's console script, as installed by pip.
 $PY list --timeout 10
 $PY watch hanging --count 3 --timeout 10
 $PY switch hanging --level 24x24 --timeout 300
+# The package as a library: examples/python follows the cloth and switches it
+# (to the level it is at now, so at once).
+"$PYVENV/bin/python" examples/python/follow_and_switch.py hanging --level 24x24 --seconds 0.2 --timeout 300
 # The point-sampled surface: its whole cloud on `state`, a switch to another size.
 "$BIN" watch sphere --count 2
 "$BIN" switch sphere 85 --timeout 300
 $PY watch sphere --count 3 --timeout 10
-if $PY switch nope --level 16x16 --timeout 10; then echo "an unknown instance was accepted" >&2; exit 1; fi
+if refusal="$($PY switch nope --level 16x16 --timeout 10 2>&1)"; then echo "an unknown instance was accepted" >&2; exit 1; fi
+grep -q "CODE_UNKNOWN_INSTANCE" <<< "$refusal" || { echo "the refusal does not name its code: $refusal" >&2; exit 1; }
+# The package's own tests: the unit tests and, with LODCLOTH_DAEMON set, the
+# ones against this daemon (decoded states of a cloth and a surface, refusals,
+# callbacks, pause/resume), run against the installed package.
+LODCLOTH_DAEMON=tcp/127.0.0.1:7450 "$PYVENV/bin/python" -m unittest discover -s clients/python/tests -v
 kill -TERM $DAEMON
 wait $DAEMON
 grep -q "stopped" "$LOG"

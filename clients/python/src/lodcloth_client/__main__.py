@@ -1,0 +1,7 @@
+"""``python -m lodcloth_client`` is ``lodcloth-py``."""
+
+import sys
+
+from .cli import main
+
+sys.exit(main())

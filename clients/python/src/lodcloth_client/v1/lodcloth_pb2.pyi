@@ -1,0 +1,288 @@
+from google.protobuf.internal import containers as _containers
+from google.protobuf.internal import enum_type_wrapper as _enum_type_wrapper
+from google.protobuf import descriptor as _descriptor
+from google.protobuf import message as _message
+from collections.abc import Iterable as _Iterable, Mapping as _Mapping
+from typing import ClassVar as _ClassVar, Optional as _Optional, Union as _Union
+
+DESCRIPTOR: _descriptor.FileDescriptor
+
+class Level(_message.Message):
+    __slots__ = ("nx", "ny", "points")
+    NX_FIELD_NUMBER: _ClassVar[int]
+    NY_FIELD_NUMBER: _ClassVar[int]
+    POINTS_FIELD_NUMBER: _ClassVar[int]
+    nx: int
+    ny: int
+    points: int
+    def __init__(self, nx: _Optional[int] = ..., ny: _Optional[int] = ..., points: _Optional[int] = ...) -> None: ...
+
+class Coefficients(_message.Message):
+    __slots__ = ("structural_k", "structural_c", "shear_k", "shear_c", "bend_k", "bend_c", "structural_v_k", "structural_v_c", "bend_v_k", "bend_v_c")
+    STRUCTURAL_K_FIELD_NUMBER: _ClassVar[int]
+    STRUCTURAL_C_FIELD_NUMBER: _ClassVar[int]
+    SHEAR_K_FIELD_NUMBER: _ClassVar[int]
+    SHEAR_C_FIELD_NUMBER: _ClassVar[int]
+    BEND_K_FIELD_NUMBER: _ClassVar[int]
+    BEND_C_FIELD_NUMBER: _ClassVar[int]
+    STRUCTURAL_V_K_FIELD_NUMBER: _ClassVar[int]
+    STRUCTURAL_V_C_FIELD_NUMBER: _ClassVar[int]
+    BEND_V_K_FIELD_NUMBER: _ClassVar[int]
+    BEND_V_C_FIELD_NUMBER: _ClassVar[int]
+    structural_k: float
+    structural_c: float
+    shear_k: float
+    shear_c: float
+    bend_k: float
+    bend_c: float
+    structural_v_k: float
+    structural_v_c: float
+    bend_v_k: float
+    bend_v_c: float
+    def __init__(self, structural_k: _Optional[float] = ..., structural_c: _Optional[float] = ..., shear_k: _Optional[float] = ..., shear_c: _Optional[float] = ..., bend_k: _Optional[float] = ..., bend_c: _Optional[float] = ..., structural_v_k: _Optional[float] = ..., structural_v_c: _Optional[float] = ..., bend_v_k: _Optional[float] = ..., bend_v_c: _Optional[float] = ...) -> None: ...
+
+class State(_message.Message):
+    __slots__ = ("instance", "frame", "time", "level", "coefficient_version", "positions", "episode", "stepped_unix_nanos", "transition", "simulation_positions", "normals", "reference_positions")
+    INSTANCE_FIELD_NUMBER: _ClassVar[int]
+    FRAME_FIELD_NUMBER: _ClassVar[int]
+    TIME_FIELD_NUMBER: _ClassVar[int]
+    LEVEL_FIELD_NUMBER: _ClassVar[int]
+    COEFFICIENT_VERSION_FIELD_NUMBER: _ClassVar[int]
+    POSITIONS_FIELD_NUMBER: _ClassVar[int]
+    EPISODE_FIELD_NUMBER: _ClassVar[int]
+    STEPPED_UNIX_NANOS_FIELD_NUMBER: _ClassVar[int]
+    TRANSITION_FIELD_NUMBER: _ClassVar[int]
+    SIMULATION_POSITIONS_FIELD_NUMBER: _ClassVar[int]
+    NORMALS_FIELD_NUMBER: _ClassVar[int]
+    REFERENCE_POSITIONS_FIELD_NUMBER: _ClassVar[int]
+    instance: str
+    frame: int
+    time: float
+    level: Level
+    coefficient_version: int
+    positions: bytes
+    episode: int
+    stepped_unix_nanos: int
+    transition: bool
+    simulation_positions: bytes
+    normals: bytes
+    reference_positions: bytes
+    def __init__(self, instance: _Optional[str] = ..., frame: _Optional[int] = ..., time: _Optional[float] = ..., level: _Optional[_Union[Level, _Mapping]] = ..., coefficient_version: _Optional[int] = ..., positions: _Optional[bytes] = ..., episode: _Optional[int] = ..., stepped_unix_nanos: _Optional[int] = ..., transition: bool = ..., simulation_positions: _Optional[bytes] = ..., normals: _Optional[bytes] = ..., reference_positions: _Optional[bytes] = ...) -> None: ...
+
+class Metrics(_message.Message):
+    __slots__ = ("instance", "frame", "time", "level", "method", "predicted_error", "live_error", "step_cost_us", "real_time_factor", "overruns", "kinetic_energy", "potential_energy", "max_strain", "coefficient_version", "paused", "dt", "steps", "lag_resets", "divergences", "rollbacks", "halted")
+    INSTANCE_FIELD_NUMBER: _ClassVar[int]
+    FRAME_FIELD_NUMBER: _ClassVar[int]
+    TIME_FIELD_NUMBER: _ClassVar[int]
+    LEVEL_FIELD_NUMBER: _ClassVar[int]
+    METHOD_FIELD_NUMBER: _ClassVar[int]
+    PREDICTED_ERROR_FIELD_NUMBER: _ClassVar[int]
+    LIVE_ERROR_FIELD_NUMBER: _ClassVar[int]
+    STEP_COST_US_FIELD_NUMBER: _ClassVar[int]
+    REAL_TIME_FACTOR_FIELD_NUMBER: _ClassVar[int]
+    OVERRUNS_FIELD_NUMBER: _ClassVar[int]
+    KINETIC_ENERGY_FIELD_NUMBER: _ClassVar[int]
+    POTENTIAL_ENERGY_FIELD_NUMBER: _ClassVar[int]
+    MAX_STRAIN_FIELD_NUMBER: _ClassVar[int]
+    COEFFICIENT_VERSION_FIELD_NUMBER: _ClassVar[int]
+    PAUSED_FIELD_NUMBER: _ClassVar[int]
+    DT_FIELD_NUMBER: _ClassVar[int]
+    STEPS_FIELD_NUMBER: _ClassVar[int]
+    LAG_RESETS_FIELD_NUMBER: _ClassVar[int]
+    DIVERGENCES_FIELD_NUMBER: _ClassVar[int]
+    ROLLBACKS_FIELD_NUMBER: _ClassVar[int]
+    HALTED_FIELD_NUMBER: _ClassVar[int]
+    instance: str
+    frame: int
+    time: float
+    level: Level
+    method: str
+    predicted_error: float
+    live_error: float
+    step_cost_us: float
+    real_time_factor: float
+    overruns: int
+    kinetic_energy: float
+    potential_energy: float
+    max_strain: float
+    coefficient_version: int
+    paused: bool
+    dt: float
+    steps: int
+    lag_resets: int
+    divergences: int
+    rollbacks: int
+    halted: str
+    def __init__(self, instance: _Optional[str] = ..., frame: _Optional[int] = ..., time: _Optional[float] = ..., level: _Optional[_Union[Level, _Mapping]] = ..., method: _Optional[str] = ..., predicted_error: _Optional[float] = ..., live_error: _Optional[float] = ..., step_cost_us: _Optional[float] = ..., real_time_factor: _Optional[float] = ..., overruns: _Optional[int] = ..., kinetic_energy: _Optional[float] = ..., potential_energy: _Optional[float] = ..., max_strain: _Optional[float] = ..., coefficient_version: _Optional[int] = ..., paused: bool = ..., dt: _Optional[float] = ..., steps: _Optional[int] = ..., lag_resets: _Optional[int] = ..., divergences: _Optional[int] = ..., rollbacks: _Optional[int] = ..., halted: _Optional[str] = ...) -> None: ...
+
+class LevelInfo(_message.Message):
+    __slots__ = ("level", "predicted_error", "dt", "ready")
+    LEVEL_FIELD_NUMBER: _ClassVar[int]
+    PREDICTED_ERROR_FIELD_NUMBER: _ClassVar[int]
+    DT_FIELD_NUMBER: _ClassVar[int]
+    READY_FIELD_NUMBER: _ClassVar[int]
+    level: Level
+    predicted_error: float
+    dt: float
+    ready: bool
+    def __init__(self, level: _Optional[_Union[Level, _Mapping]] = ..., predicted_error: _Optional[float] = ..., dt: _Optional[float] = ..., ready: bool = ...) -> None: ...
+
+class InstanceInfo(_message.Message):
+    __slots__ = ("instance", "scene", "description", "level", "reference", "levels", "method", "integrator", "dt", "coefficients", "coefficient_version", "triangles", "pinned", "publish_hz", "o_max", "shadow_reference", "paused", "kind", "simulation_points", "cloud_points", "rest_positions", "halted")
+    INSTANCE_FIELD_NUMBER: _ClassVar[int]
+    SCENE_FIELD_NUMBER: _ClassVar[int]
+    DESCRIPTION_FIELD_NUMBER: _ClassVar[int]
+    LEVEL_FIELD_NUMBER: _ClassVar[int]
+    REFERENCE_FIELD_NUMBER: _ClassVar[int]
+    LEVELS_FIELD_NUMBER: _ClassVar[int]
+    METHOD_FIELD_NUMBER: _ClassVar[int]
+    INTEGRATOR_FIELD_NUMBER: _ClassVar[int]
+    DT_FIELD_NUMBER: _ClassVar[int]
+    COEFFICIENTS_FIELD_NUMBER: _ClassVar[int]
+    COEFFICIENT_VERSION_FIELD_NUMBER: _ClassVar[int]
+    TRIANGLES_FIELD_NUMBER: _ClassVar[int]
+    PINNED_FIELD_NUMBER: _ClassVar[int]
+    PUBLISH_HZ_FIELD_NUMBER: _ClassVar[int]
+    O_MAX_FIELD_NUMBER: _ClassVar[int]
+    SHADOW_REFERENCE_FIELD_NUMBER: _ClassVar[int]
+    PAUSED_FIELD_NUMBER: _ClassVar[int]
+    KIND_FIELD_NUMBER: _ClassVar[int]
+    SIMULATION_POINTS_FIELD_NUMBER: _ClassVar[int]
+    CLOUD_POINTS_FIELD_NUMBER: _ClassVar[int]
+    REST_POSITIONS_FIELD_NUMBER: _ClassVar[int]
+    HALTED_FIELD_NUMBER: _ClassVar[int]
+    instance: str
+    scene: str
+    description: str
+    level: Level
+    reference: Level
+    levels: _containers.RepeatedCompositeFieldContainer[LevelInfo]
+    method: str
+    integrator: str
+    dt: float
+    coefficients: Coefficients
+    coefficient_version: int
+    triangles: _containers.RepeatedScalarFieldContainer[int]
+    pinned: _containers.RepeatedScalarFieldContainer[int]
+    publish_hz: float
+    o_max: float
+    shadow_reference: bool
+    paused: bool
+    kind: str
+    simulation_points: _containers.RepeatedScalarFieldContainer[int]
+    cloud_points: int
+    rest_positions: bytes
+    halted: str
+    def __init__(self, instance: _Optional[str] = ..., scene: _Optional[str] = ..., description: _Optional[str] = ..., level: _Optional[_Union[Level, _Mapping]] = ..., reference: _Optional[_Union[Level, _Mapping]] = ..., levels: _Optional[_Iterable[_Union[LevelInfo, _Mapping]]] = ..., method: _Optional[str] = ..., integrator: _Optional[str] = ..., dt: _Optional[float] = ..., coefficients: _Optional[_Union[Coefficients, _Mapping]] = ..., coefficient_version: _Optional[int] = ..., triangles: _Optional[_Iterable[int]] = ..., pinned: _Optional[_Iterable[int]] = ..., publish_hz: _Optional[float] = ..., o_max: _Optional[float] = ..., shadow_reference: bool = ..., paused: bool = ..., kind: _Optional[str] = ..., simulation_points: _Optional[_Iterable[int]] = ..., cloud_points: _Optional[int] = ..., rest_positions: _Optional[bytes] = ..., halted: _Optional[str] = ...) -> None: ...
+
+class InstanceSummary(_message.Message):
+    __slots__ = ("instance", "scene", "level", "method", "publish_hz")
+    INSTANCE_FIELD_NUMBER: _ClassVar[int]
+    SCENE_FIELD_NUMBER: _ClassVar[int]
+    LEVEL_FIELD_NUMBER: _ClassVar[int]
+    METHOD_FIELD_NUMBER: _ClassVar[int]
+    PUBLISH_HZ_FIELD_NUMBER: _ClassVar[int]
+    instance: str
+    scene: str
+    level: Level
+    method: str
+    publish_hz: float
+    def __init__(self, instance: _Optional[str] = ..., scene: _Optional[str] = ..., level: _Optional[_Union[Level, _Mapping]] = ..., method: _Optional[str] = ..., publish_hz: _Optional[float] = ...) -> None: ...
+
+class InstanceList(_message.Message):
+    __slots__ = ("daemon", "instances")
+    DAEMON_FIELD_NUMBER: _ClassVar[int]
+    INSTANCES_FIELD_NUMBER: _ClassVar[int]
+    daemon: str
+    instances: _containers.RepeatedCompositeFieldContainer[InstanceSummary]
+    def __init__(self, daemon: _Optional[str] = ..., instances: _Optional[_Iterable[_Union[InstanceSummary, _Mapping]]] = ...) -> None: ...
+
+class SwitchRequest(_message.Message):
+    __slots__ = ("level", "max_error", "method")
+    LEVEL_FIELD_NUMBER: _ClassVar[int]
+    MAX_ERROR_FIELD_NUMBER: _ClassVar[int]
+    METHOD_FIELD_NUMBER: _ClassVar[int]
+    level: Level
+    max_error: float
+    method: str
+    def __init__(self, level: _Optional[_Union[Level, _Mapping]] = ..., max_error: _Optional[float] = ..., method: _Optional[str] = ...) -> None: ...
+
+class SwitchReply(_message.Message):
+    __slots__ = ("instance", "previous", "level", "method", "coefficients", "predicted_error", "dt", "seconds", "cached", "coefficient_version", "frame")
+    INSTANCE_FIELD_NUMBER: _ClassVar[int]
+    PREVIOUS_FIELD_NUMBER: _ClassVar[int]
+    LEVEL_FIELD_NUMBER: _ClassVar[int]
+    METHOD_FIELD_NUMBER: _ClassVar[int]
+    COEFFICIENTS_FIELD_NUMBER: _ClassVar[int]
+    PREDICTED_ERROR_FIELD_NUMBER: _ClassVar[int]
+    DT_FIELD_NUMBER: _ClassVar[int]
+    SECONDS_FIELD_NUMBER: _ClassVar[int]
+    CACHED_FIELD_NUMBER: _ClassVar[int]
+    COEFFICIENT_VERSION_FIELD_NUMBER: _ClassVar[int]
+    FRAME_FIELD_NUMBER: _ClassVar[int]
+    instance: str
+    previous: Level
+    level: Level
+    method: str
+    coefficients: Coefficients
+    predicted_error: float
+    dt: float
+    seconds: float
+    cached: bool
+    coefficient_version: int
+    frame: int
+    def __init__(self, instance: _Optional[str] = ..., previous: _Optional[_Union[Level, _Mapping]] = ..., level: _Optional[_Union[Level, _Mapping]] = ..., method: _Optional[str] = ..., coefficients: _Optional[_Union[Coefficients, _Mapping]] = ..., predicted_error: _Optional[float] = ..., dt: _Optional[float] = ..., seconds: _Optional[float] = ..., cached: bool = ..., coefficient_version: _Optional[int] = ..., frame: _Optional[int] = ...) -> None: ...
+
+class ControlRequest(_message.Message):
+    __slots__ = ("action",)
+    class Action(int, metaclass=_enum_type_wrapper.EnumTypeWrapper):
+        __slots__ = ()
+        ACTION_UNSPECIFIED: _ClassVar[ControlRequest.Action]
+        ACTION_PAUSE: _ClassVar[ControlRequest.Action]
+        ACTION_RESUME: _ClassVar[ControlRequest.Action]
+        ACTION_RESET: _ClassVar[ControlRequest.Action]
+    ACTION_UNSPECIFIED: ControlRequest.Action
+    ACTION_PAUSE: ControlRequest.Action
+    ACTION_RESUME: ControlRequest.Action
+    ACTION_RESET: ControlRequest.Action
+    ACTION_FIELD_NUMBER: _ClassVar[int]
+    action: ControlRequest.Action
+    def __init__(self, action: _Optional[_Union[ControlRequest.Action, str]] = ...) -> None: ...
+
+class ControlReply(_message.Message):
+    __slots__ = ("instance", "paused", "frame")
+    INSTANCE_FIELD_NUMBER: _ClassVar[int]
+    PAUSED_FIELD_NUMBER: _ClassVar[int]
+    FRAME_FIELD_NUMBER: _ClassVar[int]
+    instance: str
+    paused: bool
+    frame: int
+    def __init__(self, instance: _Optional[str] = ..., paused: bool = ..., frame: _Optional[int] = ...) -> None: ...
+
+class Error(_message.Message):
+    __slots__ = ("code", "message")
+    class Code(int, metaclass=_enum_type_wrapper.EnumTypeWrapper):
+        __slots__ = ()
+        CODE_UNSPECIFIED: _ClassVar[Error.Code]
+        CODE_BAD_REQUEST: _ClassVar[Error.Code]
+        CODE_UNKNOWN_INSTANCE: _ClassVar[Error.Code]
+        CODE_LEVEL_NOT_ALLOWED: _ClassVar[Error.Code]
+        CODE_UNSTABLE: _ClassVar[Error.Code]
+        CODE_ESTIMATION_FAILED: _ClassVar[Error.Code]
+        CODE_UNAVAILABLE: _ClassVar[Error.Code]
+        CODE_NO_LEVEL_MEETS_ERROR: _ClassVar[Error.Code]
+        CODE_BUSY: _ClassVar[Error.Code]
+    CODE_UNSPECIFIED: Error.Code
+    CODE_BAD_REQUEST: Error.Code
+    CODE_UNKNOWN_INSTANCE: Error.Code
+    CODE_LEVEL_NOT_ALLOWED: Error.Code
+    CODE_UNSTABLE: Error.Code
+    CODE_ESTIMATION_FAILED: Error.Code
+    CODE_UNAVAILABLE: Error.Code
+    CODE_NO_LEVEL_MEETS_ERROR: Error.Code
+    CODE_BUSY: Error.Code
+    CODE_FIELD_NUMBER: _ClassVar[int]
+    MESSAGE_FIELD_NUMBER: _ClassVar[int]
+    code: Error.Code
+    message: str
+    def __init__(self, code: _Optional[_Union[Error.Code, str]] = ..., message: _Optional[str] = ...) -> None: ...
