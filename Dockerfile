@@ -31,12 +31,16 @@ COPY benches/ benches/
 COPY src/ src/
 COPY crates/ crates/
 
+# `lodcloth --version` and the lodcloth_build_info metric name the commit; the
+# context has no .git, so build.rs takes it from here
+# (docker build --build-arg REVISION=$(git rev-parse --short=12 HEAD) .).
+ARG REVISION=unknown
 # The registry and target dir live in cache mounts (not in the layer), so the
 # binary is copied out of the cached target.
 RUN --mount=type=cache,target=/usr/local/cargo/registry,sharing=locked \
     --mount=type=cache,target=/usr/local/cargo/git,sharing=locked \
     --mount=type=cache,target=/build/target,sharing=locked \
-    cargo build --release --locked --bin lodcloth \
+    LODCLOTH_GIT_REVISION="${REVISION}" cargo build --release --locked --bin lodcloth \
     && install -D -m 0755 target/release/lodcloth /out/lodcloth
 
 # ---- runtime ------------------------------------------------------------------
@@ -77,9 +81,10 @@ COPY config/docker-secure.toml config/docker-secure.toml
 ENV LODCLOTH_LOG_JSON=true
 
 VOLUME ["/var/lib/lodcloth"]
-# 7450: zenoh; 7451: zenoh over mutual TLS (config/docker-secure.toml). 8080 and 8765 when the same image runs `view --listen
+# 7450: zenoh; 7451: zenoh over mutual TLS (config/docker-secure.toml); 7460:
+# /metrics and /healthz (config/docker.toml [http]). 8080 and 8765 when the same image runs `view --listen
 # 0.0.0.0:8080` or `foxglove --host 0.0.0.0` beside the daemon (README).
-EXPOSE 7450/tcp 7451/tcp 8080/tcp 8765/tcp
+EXPOSE 7450/tcp 7451/tcp 7460/tcp 8080/tcp 8765/tcp
 USER 10001:10001
 
 # A client session to the daemon's own endpoint; exits 0 when every instance

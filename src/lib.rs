@@ -35,6 +35,13 @@
 
 pub use lodcloth_core::{atomic, cache, estimate, hash, lod, names, plan, points, problems, scene, sim};
 
+/// `<package version> (<git revision>)`, e.g. `0.1.0 (d7aae52e1f3a)`: what
+/// `lodcloth --version` prints and `lodcloth_build_info` reports. The
+/// revision is HEAD's when built from a checkout (see `build.rs`).
+pub const VERSION: &str = concat!(env!("CARGO_PKG_VERSION"), " (", env!("LODCLOTH_GIT_REVISION"), ")");
+/// The git revision alone (`unknown` when built without one).
+pub const REVISION: &str = env!("LODCLOTH_GIT_REVISION");
+
 pub mod engine;
 pub mod experiments;
 pub mod foxglove_bridge;

@@ -19,7 +19,7 @@ use lodcloth::experiments::generalise::{suite, SuiteOptions, SuiteRow, TWIN_PERT
 use lodcloth::experiments::lod::{
     lod_plan, pareto, switch_test, table1_scene, Horizon, Table1Options, Table1Row, Variant, TABLE1_VARIANTS,
 };
-use lodcloth::output::{error_map_svg, line_chart_svg, ClothPanel, Series, PALETTE};
+use lodcloth::output::{error_map_svg, line_chart_svg, ClothPanel, CsvTable, Series, PALETTE};
 use lodcloth::plan::{default_problem, record_reference, Estimator, GridLevel};
 use lodcloth::scene::{MassConvention, Scene};
 use lodcloth::sim::Integrator;
@@ -494,51 +494,90 @@ fn write_table1(
 }
 
 /// The CSV columns of a model's coefficients, and their cells.
-const COEFFICIENT_HEADER: &str = "k_structural_u,k_structural_v,k_shear,k_bend_u,k_bend_v,\
-                                  c_structural_u,c_structural_v,c_shear,c_bend_u,c_bend_v";
+const COEFFICIENT_HEADER: [&str; 10] = [
+    "k_structural_u",
+    "k_structural_v",
+    "k_shear",
+    "k_bend_u",
+    "k_bend_v",
+    "c_structural_u",
+    "c_structural_v",
+    "c_shear",
+    "c_bend_u",
+    "c_bend_v",
+];
 
-fn coefficient_cells(material: &lodcloth::sim::Material) -> String {
+fn coefficient_cells(material: &lodcloth::sim::Material) -> Vec<String> {
     let m = material.springs;
-    let k: Vec<String> = m.iter().map(|s| s.k.to_string()).collect();
-    let c: Vec<String> = m.iter().map(|s| s.c.to_string()).collect();
-    format!("{},{}", k.join(","), c.join(","))
+    m.iter()
+        .map(|s| s.k.to_string())
+        .chain(m.iter().map(|s| s.c.to_string()))
+        .collect()
+}
+
+/// `before`, the coefficient columns, `after`: one CSV header.
+fn header_around<'a>(before: &[&'a str], after: &[&'a str]) -> Vec<&'a str> {
+    [before, &COEFFICIENT_HEADER[..], after].concat()
+}
+
+/// `before`, a model's coefficient cells, `after`: one CSV row.
+fn row_around(before: Vec<String>, material: &lodcloth::sim::Material, after: Vec<String>) -> Vec<String> {
+    [before, coefficient_cells(material), after].concat()
 }
 
 /// Every row of Table 1, one line each.
 fn table1_csv(rows: &[Table1Row]) -> String {
-    let mut csv = format!(
-        "scene,level,nodes,reduction,variant,method,mass,{COEFFICIENT_HEADER},dt,dt_over_limit,mean,held_out_mean,short_held_out_mean,p95,max,first_quarter,last_quarter,worst_time,worst_frame_mean,estimate_s,cost_s_per_s,diverged,notes\n",
-    );
+    let mut csv = CsvTable::in_memory(&header_around(
+        &["scene", "level", "nodes", "reduction", "variant", "method", "mass"],
+        &[
+            "dt",
+            "dt_over_limit",
+            "mean",
+            "held_out_mean",
+            "short_held_out_mean",
+            "p95",
+            "max",
+            "first_quarter",
+            "last_quarter",
+            "worst_time",
+            "worst_frame_mean",
+            "estimate_s",
+            "cost_s_per_s",
+            "diverged",
+            "notes",
+        ],
+    ));
     for r in rows {
-        let _ = writeln!(
-            csv,
-            "{},{},{},{:.4},{},{},{},{},{:e},{:.3},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.4},{:.6},{:.2},{:.4},{},\"{}\"",
-            r.scene,
-            format_args!("{}x{}", r.nx, r.ny),
-            r.nodes,
-            r.reduction,
+        let before = vec![
+            r.scene.clone(),
+            format!("{}x{}", r.nx, r.ny),
+            r.nodes.to_string(),
+            format!("{:.4}", r.reduction),
             r.variant.label(),
-            r.variant.method,
-            r.variant.mass.name(),
-            coefficient_cells(&r.material),
-            r.dt,
-            r.dt_ratio,
-            r.all.mean,
-            r.held_out_mean,
-            r.short_held_out_mean,
-            r.all.p95,
-            r.all.max,
-            r.all.first_quarter,
-            r.all.last_quarter,
-            r.all.worst_time,
-            r.all.worst_frame_mean,
-            r.estimate_seconds,
-            r.cost,
-            r.all.diverged,
-            r.notes.replace('"', "'")
-        );
+            r.variant.method.to_string(),
+            r.variant.mass.name().to_string(),
+        ];
+        let after = vec![
+            format!("{:e}", r.dt),
+            format!("{:.3}", r.dt_ratio),
+            format!("{:.6}", r.all.mean),
+            format!("{:.6}", r.held_out_mean),
+            format!("{:.6}", r.short_held_out_mean),
+            format!("{:.6}", r.all.p95),
+            format!("{:.6}", r.all.max),
+            format!("{:.6}", r.all.first_quarter),
+            format!("{:.6}", r.all.last_quarter),
+            format!("{:.4}", r.all.worst_time),
+            format!("{:.6}", r.all.worst_frame_mean),
+            format!("{:.2}", r.estimate_seconds),
+            format!("{:.4}", r.cost),
+            r.all.diverged.to_string(),
+            r.notes.clone(),
+        ];
+        csv.row(&row_around(before, &r.material, after))
+            .expect("a row per header column");
     }
-    csv
+    csv.into_text()
 }
 
 /// The paper's same / BCD / GKD at `level`, or a dash where its table has
@@ -797,23 +836,32 @@ fn pareto_cmd(common: &Common, levels: &[GridLevel], methods: &[Method], fractio
         &common.estimator()?,
         &mut log_line,
     )?;
-    let mut csv = String::from("level,method,integrator,dt,dt_over_limit,cost_s_per_s,mean_error,on_front\n");
+    let mut csv = CsvTable::create(
+        &out.join("pareto.csv"),
+        &[
+            "level",
+            "method",
+            "integrator",
+            "dt",
+            "dt_over_limit",
+            "cost_s_per_s",
+            "mean_error",
+            "on_front",
+        ],
+    )?;
     for p in &points {
-        let _ = writeln!(
-            csv,
-            "{}x{},{},{},{:e},{:.3},{:.5},{:.6},{}",
-            p.nx,
-            p.ny,
-            p.method,
-            p.integrator.name(),
-            p.dt,
-            p.dt_ratio,
-            p.cost,
-            p.mean_error,
-            p.on_front
-        );
+        csv.row(&[
+            format!("{}x{}", p.nx, p.ny),
+            p.method.to_string(),
+            p.integrator.name().to_string(),
+            format!("{:e}", p.dt),
+            format!("{:.3}", p.dt_ratio),
+            format!("{:.5}", p.cost),
+            format!("{:.6}", p.mean_error),
+            p.on_front.to_string(),
+        ])?;
     }
-    fs::write(out.join("pareto.csv"), csv)?;
+    csv.finish()?;
     let names: Vec<String> = methods.iter().map(|m| m.name().to_string()).collect();
     let mut series: Vec<Series<'_>> = methods
         .iter()
@@ -858,7 +906,10 @@ fn plan_cmd(common: &Common, max_error: f64, horizon: Horizon, levels: &[GridLev
     let out = common.out("out/lod-plan")?;
     let estimator = common.estimator()?;
     let spec = common.spec()?;
-    let mut csv = format!("scene,level,dt,held_out_mean,accepted,{COEFFICIENT_HEADER}\n");
+    let mut csv = CsvTable::create(
+        &out.join("lod-plan.csv"),
+        &header_around(&["scene", "level", "dt", "held_out_mean", "accepted"], &[]),
+    )?;
     for scene in common.scenes()? {
         let (reference, _) = reference_for(&scene, spec)?;
         let fit = common.fit(reference.frames.len())?;
@@ -891,29 +942,39 @@ fn plan_cmd(common: &Common, max_error: f64, horizon: Horizon, levels: &[GridLev
             ),
         }
         for s in &steps {
-            let _ = writeln!(
-                csv,
-                "{},{}x{},{:e},{:.6},{},{}",
-                scene.name,
-                s.nx,
-                s.ny,
-                s.dt,
-                s.held_out_mean,
-                s.accepted,
-                coefficient_cells(&s.material)
-            );
+            let before = vec![
+                scene.name.clone(),
+                format!("{}x{}", s.nx, s.ny),
+                format!("{:e}", s.dt),
+                format!("{:.6}", s.held_out_mean),
+                s.accepted.to_string(),
+            ];
+            csv.row(&row_around(before, &s.material, Vec::new()))?;
         }
     }
-    fs::write(out.join("lod-plan.csv"), csv)?;
+    csv.finish()?;
     Ok(())
 }
 
 fn switch_cmd(common: &Common, level: GridLevel, method: Method, at: f64, window: f64) -> Result<()> {
     let out = common.out("out/switch-test")?;
     let spec = common.spec()?;
-    let mut csv = String::from(
-        "scene,level,method,switch_time,position_jump_m,kinetic_jump,error_transfer,error_never_switched,error_zero_velocity,back_kinetic_jump,back_error\n",
-    );
+    let mut csv = CsvTable::create(
+        &out.join("switch-test.csv"),
+        &[
+            "scene",
+            "level",
+            "method",
+            "switch_time",
+            "position_jump_m",
+            "kinetic_jump",
+            "error_transfer",
+            "error_never_switched",
+            "error_zero_velocity",
+            "back_kinetic_jump",
+            "back_error",
+        ],
+    )?;
     for scene in common.scenes()? {
         let (reference, _) = reference_for(&scene, spec)?;
         let interval = reference.dt * reference.spec.metric_stride as f64;
@@ -940,21 +1001,21 @@ fn switch_cmd(common: &Common, level: GridLevel, method: Method, at: f64, window
             100.0 * r.back_kinetic_jump,
             100.0 * r.back_error
         );
-        let _ = writeln!(
-            csv,
-            "{},{nx}x{ny},{method},{:.4},{:e},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6}",
-            scene.name,
-            r.switch_time,
-            r.position_jump,
-            r.kinetic_jump,
-            r.error_transfer,
-            r.error_never_switched,
-            r.error_zero_velocity,
-            r.back_kinetic_jump,
-            r.back_error
-        );
+        csv.row(&[
+            scene.name.clone(),
+            format!("{nx}x{ny}"),
+            method.to_string(),
+            format!("{:.4}", r.switch_time),
+            format!("{:e}", r.position_jump),
+            format!("{:.6}", r.kinetic_jump),
+            format!("{:.6}", r.error_transfer),
+            format!("{:.6}", r.error_never_switched),
+            format!("{:.6}", r.error_zero_velocity),
+            format!("{:.6}", r.back_kinetic_jump),
+            format!("{:.6}", r.back_error),
+        ])?;
     }
-    fs::write(out.join("switch-test.csv"), csv)?;
+    csv.finish()?;
     Ok(())
 }
 
@@ -986,45 +1047,60 @@ fn generalise_cmd(common: &Common, level: GridLevel, methods: &[Method], floor_p
 }
 
 fn suite_csv(rows: &[SuiteRow]) -> String {
-    let mut csv = format!(
-        "scene,level,reduction,method,{COEFFICIENT_HEADER},estimate_s,\
-         mean,p95,last_quarter,short_mean,short_p95,\
-         transferred_mean,transferred_p95,transferred_last_quarter,transferred_short_mean,transferred_short_p95,\
-         floor_mean,floor_p95,floor_last_quarter,floor_min,floor_max\n",
-    );
+    let mut csv = CsvTable::in_memory(&header_around(
+        &["scene", "level", "reduction", "method"],
+        &[
+            "estimate_s",
+            "mean",
+            "p95",
+            "last_quarter",
+            "short_mean",
+            "short_p95",
+            "transferred_mean",
+            "transferred_p95",
+            "transferred_last_quarter",
+            "transferred_short_mean",
+            "transferred_short_p95",
+            "floor_mean",
+            "floor_p95",
+            "floor_last_quarter",
+            "floor_min",
+            "floor_max",
+        ],
+    ));
+    let f6 = |v: f64| format!("{v:.6}");
     for r in rows {
         let t = r.transferred;
-        let opt = |f: fn(&lodcloth::experiments::generalise::HeldOut) -> f64| {
-            t.as_ref().map_or(String::new(), |h| format!("{:.6}", f(h)))
-        };
-        let _ = writeln!(
-            csv,
-            "\"{}\",{}x{},{:.4},{},{},{:.1},{:.6},{:.6},{:.6},{:.6},{:.6},{},{},{},{},{},{:.6},{:.6},{:.6},{:.6},{:.6}",
-            r.scene.replace('"', "'"),
-            r.nx,
-            r.ny,
-            r.reduction,
-            r.method,
-            coefficient_cells(&r.material),
-            r.estimate_seconds,
-            r.own.mean,
-            r.own.p95,
-            r.own.last_quarter,
-            r.own.short_mean,
-            r.own.short_p95,
+        let opt =
+            |f: fn(&lodcloth::experiments::generalise::HeldOut) -> f64| t.as_ref().map_or(String::new(), |h| f6(f(h)));
+        let before = vec![
+            r.scene.clone(),
+            format!("{}x{}", r.nx, r.ny),
+            format!("{:.4}", r.reduction),
+            r.method.to_string(),
+        ];
+        let after = vec![
+            format!("{:.1}", r.estimate_seconds),
+            f6(r.own.mean),
+            f6(r.own.p95),
+            f6(r.own.last_quarter),
+            f6(r.own.short_mean),
+            f6(r.own.short_p95),
             opt(|h| h.mean),
             opt(|h| h.p95),
             opt(|h| h.last_quarter),
             opt(|h| h.short_mean),
             opt(|h| h.short_p95),
-            r.floor.mean,
-            r.floor.p95,
-            r.floor.last_quarter,
-            r.floor.min,
-            r.floor.max,
-        );
+            f6(r.floor.mean),
+            f6(r.floor.p95),
+            f6(r.floor.last_quarter),
+            f6(r.floor.min),
+            f6(r.floor.max),
+        ];
+        csv.row(&row_around(before, &r.material, after))
+            .expect("a row per header column");
     }
-    csv
+    csv.into_text()
 }
 
 /// Per scene, each method's held-out mean / p95 / last quarter, long and

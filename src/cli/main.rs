@@ -2,15 +2,19 @@
 
 use std::path::PathBuf;
 
-use anyhow::{bail, Result};
-use clap::{Parser, Subcommand};
+use anyhow::{bail, Context, Result};
+use clap::{CommandFactory, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use lodcloth::output::Precision;
 use lodcloth::sim::Integrator;
 
 #[derive(Parser)]
-#[command(name = "lodcloth", version, about = "Mass-spring cloth at several levels of detail")]
+#[command(
+    name = "lodcloth",
+    version = lodcloth::VERSION,
+    about = "Mass-spring cloth at several levels of detail"
+)]
 struct Cli {
     /// Log as JSON lines (for containers and log collectors) instead of text.
     #[arg(long, global = true, env = "LODCLOTH_LOG_JSON", value_parser = clap::builder::FalseyValueParser::new())]
@@ -174,6 +178,20 @@ enum Command {
         /// Trajectory file (.lct).
         file: PathBuf,
     },
+    /// Print a shell completion script, e.g.
+    /// `lodcloth completions bash > ~/.local/share/bash-completion/completions/lodcloth`.
+    Completions {
+        /// bash, zsh, fish, elvish or powershell.
+        shell: clap_complete::Shell,
+    },
+    /// Write the manual pages (roff): `lodcloth.1` and one per subcommand
+    /// (`lodcloth-serve.1`, …) into --out; without it, print `lodcloth.1`.
+    Man {
+        /// Directory for the pages (created if missing), e.g.
+        /// ~/.local/share/man/man1.
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
 }
 
 mod experiment;
@@ -262,7 +280,29 @@ fn main() -> Result<()> {
         Command::Experiment(e) => experiment::run(e),
         Command::Points(p) => points::run(p),
         Command::Inspect { file } => simulate::inspect(&file),
+        Command::Completions { shell } => {
+            clap_complete::generate(shell, &mut Cli::command(), "lodcloth", &mut std::io::stdout());
+            Ok(())
+        }
+        Command::Man { out } => man(out),
     }
+}
+
+/// `lodcloth man`: every page into `out`, or the top page to stdout.
+fn man(out: Option<PathBuf>) -> Result<()> {
+    let cmd = Cli::command();
+    match out {
+        Some(dir) => {
+            std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+            clap_mangen::generate_to(cmd, &dir)
+                .with_context(|| format!("writing manual pages to {}", dir.display()))?;
+            eprintln!("manual pages written to {}", dir.display());
+        }
+        None => clap_mangen::Man::new(cmd)
+            .render(&mut std::io::stdout())
+            .context("writing the manual page")?,
+    }
+    Ok(())
 }
 
 pub(crate) fn progress_bar(len: u64, what: &str) -> ProgressBar {

@@ -2,7 +2,6 @@
 //! move the full one, and measure accuracy against simplification size.
 
 use std::fs;
-use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -10,7 +9,7 @@ use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand, ValueEnum};
 use tracing::info;
 
-use lodcloth::output::{line_chart_svg, render_points_png, Series, PALETTE};
+use lodcloth::output::{line_chart_svg, render_points_png, CsvTable, Series, PALETTE};
 use lodcloth::points::estimate::{
     fit, rescaled, restart, score, SurfaceFit, SurfaceFitOptions, SurfaceReference, SurfaceScore,
 };
@@ -371,10 +370,10 @@ fn simulate(a: &ModelArgs, steps: u64, every: u64, out: &Path) -> Result<()> {
         800,
     )?;
     let csv_path = out.join("report.csv");
-    let mut csv = std::io::BufWriter::new(
-        fs::File::create(&csv_path).with_context(|| format!("cannot create {}", csv_path.display()))?,
-    );
-    writeln!(csv, "step,time,kinetic_energy,elastic_energy,max_displacement")?;
+    let mut csv = CsvTable::create(
+        &csv_path,
+        &["step", "time", "kinetic_energy", "elastic_energy", "max_displacement"],
+    )?;
     let bar = progress_bar(steps, "simulating");
     let started = Instant::now();
     let mut sim_time = 0.0;
@@ -404,11 +403,13 @@ fn simulate(a: &ModelArgs, steps: u64, every: u64, out: &Path) -> Result<()> {
                 .zip(&cloud.positions)
                 .map(|(p, q)| dist(*p, *q))
                 .fold(0.0, f64::max);
-            writeln!(
-                csv,
-                "{s},{},{},{},{max_disp}",
-                r.time, r.kinetic_energy, r.elastic_energy
-            )?;
+            csv.row(&[
+                s.to_string(),
+                r.time.to_string(),
+                r.kinetic_energy.to_string(),
+                r.elastic_energy.to_string(),
+                max_disp.to_string(),
+            ])?;
             energy[0].push((r.time, r.kinetic_energy));
             energy[1].push((r.time, r.elastic_energy));
             let path = out.join(format!("cloud_{s:06}.ply"));
@@ -418,7 +419,7 @@ fn simulate(a: &ModelArgs, steps: u64, every: u64, out: &Path) -> Result<()> {
         bar.set_position(s);
     }
     bar.finish_and_clear();
-    csv.flush()?;
+    csv.finish()?;
     render_points_png(
         &out.join("final.png"),
         &model.positions,
@@ -497,19 +498,35 @@ fn accuracy(a: &ModelArgs, sizes: &[usize], seconds: f64, fps: f64, with_fit: bo
         .context("recording the all-points reference (add a --pull or --gravity so there is motion)")?;
     let ref_cost = t.elapsed().as_secs_f64() / seconds;
     let csv_path = out.join("accuracy.csv");
-    let mut csv = std::io::BufWriter::new(
-        fs::File::create(&csv_path).with_context(|| format!("cannot create {}", csv_path.display()))?,
-    );
-    writeln!(
-        csv,
-        "sim_points,springs,dt,wall_per_sim_second,error_mean,error_max,fit_error_mean,fit_error_max,fit_held_out_mean,stretch_scale,bend_scale,fit_seconds"
+    let mut csv = CsvTable::create(
+        &csv_path,
+        &[
+            "sim_points",
+            "springs",
+            "dt",
+            "wall_per_sim_second",
+            "error_mean",
+            "error_max",
+            "fit_error_mean",
+            "fit_error_max",
+            "fit_held_out_mean",
+            "stretch_scale",
+            "bend_scale",
+            "fit_seconds",
+        ],
     )?;
-    writeln!(
-        csv,
-        "{},{},{},{ref_cost},0,0,0,0,0,1,1,0",
-        cloud.len(),
-        reference_model.sim.topology().spring_count(),
-        reference_model.sim.params().dt,
+    let reference_row = [
+        cloud.len().to_string(),
+        reference_model.sim.topology().spring_count().to_string(),
+        reference_model.sim.params().dt.to_string(),
+        ref_cost.to_string(),
+    ];
+    csv.row(
+        &[
+            &reference_row[..],
+            &["0", "0", "0", "0", "0", "1", "1", "0"].map(String::from),
+        ]
+        .concat(),
     )?;
     let mut same_by_size = Vec::new();
     let mut same_by_cost = Vec::new();
@@ -558,7 +575,7 @@ fn accuracy(a: &ModelArgs, sizes: &[usize], seconds: f64, fps: f64, with_fit: bo
             100.0 * same.mean,
             100.0 * same.max
         );
-        let mut fit_cols = "0,0,0,1,1,0".to_string();
+        let mut fit_cols = ["0", "0", "0", "1", "1", "0"].map(String::from);
         if with_fit {
             let (fitted, all, held, fit_seconds) = fit_and_score(&mut model, &reference, frames)?;
             row += &format!(
@@ -569,21 +586,29 @@ fn accuracy(a: &ModelArgs, sizes: &[usize], seconds: f64, fps: f64, with_fit: bo
                 fitted.stretch_scale,
                 fitted.bend_scale
             );
-            fit_cols = format!(
-                "{},{},{},{},{},{fit_seconds}",
-                all.mean, all.max, held.mean, fitted.stretch_scale, fitted.bend_scale
-            );
+            fit_cols = [
+                all.mean.to_string(),
+                all.max.to_string(),
+                held.mean.to_string(),
+                fitted.stretch_scale.to_string(),
+                fitted.bend_scale.to_string(),
+                fit_seconds.to_string(),
+            ];
             fit_by_size.push((size as f64, 100.0 * all.mean));
             fit_by_cost.push((cost * 1e3, 100.0 * all.mean));
         }
-        writeln!(
-            csv,
-            "{size},{springs},{dt},{cost},{},{},{fit_cols}",
-            same.mean, same.max
-        )?;
+        let same_cols = [
+            size.to_string(),
+            springs.to_string(),
+            dt.to_string(),
+            cost.to_string(),
+            same.mean.to_string(),
+            same.max.to_string(),
+        ];
+        csv.row(&[&same_cols[..], &fit_cols[..]].concat())?;
         println!("{row}");
     }
-    csv.flush()?;
+    csv.finish()?;
     let points = cloud.len();
     accuracy_chart(out, "error_vs_size.svg", points, Axis::Size, same_by_size, fit_by_size)?;
     accuracy_chart(out, "error_vs_cost.svg", points, Axis::Cost, same_by_cost, fit_by_cost)?;

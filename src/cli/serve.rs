@@ -72,12 +72,33 @@ impl Connect {
     }
 }
 
-/// `serve` options.
+/// `serve` options. Each has an environment variable, for containers and
+/// service managers; the command line wins over it.
 #[derive(Args)]
 pub struct ServeArgs {
     /// Service config (TOML).
-    #[arg(long, default_value = "config/default.toml")]
+    #[arg(long, env = "LODCLOTH_CONFIG", default_value = "config/default.toml")]
     pub config: PathBuf,
+    /// Validate the config (every scene and surface file it names
+    /// included), print what it would serve, and exit.
+    #[arg(long)]
+    pub check: bool,
+    /// Serve /metrics (OpenMetrics) and /healthz on this address:port,
+    /// replacing the config's `[http] listen`; `off`: not at all.
+    #[arg(long, env = "LODCLOTH_HTTP")]
+    pub http: Option<String>,
+    /// Directory that relative state directories (the coefficient cache,
+    /// snapshots) are placed in instead of the working directory. Without
+    /// it, systemd's STATE_DIRECTORY (`StateDirectory=`) is used when set.
+    #[arg(long, env = "LODCLOTH_STATE_DIR")]
+    pub state_dir: Option<PathBuf>,
+    /// Coefficient cache directory, replacing the config's `cache`.
+    #[arg(long, env = "LODCLOTH_CACHE_DIR")]
+    pub cache_dir: Option<PathBuf>,
+    /// Snapshot directory, replacing the config's `[snapshots] dir` (and
+    /// turning snapshots on, every 30 s, when the config has none).
+    #[arg(long, env = "LODCLOTH_SNAPSHOT_DIR")]
+    pub snapshot_dir: Option<PathBuf>,
     /// Override the config's zenoh listen endpoints (comma separated).
     #[arg(long, env = "LODCLOTH_LISTEN", value_delimiter = ',')]
     pub listen: Vec<String>,
@@ -168,8 +189,64 @@ pub fn serve(args: ServeArgs) -> Result<()> {
     config
         .zenoh
         .override_with(args.listen, args.connect, args.mode, "command line")?;
+    match args.http.as_deref().map(str::trim) {
+        None => {}
+        Some("off") => config.http = None,
+        Some(a) => {
+            config.http =
+                Some(lodcloth::service::config::parse_http_listen(a).map_err(|e| anyhow::anyhow!("--http: {e}"))?)
+        }
+    }
+    let state_dir = args
+        .state_dir
+        .or_else(|| std::env::var_os("STATE_DIRECTORY").map(PathBuf::from))
+        .filter(|d| !d.as_os_str().is_empty());
+    config.place_state(state_dir.as_deref(), args.cache_dir, args.snapshot_dir);
+    if args.check {
+        print_check(&args.config, &config);
+        return Ok(());
+    }
+    tracing::info!(
+        version = lodcloth::VERSION,
+        config = %args.config.display(),
+        cache = %config.cache.display(),
+        snapshots = %config.snapshots.as_ref().map_or("off".into(), |s| s.dir.display().to_string()),
+        http = %config.http.map_or("off".into(), |a| a.to_string()),
+        "starting"
+    );
     runtime()?.block_on(lodcloth::service::run(config, shutdown_signal()))?;
     Ok(())
+}
+
+/// `serve --check`: what a valid config would serve.
+fn print_check(path: &std::path::Path, config: &ServiceConfig) {
+    let z = config.zenoh.values();
+    println!("{}: valid", path.display());
+    println!("  prefix     {}", config.prefix);
+    println!(
+        "  zenoh      mode {}, listen {:?}, connect {:?}",
+        z.mode.as_deref().unwrap_or("peer"),
+        z.listen.as_deref().unwrap_or_default(),
+        z.connect.as_deref().unwrap_or_default()
+    );
+    println!("  cache      {}", config.cache.display());
+    match &config.snapshots {
+        Some(s) => println!("  snapshots  {}", s.dir.display()),
+        None => println!("  snapshots  off"),
+    }
+    match config.http {
+        Some(a) => println!("  http       http://{a}/metrics, http://{a}/healthz"),
+        None => println!("  http       off"),
+    }
+    for i in &config.instances {
+        let levels: Vec<String> = i.levels.iter().map(|l| l.to_string()).collect();
+        println!(
+            "  instance   {:<20} start {:<8} levels {}",
+            i.name,
+            i.start.to_string(),
+            levels.join(", ")
+        );
+    }
 }
 
 async fn connect(c: &Connect) -> Result<Client> {

@@ -2,7 +2,6 @@
 //! goes unstable, and inspect a trajectory it wrote.
 
 use std::fs;
-use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -12,8 +11,8 @@ use tracing::info;
 use crate::progress_bar;
 use lodcloth::experiments::{stability_sweep, StabilityRow, StabilitySweep};
 use lodcloth::output::{
-    line_chart_svg, render_png, report_csv_line, Precision, Series, TrajectoryReader, TrajectoryWriter, PALETTE,
-    REPORT_CSV_HEADER,
+    line_chart_svg, render_png, report_csv_row, CsvTable, Precision, Series, TrajectoryReader, TrajectoryWriter,
+    PALETTE, REPORT_CSV_HEADER,
 };
 use lodcloth::scene::Scene;
 use lodcloth::sim::{Integrator, Simulation, StabilityCheck, StepReport};
@@ -64,10 +63,7 @@ pub(crate) fn simulate(a: SimulateArgs) -> Result<()> {
         a.velocities,
     )?;
     let csv_path = out.join("report.csv");
-    let mut csv = std::io::BufWriter::new(
-        fs::File::create(&csv_path).with_context(|| format!("cannot create {}", csv_path.display()))?,
-    );
-    writeln!(csv, "{REPORT_CSV_HEADER}")?;
+    let mut csv = CsvTable::create(&csv_path, &REPORT_CSV_HEADER)?;
     traj.write(sim.state())?;
 
     let bar = progress_bar(steps, "simulating");
@@ -93,7 +89,7 @@ pub(crate) fn simulate(a: SimulateArgs) -> Result<()> {
         }
         if s % frame_every == 0 || s == steps {
             traj.write(sim.state())?;
-            writeln!(csv, "{}", report_csv_line(&r))?;
+            csv.row(&report_csv_row(&r))?;
             energy[0].push((r.time, r.kinetic_energy));
             energy[1].push((r.time, r.elastic_energy));
             let e0 = *first_total.get_or_insert(r.total_energy());
@@ -108,7 +104,7 @@ pub(crate) fn simulate(a: SimulateArgs) -> Result<()> {
     bar.finish_and_clear();
     let wall = started.elapsed().as_secs_f64();
     let header = traj.finish()?;
-    csv.flush()?;
+    csv.finish()?;
 
     let pinned: Vec<u32> = sim.loads().pins.iter().map(|p| p.node).collect();
     let png = out.join("final.png");
@@ -258,9 +254,21 @@ pub(crate) fn stability(
     bar.finish_and_clear();
 
     let csv_path = out.join("stability.csv");
-    let mut csv = String::from(
-        "integrator,n,stiffness_factor,omega_gershgorin,omega_max,damping_rate,predicted_dt,measured_stable_dt,measured_unstable_dt,measured_over_predicted\n",
-    );
+    let mut csv = CsvTable::create(
+        &csv_path,
+        &[
+            "integrator",
+            "n",
+            "stiffness_factor",
+            "omega_gershgorin",
+            "omega_max",
+            "damping_rate",
+            "predicted_dt",
+            "measured_stable_dt",
+            "measured_unstable_dt",
+            "measured_over_predicted",
+        ],
+    )?;
     println!(
         "{:<17} {:>4} {:>7} {:>10} {:>12} {:>12} {:>8}",
         "integrator", "n", "k×", "ω_max", "predicted dt", "measured dt", "ratio"
@@ -272,19 +280,18 @@ pub(crate) fn stability(
         } else {
             f64::NAN
         };
-        csv.push_str(&format!(
-            "{},{},{},{:.6e},{:.6e},{:.6e},{:.6e},{:.6e},{:.6e},{:.4}\n",
-            r.integrator,
-            r.n,
-            r.stiffness_factor,
-            r.omega_gershgorin,
-            r.omega_max,
-            r.damping_rate,
-            r.predicted_dt,
-            r.measured_stable,
-            r.measured_unstable,
-            ratio
-        ));
+        csv.row(&[
+            r.integrator.to_string(),
+            r.n.to_string(),
+            r.stiffness_factor.to_string(),
+            format!("{:.6e}", r.omega_gershgorin),
+            format!("{:.6e}", r.omega_max),
+            format!("{:.6e}", r.damping_rate),
+            format!("{:.6e}", r.predicted_dt),
+            format!("{:.6e}", r.measured_stable),
+            format!("{:.6e}", r.measured_unstable),
+            format!("{ratio:.4}"),
+        ])?;
         let measured = if r.measured_unstable.is_finite() {
             format!("{:.3e}", r.measured_dt())
         } else {
@@ -301,7 +308,7 @@ pub(crate) fn stability(
             ratio
         );
     }
-    fs::write(&csv_path, csv).with_context(|| format!("cannot write {}", csv_path.display()))?;
+    csv.finish()?;
 
     // Chart: measured threshold against ω_max, with each integrator's
     // prediction as a line (implicit Euler: lower bounds only).

@@ -1,9 +1,10 @@
 //! Files a run leaves behind: the binary trajectory (written and read back),
-//! the per-step CSV report, PNG renders of a cloth or a cloud, SVG charts
+//! CSV tables (and the per-step report), PNG renders of a cloth or a cloud, SVG charts
 //! and error maps. One file per format; they share the camera.
 
 mod camera;
 mod chart;
+mod csv_table;
 mod error_map;
 mod render;
 mod report;
@@ -12,9 +13,10 @@ mod trajectory;
 use std::path::Path;
 
 pub use chart::{line_chart_svg, Series, PALETTE};
+pub use csv_table::CsvTable;
 pub use error_map::{error_map_svg, heat_color, ClothPanel};
 pub use render::{render_png, render_points_png};
-pub use report::{report_csv_line, REPORT_CSV_HEADER};
+pub use report::{report_csv_row, REPORT_CSV_HEADER};
 pub use trajectory::{Frame, Precision, TrajectoryHeader, TrajectoryReader, TrajectoryWriter, TRAJECTORY_MAGIC};
 
 /// Errors from reading or writing output files.

@@ -51,6 +51,17 @@ pub struct RawConfig {
     /// Instance snapshots, so a restart resumes every cloth where it was
     /// (absent: no snapshots).
     pub snapshots: Option<RawSnapshots>,
+    /// The operations endpoint (absent: none).
+    pub http: Option<RawHttp>,
+}
+
+/// `[http]`: `/metrics` (OpenMetrics) and `/healthz` for operators.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RawHttp {
+    /// `address:port` to serve on, e.g. `127.0.0.1:7460`. Nothing there is
+    /// authenticated: keep it on loopback or a private network.
+    pub listen: String,
 }
 
 /// `[snapshots]`: each instance's state persisted at an interval and at
@@ -276,6 +287,8 @@ pub struct ServiceConfig {
     pub estimation: EstimationPlan,
     pub instances: Vec<InstancePlan>,
     pub snapshots: Option<Snapshots>,
+    /// Where `/metrics` and `/healthz` are served (`None`: not at all).
+    pub http: Option<std::net::SocketAddr>,
 }
 
 /// `[zenoh]`, validated: made only by [`ServiceConfig::validate`] and
@@ -350,6 +363,42 @@ pub fn valid_instance_name(name: &str) -> bool {
 pub const RESERVED: [&str; 2] = ["instances", "alive"];
 
 impl ServiceConfig {
+    /// Put the daemon's state where the operator says: `cache` and
+    /// `snapshots` (directories from the command line or the environment)
+    /// replace the file's, a snapshot directory turning snapshots on with
+    /// the defaults when the file has no `[snapshots]`; then every relative
+    /// state directory resolves against `state_dir` when one is given (a
+    /// service's `/var/lib/lodcloth`), else stays relative to the working
+    /// directory.
+    pub fn place_state(&mut self, state_dir: Option<&Path>, cache: Option<PathBuf>, snapshots: Option<PathBuf>) {
+        if let Some(c) = cache {
+            self.cache = c;
+        }
+        if let Some(dir) = snapshots {
+            match &mut self.snapshots {
+                Some(s) => s.dir = dir,
+                None => {
+                    self.snapshots = Some(Snapshots {
+                        dir,
+                        interval: Some(std::time::Duration::from_secs_f64(default_snapshot_interval())),
+                        resume: true,
+                    })
+                }
+            }
+        }
+        if let Some(base) = state_dir {
+            let under = |p: &mut PathBuf| {
+                if p.is_relative() {
+                    *p = base.join(&*p);
+                }
+            };
+            under(&mut self.cache);
+            if let Some(s) = &mut self.snapshots {
+                under(&mut s.dir);
+            }
+        }
+    }
+
     /// Read and validate a config file.
     pub fn load(path: &Path) -> Result<ServiceConfig, ConfigError> {
         let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Io {
@@ -381,6 +430,13 @@ impl ServiceConfig {
         if let Some(snap) = &raw.snapshots {
             check_snapshots(&mut p, snap);
         }
+        let http = raw.http.as_ref().and_then(|h| match parse_http_listen(&h.listen) {
+            Ok(a) => Some(a),
+            Err(e) => {
+                p.push(format!("http.listen: {e}"));
+                None
+            }
+        });
         let instances: Vec<InstancePlan> = (0..raw.instances.len())
             .filter_map(|i| instance(&mut p, &raw.instances, i, raw.engine.publish_hz))
             .collect();
@@ -404,6 +460,7 @@ impl ServiceConfig {
                 interval: (s.interval > 0.0).then(|| std::time::Duration::from_secs_f64(s.interval)),
                 resume: s.resume,
             }),
+            http,
             zenoh: ZenohSettings(raw.zenoh),
             engine: EngineSettings {
                 threads,
@@ -517,6 +574,13 @@ fn check_estimation(p: &mut Problems, s: &RawEstimation) {
         ));
     }
     p.at_least("estimation.fit_frames", s.fit_frames, 2);
+}
+
+/// `[http]`: an `address:port` (`serve --http` takes the same, or `off`).
+pub fn parse_http_listen(text: &str) -> Result<std::net::SocketAddr, String> {
+    text.trim()
+        .parse()
+        .map_err(|_| format!("'{text}' is not an address:port such as 127.0.0.1:7460"))
 }
 
 /// `[snapshots]`: a directory and an interval.

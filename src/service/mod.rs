@@ -20,10 +20,12 @@
 //! coefficients) hold the instance until its level is prepared.
 
 mod handlers;
+mod http;
 mod persist;
 mod prepare;
 mod publish;
 mod startup;
+mod telemetry;
 
 pub mod client;
 pub mod config;
@@ -31,6 +33,8 @@ pub mod keys;
 pub mod request;
 pub mod security;
 pub mod snapshot;
+
+pub use telemetry::{Health, InstanceHealth};
 
 use std::collections::BTreeMap;
 use std::future::Future;
@@ -56,6 +60,11 @@ pub enum ServiceError {
     Prepare { instance: String, source: PrepareError },
     #[error("starting the stepping threads: {0}")]
     Threads(#[from] std::io::Error),
+    #[error("http.listen {addr}: {source}")]
+    Http {
+        addr: std::net::SocketAddr,
+        source: std::io::Error,
+    },
 }
 
 fn zerr(e: zenoh::Error) -> ServiceError {
@@ -94,6 +103,10 @@ struct Context {
     instances: BTreeMap<String, Arc<Instance>>,
     /// Set when shutting down: new switches are refused.
     closing: watch::Receiver<bool>,
+    /// Counters for `/metrics` and `/healthz`.
+    telemetry: telemetry::Telemetry,
+    /// Metrics messages per second per instance.
+    metrics_hz: f64,
 }
 
 /// Open the zenoh session from `config` and serve until `shutdown` completes.
@@ -114,15 +127,24 @@ pub async fn serve(
     session: &Session,
     shutdown: impl Future<Output = ()>,
 ) -> Result<(), ServiceError> {
+    let listener = match config.http {
+        Some(addr) => Some(http::bind(addr).await?),
+        None => None,
+    };
     let (engine, instances, resumes) = startup::start_engine(&config)?;
     let (closing_tx, closing) = watch::channel(false);
     let ctx = Arc::new(Context {
         prefix: config.prefix.clone(),
         daemon: session.zid().to_string(),
+        telemetry: telemetry::Telemetry::new(instances.keys().map(String::as_str)),
         instances,
         closing: closing.clone(),
+        metrics_hz: config.engine.metrics_hz,
     });
     let mut tasks = tokio::task::JoinSet::new();
+    if let Some(listener) = listener {
+        tasks.spawn(http::serve(listener, ctx.clone()));
+    }
     let tokens = startup::declare_outputs(session, &ctx, &closing, &mut tasks).await?;
     let queryables = startup::Queryables::declare(session, &ctx.prefix).await?;
     tasks.spawn(prepare::precompute(ctx.clone(), config.estimation.precompute, resumes));
@@ -178,14 +200,14 @@ async fn answer(
             Ok(query) = q.list.recv_async() => handlers::answer_list(ctx, query).await,
             Ok(query) = q.switch.recv_async() => {
                 if requests.len() >= MAX_REQUESTS_IN_FLIGHT {
-                    handlers::busy(query).await;
+                    handlers::busy(ctx, query).await;
                 } else {
                     requests.spawn(handlers::answer_switch(ctx.clone(), query));
                 }
             }
             Ok(query) = q.control.recv_async() => {
                 if requests.len() >= MAX_REQUESTS_IN_FLIGHT {
-                    handlers::busy(query).await;
+                    handlers::busy(ctx, query).await;
                 } else {
                     requests.spawn(handlers::answer_control(ctx.clone(), query));
                 }

@@ -2,15 +2,18 @@
 //! hands out, encoded once and put on the bus (states are skipped while
 //! nobody listens, never the two states of a switch).
 
+use std::sync::atomic::Ordering;
 use std::sync::Arc;
 
 use prost::Message;
 use tokio::sync::watch;
 
+use super::Context;
 use crate::engine::{InstanceHandle, StateFrame};
 use crate::proto;
 
 pub(super) async fn publish_states(
+    ctx: Arc<Context>,
     handle: InstanceHandle,
     publisher: zenoh::pubsub::Publisher<'static>,
     closing: watch::Receiver<bool>,
@@ -19,6 +22,7 @@ pub(super) async fn publish_states(
     let mut transitions = handle.transitions.lock().await;
     let mut closing = closing;
     let mut buf = Vec::new();
+    let counters = ctx.telemetry.instance(&handle.name);
     loop {
         let frame: Arc<StateFrame> = tokio::select! {
             biased;
@@ -37,20 +41,30 @@ pub(super) async fn publish_states(
             }
         };
         // Skip the encoding when nobody listens.
-        if !frame.transition && !publisher.matching_status().await.map(|m| m.matching()).unwrap_or(true) {
+        let matching = publisher.matching_status().await.map(|m| m.matching()).unwrap_or(true);
+        if let Some(c) = counters {
+            c.state_subscribed.store(matching, Ordering::Relaxed);
+        }
+        if !frame.transition && !matching {
             continue;
         }
         buf.clear();
         proto::state_message(&handle.name, &frame)
             .encode(&mut buf)
             .expect("Vec grows");
-        if let Err(e) = publisher.put(buf.clone()).await {
-            tracing::warn!(instance = %handle.name, "publishing a state: {e}");
+        match publisher.put(buf.clone()).await {
+            Ok(()) => {
+                if let Some(c) = counters {
+                    c.states_published.fetch_add(1, Ordering::Relaxed);
+                }
+            }
+            Err(e) => tracing::warn!(instance = %handle.name, "publishing a state: {e}"),
         }
     }
 }
 
 pub(super) async fn publish_metrics(
+    ctx: Arc<Context>,
     handle: InstanceHandle,
     publisher: zenoh::pubsub::Publisher<'static>,
     closing: watch::Receiver<bool>,
@@ -66,8 +80,9 @@ pub(super) async fn publish_metrics(
                 }
                 let Some(m) = metrics.borrow_and_update().clone() else { continue };
                 let bytes = proto::metrics_message(&handle.name, &m).encode_to_vec();
-                if let Err(e) = publisher.put(bytes).await {
-                    tracing::warn!(instance = %handle.name, "publishing metrics: {e}");
+                match publisher.put(bytes).await {
+                    Ok(()) => ctx.telemetry.metrics_published(&handle.name),
+                    Err(e) => tracing::warn!(instance = %handle.name, "publishing metrics: {e}"),
                 }
             }
         }

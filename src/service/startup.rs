@@ -101,7 +101,7 @@ pub(super) fn start_engine(config: &ServiceConfig) -> Result<Started, ServiceErr
 /// serving.
 pub(super) async fn declare_outputs(
     session: &Session,
-    ctx: &Context,
+    ctx: &Arc<Context>,
     closing: &watch::Receiver<bool>,
     tasks: &mut tokio::task::JoinSet<()>,
 ) -> Result<Vec<LivelinessToken>, ServiceError> {
@@ -121,8 +121,18 @@ pub(super) async fn declare_outputs(
             .congestion_control(CongestionControl::Drop)
             .await
             .map_err(zerr)?;
-        tasks.spawn(publish_states(inst.handle.clone(), states, closing.clone()));
-        tasks.spawn(publish_metrics(inst.handle.clone(), metrics, closing.clone()));
+        tasks.spawn(publish_states(
+            ctx.clone(),
+            inst.handle.clone(),
+            states,
+            closing.clone(),
+        ));
+        tasks.spawn(publish_metrics(
+            ctx.clone(),
+            inst.handle.clone(),
+            metrics,
+            closing.clone(),
+        ));
         tokens.push(
             session
                 .liveliness()

@@ -21,7 +21,7 @@ pub(in crate::service) async fn answer_control(ctx: Arc<Context>, q: Query) {
     });
     let (inst, action) = match checked {
         Ok(c) => c,
-        Err(r) => return refuse(&q, r).await,
+        Err(r) => return refuse(&ctx, &q, r).await,
     };
     use v1::control_request::Action;
     let (tx, rx) = oneshot::channel();
@@ -37,7 +37,7 @@ pub(in crate::service) async fn answer_control(ctx: Arc<Context>, q: Query) {
         Action::Reset | Action::Unspecified => Command::Reset { reply: tx },
     };
     if let Err(e) = inst.handle.send(command) {
-        return reply_error(&q, Code::Unavailable, e).await;
+        return reply_error(&ctx, &q, Code::Unavailable, e).await;
     }
     match tokio::time::timeout(Duration::from_secs(5), rx).await {
         Ok(Ok(o)) => {
@@ -54,6 +54,6 @@ pub(in crate::service) async fn answer_control(ctx: Arc<Context>, q: Query) {
             )
             .await;
         }
-        _ => reply_error(&q, Code::Unavailable, "the engine did not apply the command").await,
+        _ => reply_error(&ctx, &q, Code::Unavailable, "the engine did not apply the command").await,
     }
 }

@@ -21,7 +21,7 @@ pub(in crate::service) async fn answer_info(ctx: &Context, q: Query) {
                 ctx.instances.keys().cloned().collect::<Vec<_>>().join(", ")
             ),
         };
-        return reply_error(&q, Code::UnknownInstance, message).await;
+        return reply_error(ctx, &q, Code::UnknownInstance, message).await;
     }
     for inst in matched {
         let info = instance_info(inst);

@@ -19,8 +19,9 @@ pub(super) use control::answer_control;
 pub(super) use info::{answer_info, answer_list};
 pub(super) use switch::answer_switch;
 
-pub(super) async fn reply_error(q: &Query, code: Code, message: impl Into<String>) {
+pub(super) async fn reply_error(ctx: &Context, q: &Query, code: Code, message: impl Into<String>) {
     let message = message.into();
+    ctx.telemetry.refused(code);
     tracing::info!(key = %q.key_expr(), ?code, "refused: {message}");
     let e = proto::error(code, message);
     if let Err(err) = q.reply_err(e.encode_to_vec()).encoding(encoding(schema::ERROR)).await {
@@ -72,12 +73,12 @@ pub(super) fn target<'a>(ctx: &'a Context, q: &Query, leaf: &str) -> Result<&'a 
 }
 
 /// Refuse a request because too many are being handled.
-pub(in crate::service) async fn busy(q: Query) {
+pub(in crate::service) async fn busy(ctx: &Context, q: Query) {
     let message = format!("the daemon is handling {MAX_REQUESTS_IN_FLIGHT} requests; retry shortly");
-    reply_error(&q, Code::Busy, message).await
+    reply_error(ctx, &q, Code::Busy, message).await
 }
 
 /// Answer a refusal.
-pub(super) async fn refuse(q: &Query, r: Refusal) {
-    reply_error(q, r.code, r.message).await
+pub(super) async fn refuse(ctx: &Context, q: &Query, r: Refusal) {
+    reply_error(ctx, q, r.code, r.message).await
 }

@@ -47,12 +47,13 @@ pub(in crate::service) async fn answer_switch(ctx: Arc<Context>, q: Query) {
     });
     let (inst, plan) = match checked {
         Ok(c) => c,
-        Err(r) => return refuse(&q, r).await,
+        Err(r) => return refuse(&ctx, &q, r).await,
     };
     // A bounded queue per instance: a flood of switches is refused here,
     // cheaply, instead of piling up behind the one being applied.
     let Some(_slot) = SwitchSlot::take(&inst.pending_switches) else {
         return reply_error(
+            &ctx,
             &q,
             Code::Busy,
             format!(
@@ -68,11 +69,11 @@ pub(in crate::service) async fn answer_switch(ctx: Arc<Context>, q: Query) {
         SwitchTarget::Level(level) => level,
         SwitchTarget::MaxError(bound) => match cheapest_meeting(inst, method, bound).await {
             Ok(level) => level,
-            Err(message) => return reply_error(&q, Code::NoLevelMeetsError, message).await,
+            Err(message) => return reply_error(&ctx, &q, Code::NoLevelMeetsError, message).await,
         },
     };
     if *ctx.closing.borrow() {
-        return reply_error(&q, Code::Unavailable, "the daemon is shutting down").await;
+        return reply_error(&ctx, &q, Code::Unavailable, "the daemon is shutting down").await;
     }
     let was_ready = inst.preparer.get(level, method).is_some();
     let _guard = inst.switching.lock().await;
@@ -84,7 +85,7 @@ pub(in crate::service) async fn answer_switch(ctx: Arc<Context>, q: Query) {
                 PrepareError::NotAllowed { .. } => Code::LevelNotAllowed,
                 _ => Code::EstimationFailed,
             };
-            return reply_error(&q, code, e.to_string()).await;
+            return reply_error(&ctx, &q, code, e.to_string()).await;
         }
     };
     let cached = was_ready || ready.prepared.cached;
@@ -104,6 +105,9 @@ pub(in crate::service) async fn answer_switch(ctx: Arc<Context>, q: Query) {
                 coefficient_version: o.coefficient_version,
                 frame: o.frame,
             };
+            if let Some(c) = ctx.telemetry.instance(&config.name) {
+                c.switches.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            }
             reply_ok(
                 &q,
                 keys::switch(&ctx.prefix, &config.name),
@@ -112,7 +116,7 @@ pub(in crate::service) async fn answer_switch(ctx: Arc<Context>, q: Query) {
             )
             .await;
         }
-        Err(e) => reply_error(&q, Code::Unavailable, e).await,
+        Err(e) => reply_error(&ctx, &q, Code::Unavailable, e).await,
     }
 }
 
