@@ -200,6 +200,11 @@ async fn metrics_report_each_instance_and_count_what_the_daemon_did() {
     assert_eq!(value(&m, "lodcloth_switches_total{instance=\"quiet\"}"), 0.0);
     assert!(value(&m, "lodcloth_predicted_error{instance=\"op\"}") > 0.0);
     assert!(value(&m, "lodcloth_states_published_total{instance=\"op\"}") > op_states);
+    // Preparation progress: op's three configured levels, 8x8 among the prepared.
+    assert_eq!(value(&m, "lodcloth_levels{instance=\"op\"}"), 3.0);
+    assert_eq!(value(&m, "lodcloth_levels{instance=\"quiet\"}"), 2.0);
+    let prepared = value(&m, "lodcloth_levels_prepared{instance=\"op\"}");
+    assert!((1.0..=3.0).contains(&prepared), "{prepared} levels of op prepared");
 
     let (status, _, _) = http_get(http, "/nope").await.expect("GET /nope");
     assert_eq!(status, 404);
@@ -382,5 +387,39 @@ fn version_names_the_commit_and_completions_and_manual_pages_cover_every_subcomm
     assert!(
         serve.contains("LODCLOTH_CONFIG"),
         "the serve page names its environment"
+    );
+}
+
+#[test]
+fn background_work_runs_in_the_idle_class_and_a_bad_class_is_named() {
+    // On Linux, without privileges: SCHED_IDLE for the calling thread only.
+    let (class, policy) = std::thread::spawn(|| {
+        let class = lodcloth::service::lower_priority();
+        // SAFETY: sched_getscheduler(0) queries the calling thread.
+        #[cfg(target_os = "linux")]
+        let policy = unsafe { libc::sched_getscheduler(0) };
+        #[cfg(not(target_os = "linux"))]
+        let policy = -1;
+        (class, policy)
+    })
+    .join()
+    .expect("thread");
+    if cfg!(target_os = "linux") {
+        assert_eq!(class, lodcloth::service::Background::Idle);
+        #[cfg(target_os = "linux")]
+        assert_eq!(policy, libc::SCHED_IDLE, "the thread is not SCHED_IDLE");
+    }
+    // SAFETY: as above, for this (test) thread, which was not lowered.
+    #[cfg(target_os = "linux")]
+    assert_eq!(unsafe { libc::sched_getscheduler(0) }, libc::SCHED_OTHER);
+
+    let dir = tempfile::tempdir().expect("temp dir");
+    let text =
+        config_text(free_port(), dir.path(), ("a", "b")).replace("[engine]\n", "[engine]\nbackground = \"low\"\n");
+    let err = ServiceConfig::from_toml(&text, "test").expect_err("not a class");
+    assert!(
+        err.to_string()
+            .contains("engine.background: 'low' is not one of idle, nice"),
+        "{err}"
     );
 }

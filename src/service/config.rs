@@ -143,6 +143,11 @@ pub struct RawEngine {
     /// Default state messages per second per instance (default 60).
     #[serde(default = "default_publish_hz")]
     pub publish_hz: f64,
+    /// Scheduling class of background work (level preparation and
+    /// estimation): `idle` (default; Linux SCHED_IDLE, nice 10 elsewhere)
+    /// or `nice` (nice 10 only).
+    #[serde(default = "default_background")]
+    pub background: String,
 }
 
 impl Default for RawEngine {
@@ -153,8 +158,13 @@ impl Default for RawEngine {
             max_lag: default_max_lag(),
             metrics_hz: default_metrics_hz(),
             publish_hz: default_publish_hz(),
+            background: default_background(),
         }
     }
+}
+
+fn default_background() -> String {
+    "idle".into()
 }
 
 fn default_max_substeps() -> u32 {
@@ -289,6 +299,8 @@ pub struct ServiceConfig {
     pub snapshots: Option<Snapshots>,
     /// Where `/metrics` and `/healthz` are served (`None`: not at all).
     pub http: Option<std::net::SocketAddr>,
+    /// The scheduling class asked for background work.
+    pub background: super::Background,
 }
 
 /// `[zenoh]`, validated: made only by [`ServiceConfig::validate`] and
@@ -461,6 +473,7 @@ impl ServiceConfig {
                 resume: s.resume,
             }),
             http,
+            background: parse_background(&e.background).unwrap_or(super::Background::Idle),
             zenoh: ZenohSettings(raw.zenoh),
             engine: EngineSettings {
                 threads,
@@ -550,6 +563,12 @@ fn check_engine(p: &mut Problems, e: &RawEngine) {
     p.positive("engine.max_lag", e.max_lag);
     p.in_open_closed("engine.metrics_hz", e.metrics_hz, 0.0, 1000.0, "messages per second");
     p.in_open_closed("engine.publish_hz", e.publish_hz, 0.0, 1000.0, "messages per second");
+    if parse_background(&e.background).is_none() {
+        p.push(format!(
+            "engine.background: '{}' is not one of idle, nice",
+            e.background
+        ));
+    }
 }
 
 /// `[estimation]`: the reference recording and the fit.
@@ -574,6 +593,15 @@ fn check_estimation(p: &mut Problems, s: &RawEstimation) {
         ));
     }
     p.at_least("estimation.fit_frames", s.fit_frames, 2);
+}
+
+/// `[engine] background`.
+fn parse_background(text: &str) -> Option<super::Background> {
+    match text {
+        "idle" => Some(super::Background::Idle),
+        "nice" => Some(super::Background::Nice),
+        _ => None,
+    }
 }
 
 /// `[http]`: an `address:port` (`serve --http` takes the same, or `off`).

@@ -38,7 +38,7 @@ pub use telemetry::{Health, InstanceHealth};
 
 use std::collections::BTreeMap;
 use std::future::Future;
-use std::sync::atomic::AtomicUsize;
+use std::sync::atomic::{AtomicU8, AtomicUsize, Ordering};
 use std::sync::Arc;
 
 use tokio::sync::watch;
@@ -131,6 +131,7 @@ pub async fn serve(
         Some(addr) => Some(http::bind(addr).await?),
         None => None,
     };
+    BACKGROUND.store(config.background as u8, Ordering::Relaxed);
     let (engine, instances, resumes) = startup::start_engine(&config)?;
     let (closing_tx, closing) = watch::channel(false);
     let ctx = Arc::new(Context {
@@ -217,13 +218,44 @@ async fn answer(
     }
 }
 
-/// Lower the calling thread's scheduling priority (nice 10), for background
-/// estimation beside the stepping threads.
-pub fn lower_priority() {
+/// How background work (level preparation, estimation's rayon threads)
+/// yields to the stepping threads.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Background {
+    /// Linux `SCHED_IDLE`: runs only on a core no normal thread wants, and
+    /// a waking stepping thread preempts it at once.
+    Idle = 0,
+    /// nice 10 (where `SCHED_IDLE` is refused or not Linux): a smaller
+    /// share of a contended core, but a share.
+    Nice = 1,
+}
+
+/// The class [`lower_priority`] applies (`[engine] background`; the last
+/// daemon started in this process sets it).
+static BACKGROUND: AtomicU8 = AtomicU8::new(Background::Idle as u8);
+
+/// Put the calling thread in the background class: `SCHED_IDLE` on Linux
+/// (no privilege needed to lower one's own class), else nice 10. Measured
+/// on a cold start of the default config on 2 cores (docs/results.md,
+/// "Real time during a cold start"): nice 10 alone let preparation take
+/// real time from the instances.
+pub fn lower_priority() -> Background {
     #[cfg(target_os = "linux")]
+    if BACKGROUND.load(Ordering::Relaxed) == Background::Idle as u8 {
+        let param = libc::sched_param { sched_priority: 0 };
+        // SAFETY: sched_setscheduler reads `param` only during the call; on
+        // Linux, pid 0 is the calling thread.
+        if unsafe { libc::sched_setscheduler(0, libc::SCHED_IDLE, &param) } == 0 {
+            return Background::Idle;
+        }
+        static REFUSED: std::sync::Once = std::sync::Once::new();
+        let e = std::io::Error::last_os_error();
+        REFUSED.call_once(|| tracing::warn!("background work cannot run as SCHED_IDLE ({e}); nice 10 instead"));
+    }
     // SAFETY: setpriority has no memory-safety preconditions; on Linux,
     // PRIO_PROCESS with id 0 applies to the calling thread only.
     unsafe {
         libc::setpriority(libc::PRIO_PROCESS, 0, 10);
     }
+    Background::Nice
 }

@@ -30,7 +30,7 @@ pub(super) async fn prepare(preparer: Arc<Preparer>, level: Level, method: Metho
     let spawned = std::thread::Builder::new()
         .name("lodcloth-prepare".into())
         .spawn(move || {
-            lower_priority();
+            let _ = lower_priority();
             let result = preparer.prepare(level, method).and_then(|prepared| {
                 let sim = prepared.simulation()?;
                 let cloud = prepared.cloud_map();

@@ -34,7 +34,9 @@ pub(super) fn start_engine(config: &ServiceConfig) -> Result<Started, ServiceErr
     // Estimation's parallel loops (rayon) run below the stepping threads'
     // priority; ignore the error when the pool already exists (tests).
     let _ = rayon::ThreadPoolBuilder::new()
-        .start_handler(|_| super::lower_priority())
+        .start_handler(|_| {
+            super::lower_priority();
+        })
         .build_global();
     let cache = match CoefficientCache::open(&config.cache) {
         Ok(c) => Some(c),

@@ -475,6 +475,39 @@ impl Collector for DaemonCollector {
             None,
             &pending,
         )?;
+        // Preparation progress: the configured levels ready with the
+        // instance's method (a switch to one answers from memory).
+        let levels = |prepared: bool| -> Vec<(&str, Option<ConstGauge<i64>>)> {
+            ctx.instances
+                .iter()
+                .map(|(n, i)| {
+                    let plan = i.preparer.plan();
+                    let count = plan
+                        .levels
+                        .iter()
+                        .filter(|&&l| !prepared || i.preparer.get(l, plan.method).is_some())
+                        .count();
+                    (
+                        n.as_str(),
+                        Some(ConstGauge::new(i64::try_from(count).unwrap_or(i64::MAX))),
+                    )
+                })
+                .collect()
+        };
+        family(
+            &mut enc,
+            "lodcloth_levels",
+            "Levels the instance may switch to (its configured levels)",
+            None,
+            &levels(false),
+        )?;
+        family(
+            &mut enc,
+            "lodcloth_levels_prepared",
+            "Configured levels prepared with the instance's method: a switch to one answers from memory",
+            None,
+            &levels(true),
+        )?;
         Ok(())
     }
 }

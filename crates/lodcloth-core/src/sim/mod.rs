@@ -25,6 +25,7 @@ pub use params::{
     CgSettings, Integrator, Material, SimParams, SpringClass, SpringCoeffs, SpringKind, StiffnessAdjustment,
     StrainLimit,
 };
+pub use simd::{active_isa_name, force_path, VectorPath};
 pub use stability::{amplification, dt_limit, modal_estimate, ModalEstimate};
 pub use state::State;
 pub use strain::StrainOutcome;

@@ -54,11 +54,57 @@ impl Isa {
     }
 }
 
-/// Run `f` compiled for the best instruction set of this CPU. Mark the
-/// closure `#[inline(always)]` so that its body is compiled in that context.
+/// Which compiled path the hot loops of this thread take (see
+/// [`force_baseline`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum VectorPath {
+    /// The best instruction set of this CPU (the default).
+    Best,
+    /// The target's baseline (x86-64: SSE2, two f64 lanes), as if the CPU
+    /// had nothing better.
+    Baseline,
+}
+
+thread_local! {
+    static PATH: std::cell::Cell<VectorPath> = const { std::cell::Cell::new(VectorPath::Best) };
+}
+
+/// Run the hot loops of the calling thread on `path` from now on; returns
+/// the path it replaces. For the vectorisation guard (`cargo bench -p
+/// lodcloth-core --bench vector_guard`): the same step timed on both paths
+/// in one run shows whether the vector path still runs vector code (a
+/// function on the hot path that is not inlined into the dispatched
+/// closure silently runs baseline code). Results are bit-identical on
+/// either path.
+pub fn force_path(path: VectorPath) -> VectorPath {
+    PATH.with(|p| p.replace(path))
+}
+
+/// The instruction set the hot loops of this thread run: the best this CPU
+/// has, unless [`force_path`] asked for the baseline.
+pub fn active_isa_name() -> &'static str {
+    match current() {
+        #[cfg(target_arch = "x86_64")]
+        Isa::Avx512 => "AVX-512F",
+        #[cfg(target_arch = "x86_64")]
+        Isa::Avx2Fma => "AVX2+FMA",
+        Isa::Generic => "baseline",
+    }
+}
+
+fn current() -> Isa {
+    match PATH.with(std::cell::Cell::get) {
+        VectorPath::Best => Isa::best(),
+        VectorPath::Baseline => Isa::Generic,
+    }
+}
+
+/// Run `f` compiled for the best instruction set of this CPU (or the
+/// baseline, see [`force_path`]). Mark the closure `#[inline(always)]` so
+/// that its body is compiled in that context.
 #[inline(always)]
 pub(crate) fn dispatch<R>(f: impl FnOnce() -> R) -> R {
-    run(Isa::best(), f)
+    run(current(), f)
 }
 
 /// Run `f` compiled for `isa`; falls back to [`Isa::Generic`] when the CPU

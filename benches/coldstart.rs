@@ -1,0 +1,401 @@
+//! Cold start of the default daemon (issue 21): does preparing every level
+//! in the background take real time away from the instances?
+//!
+//! Starts `lodcloth serve --config config/default.toml` in its own process
+//! with an empty coefficient cache and no snapshots (a first start), on
+//! free loopback ports. A subscriber counts every instance's states; every
+//! second `/metrics` is scraped for overruns, lag resets, the real-time
+//! factor and how many levels are prepared. `--switch-after` seconds in, a
+//! switch to a level not yet prepared is sent and timed. The run ends when
+//! every configured level is prepared (or after `--minutes`).
+//!
+//! Prints the machine, a line per 10 s and a summary (overruns and lag
+//! resets during preparation, the lowest one-second state rate of each
+//! instance against its configured rate, the switch's answer time, the
+//! time to prepare everything); writes `out/coldstart-<class>/coldstart.csv`,
+//! `coldstart_rates.svg` (state rates and preparation over time) and
+//! `coldstart_rtf.svg` (each instance's real-time factor).
+//!
+//! `cargo bench --bench coldstart -- [--minutes 15] [--switch-after 5]
+//! [--switch paper-3=40x40] [--background idle|nice]` (`--background`
+//! replaces the config's `[engine] background`, to compare the classes).
+
+#[path = "../tests/daemon/mod.rs"]
+mod daemon;
+
+use std::collections::BTreeMap;
+use std::net::SocketAddr;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use lodcloth::output::{line_chart_svg, CsvTable, Series, PALETTE};
+use lodcloth::plan::Level;
+use lodcloth::proto::{v1, WireLevel};
+use lodcloth::service::client::{client_config, Client, ClientOptions};
+
+const PREFIX: &str = "lodcloth";
+const CONFIG: &str = "config/default.toml";
+
+fn arg(name: &str) -> Option<String> {
+    let args: Vec<String> = std::env::args().collect();
+    args.iter()
+        .position(|a| a == name)
+        .and_then(|i| args.get(i + 1))
+        .cloned()
+}
+
+/// `name{labels} value` → value, for the families read here.
+fn parse_metrics(text: &str) -> BTreeMap<String, f64> {
+    text.lines()
+        .filter(|l| !l.starts_with('#'))
+        .filter_map(|l| l.rsplit_once(' '))
+        .filter_map(|(series, v)| Some((series.to_string(), v.parse().ok()?)))
+        .collect()
+}
+
+fn per_instance(m: &BTreeMap<String, f64>, family: &str, instance: &str) -> f64 {
+    m.get(&format!("{family}{{instance=\"{instance}\"}}"))
+        .copied()
+        .unwrap_or(0.0)
+}
+
+/// One second of the run.
+struct Sample {
+    t: f64,
+    /// Per instance: cumulative overruns, lag resets, states received in
+    /// this second, real-time factor, levels prepared.
+    overruns: Vec<f64>,
+    lag_resets: Vec<f64>,
+    states: Vec<f64>,
+    rtf: Vec<f64>,
+    prepared: f64,
+}
+
+/// The daemon's process, stopped (SIGTERM, then killed) when dropped.
+struct Daemon(std::process::Child);
+
+impl Drop for Daemon {
+    fn drop(&mut self) {
+        // SAFETY: kill(2) on our own child's pid has no memory-safety preconditions.
+        unsafe {
+            libc::kill(self.0.id() as libc::pid_t, libc::SIGTERM);
+        }
+        let deadline = Instant::now() + Duration::from_secs(20);
+        while Instant::now() < deadline {
+            if let Ok(Some(_)) = self.0.try_wait() {
+                return;
+            }
+            std::thread::sleep(Duration::from_millis(100));
+        }
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+fn cpu_model() -> String {
+    std::fs::read_to_string("/proc/cpuinfo")
+        .unwrap_or_default()
+        .lines()
+        .find_map(|l| {
+            l.strip_prefix("model name")
+                .map(|v| v.trim_start_matches([' ', '\t', ':']).to_string())
+        })
+        .unwrap_or_else(|| "unknown CPU".into())
+}
+
+#[tokio::main(flavor = "multi_thread", worker_threads = 1)]
+async fn main() {
+    let minutes: f64 = arg("--minutes").and_then(|v| v.parse().ok()).unwrap_or(15.0);
+    let switch_after: f64 = arg("--switch-after").and_then(|v| v.parse().ok()).unwrap_or(5.0);
+    let switch = arg("--switch").unwrap_or_else(|| "paper-3=40x40".into());
+    let (switch_instance, switch_level) = switch.split_once('=').expect("--switch INSTANCE=LEVEL");
+    let switch_level: Level = switch_level.parse().expect("--switch level");
+
+    let config = lodcloth::service::config::ServiceConfig::load(std::path::Path::new(CONFIG)).expect("default config");
+    let names: Vec<String> = config.instances.iter().map(|i| i.name.clone()).collect();
+    let rates: Vec<f64> = config.instances.iter().map(|i| i.publish_hz).collect();
+    let total_levels: usize = config.instances.iter().map(|i| i.levels.len()).sum();
+
+    let dir = tempfile::tempdir().expect("temp dir");
+    // The default config, with another background class when asked.
+    let background = arg("--background").unwrap_or_else(|| "idle".into());
+    let text = std::fs::read_to_string(CONFIG).expect("default config");
+    assert!(
+        text.contains("background = \"idle\""),
+        "{CONFIG} no longer sets background = \"idle\""
+    );
+    let config_path = dir.path().join("default.toml");
+    std::fs::write(
+        &config_path,
+        text.replace("background = \"idle\"", &format!("background = \"{background}\"")),
+    )
+    .expect("config");
+    let port = daemon::free_port();
+    let http: SocketAddr = format!("127.0.0.1:{}", daemon::free_port()).parse().expect("addr");
+    let exe = std::env::current_exe().expect("exe");
+    let lodcloth = exe
+        .parent()
+        .and_then(|p| p.parent())
+        .map(|p| p.join("lodcloth"))
+        .expect("target dir");
+    let log = std::fs::File::create(dir.path().join("serve.log")).expect("log");
+    let _daemon = Daemon(
+        std::process::Command::new(&lodcloth)
+            .arg("serve")
+            .arg("--config")
+            .arg(&config_path)
+            .arg("--listen")
+            .arg(format!("tcp/127.0.0.1:{port}"))
+            .arg("--http")
+            .arg(http.to_string())
+            .arg("--cache-dir")
+            .arg(dir.path().join("cache"))
+            .arg("--snapshot-dir")
+            .arg(dir.path().join("snapshots"))
+            .stdout(std::process::Stdio::null())
+            .stderr(log)
+            .spawn()
+            .unwrap_or_else(|e| panic!("{}: {e} (cargo build --release first)", lodcloth.display())),
+    );
+    let started = Instant::now();
+    println!(
+        "cold start of {CONFIG} ({} instances, {total_levels} levels, background {background}) on {} ({} cores), lodcloth {}",
+        names.len(),
+        cpu_model(),
+        std::thread::available_parallelism().map_or(0, |n| n.get()),
+        lodcloth::VERSION
+    );
+
+    // Every instance's states, counted per instance.
+    let options = ClientOptions::new(&[format!("tcp/127.0.0.1:{port}")]);
+    let session = loop {
+        match zenoh::open(client_config(&options).expect("client config")).await {
+            Ok(s) => break s,
+            Err(e) if started.elapsed() > Duration::from_secs(20) => panic!("cannot connect: {e}"),
+            Err(_) => tokio::time::sleep(Duration::from_millis(100)).await,
+        }
+    };
+    let client = Arc::new(Client::with_session(session, PREFIX));
+    let counts: Arc<Mutex<BTreeMap<String, u64>>> = Arc::default();
+    let tally = counts.clone();
+    client
+        .session
+        .declare_subscriber(format!("{PREFIX}/*/state"))
+        .callback(move |s| {
+            if let Some(name) = s.key_expr().as_str().split('/').nth(1) {
+                *tally.lock().expect("counts").entry(name.to_string()).or_default() += 1;
+            }
+        })
+        .background()
+        .await
+        .expect("subscriber");
+
+    let mut samples: Vec<Sample> = Vec::new();
+    let mut switch_task = None;
+    let mut switch_answer: Option<(f64, String)> = None;
+    let mut all_prepared_at = None;
+    let mut last_counts: BTreeMap<String, u64> = BTreeMap::new();
+    let mut next = Instant::now() + Duration::from_secs(1);
+    println!(
+        "{:>6} {:>9} {:>9} {:>30} {:>9}",
+        "t (s)", "overruns", "lag rst", "states/s (min over instances)", "prepared"
+    );
+    loop {
+        tokio::time::sleep_until(next.into()).await;
+        next += Duration::from_secs(1);
+        let t = started.elapsed().as_secs_f64();
+        let Ok((200, _, body)) = daemon::http_get(http, "/metrics").await else {
+            assert!(t < 30.0, "no /metrics within 30 s");
+            continue;
+        };
+        let m = parse_metrics(&body);
+        let now_counts = counts.lock().expect("counts").clone();
+        let states: Vec<f64> = names
+            .iter()
+            .map(|n| (now_counts.get(n).copied().unwrap_or(0) - last_counts.get(n).copied().unwrap_or(0)) as f64)
+            .collect();
+        last_counts = now_counts;
+        let s = Sample {
+            t,
+            overruns: names
+                .iter()
+                .map(|n| per_instance(&m, "lodcloth_overruns_total", n))
+                .collect(),
+            lag_resets: names
+                .iter()
+                .map(|n| per_instance(&m, "lodcloth_lag_resets_total", n))
+                .collect(),
+            rtf: names
+                .iter()
+                .map(|n| per_instance(&m, "lodcloth_real_time_factor", n))
+                .collect(),
+            states,
+            prepared: names
+                .iter()
+                .map(|n| per_instance(&m, "lodcloth_levels_prepared", n))
+                .sum(),
+        };
+        if samples.len() % 10 == 0 {
+            let worst = s
+                .states
+                .iter()
+                .zip(&rates)
+                .map(|(got, want)| got / want)
+                .fold(f64::INFINITY, f64::min);
+            println!(
+                "{:>6.0} {:>9.0} {:>9.0} {:>29.0}% {:>5.0}/{total_levels}",
+                t,
+                s.overruns.iter().sum::<f64>(),
+                s.lag_resets.iter().sum::<f64>(),
+                100.0 * worst,
+                s.prepared
+            );
+        }
+        if all_prepared_at.is_none() && s.prepared as usize >= total_levels {
+            all_prepared_at = Some(t);
+        }
+        samples.push(s);
+
+        if switch_task.is_none() && t >= switch_after {
+            let c = client.clone();
+            let instance = switch_instance.to_string();
+            let request = v1::SwitchRequest {
+                target: Some(v1::switch_request::Target::Level(switch_level.to_wire())),
+                method: String::new(),
+            };
+            switch_task = Some(tokio::spawn(async move {
+                let sent = Instant::now();
+                let reply = c.switch(&instance, &request, Duration::from_secs(600)).await;
+                (
+                    sent.elapsed().as_secs_f64(),
+                    reply.map_or_else(|e| format!("refused: {e}"), |r| format!("{r:?}")),
+                )
+            }));
+        }
+        if let Some(task) = switch_task
+            .as_mut()
+            .filter(|t| t.is_finished() && switch_answer.is_none())
+        {
+            let (secs, reply) = task.await.expect("switch task");
+            println!("switch of {switch_instance} to {switch_level} answered in {secs:.2} s: {reply}");
+            switch_answer = Some((secs, reply));
+        }
+        if (all_prepared_at.is_some() && switch_answer.is_some()) || t > minutes * 60.0 {
+            break;
+        }
+    }
+
+    // Summary.
+    let first = &samples[0];
+    let last = samples.last().expect("a sample");
+    println!("\n| instance | overruns | lag resets | states/s configured | lowest 1-s rate (from 2 s) | mean rate | lowest RTF |");
+    println!("|---|---|---|---|---|---|---|");
+    for (i, n) in names.iter().enumerate() {
+        let steady: Vec<&Sample> = samples.iter().filter(|s| s.t >= 2.0).collect();
+        let lowest = steady.iter().map(|s| s.states[i]).fold(f64::INFINITY, f64::min);
+        let mean = steady.iter().map(|s| s.states[i]).sum::<f64>() / steady.len().max(1) as f64;
+        let rtf = steady
+            .iter()
+            .map(|s| s.rtf[i])
+            .filter(|r| *r > 0.0)
+            .fold(f64::INFINITY, f64::min);
+        println!(
+            "| {n} | {:.0} | {:.0} | {:.0} | {lowest:.0} | {mean:.1} | {rtf:.3} |",
+            last.overruns[i] - first.overruns[i].min(0.0),
+            last.lag_resets[i],
+            rates[i]
+        );
+    }
+    match all_prepared_at {
+        Some(t) => println!("every level prepared {t:.0} s after start"),
+        None => println!(
+            "after {minutes} min, {:.0} of {total_levels} levels prepared",
+            last.prepared
+        ),
+    }
+    if let Some((secs, _)) = &switch_answer {
+        println!("first switch to an unprepared level ({switch_instance} → {switch_level}, sent at {switch_after} s) answered in {secs:.2} s");
+    }
+
+    let out_dir = format!("out/coldstart-{background}");
+    let out = std::path::Path::new(&out_dir);
+    std::fs::create_dir_all(out).expect("out/coldstart");
+    let mut header = vec!["t_s".to_string(), "levels_prepared".to_string()];
+    for n in &names {
+        header.extend([
+            format!("{n}_overruns"),
+            format!("{n}_lag_resets"),
+            format!("{n}_states"),
+            format!("{n}_rtf"),
+        ]);
+    }
+    let header: Vec<&str> = header.iter().map(String::as_str).collect();
+    let mut csv = CsvTable::create(&out.join("coldstart.csv"), &header).expect("csv");
+    for s in &samples {
+        let mut row = vec![format!("{:.2}", s.t), format!("{:.0}", s.prepared)];
+        for i in 0..names.len() {
+            row.extend([
+                format!("{:.0}", s.overruns[i]),
+                format!("{:.0}", s.lag_resets[i]),
+                format!("{:.0}", s.states[i]),
+                format!("{:.4}", s.rtf[i]),
+            ]);
+        }
+        csv.row(&row).expect("row");
+    }
+    csv.finish().expect("csv");
+    let labels: Vec<String> = names.iter().map(|n| format!("{n}: states/s ÷ configured")).collect();
+    let mut rates_series: Vec<Series<'_>> = names
+        .iter()
+        .enumerate()
+        .map(|(i, _)| Series {
+            name: &labels[i],
+            points: samples.iter().map(|s| (s.t, 100.0 * s.states[i] / rates[i])).collect(),
+            markers: false,
+            color: PALETTE[i % PALETTE.len()],
+        })
+        .collect();
+    rates_series.push(Series {
+        name: "levels prepared (of all)",
+        points: samples
+            .iter()
+            .map(|s| (s.t, 100.0 * s.prepared / total_levels as f64))
+            .collect(),
+        markers: false,
+        color: PALETTE[5],
+    });
+    line_chart_svg(
+        &out.join("coldstart_rates.svg"),
+        &format!("Cold start, background {background}: states published, levels prepared"),
+        "seconds since start",
+        "%",
+        &rates_series,
+        false,
+        false,
+    )
+    .expect("chart");
+    // Real-time factor (each metrics interval) and overruns: the overruns
+    // are in the CSV; the factor shows lost time even before it adds up to
+    // an overrun.
+    let rtf_series: Vec<Series<'_>> = names
+        .iter()
+        .enumerate()
+        .map(|(i, n)| Series {
+            name: n,
+            points: samples.iter().filter(|s| s.t >= 2.0).map(|s| (s.t, s.rtf[i])).collect(),
+            markers: false,
+            color: PALETTE[i % PALETTE.len()],
+        })
+        .collect();
+    line_chart_svg(
+        &out.join("coldstart_rtf.svg"),
+        &format!("Cold start, background {background}: real-time factor (metrics interval)"),
+        "seconds since start",
+        "simulated s per wall s",
+        &rtf_series,
+        false,
+        false,
+    )
+    .expect("chart");
+    println!("wrote {out_dir}/coldstart.csv, coldstart_rates.svg and coldstart_rtf.svg");
+}
