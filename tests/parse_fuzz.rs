@@ -699,7 +699,7 @@ const SCENE_ROOTS: [&str; 9] = [
     "forces",
     "wind",
 ];
-const CONFIG_ROOTS: [&str; 7] = [
+const CONFIG_ROOTS: [&str; 8] = [
     "prefix",
     "cache",
     "zenoh",
@@ -707,6 +707,7 @@ const CONFIG_ROOTS: [&str; 7] = [
     "estimation",
     "instances",
     "snapshots",
+    "http",
 ];
 
 /// A refused scene: its message names the file and, for a parse error, a
