@@ -132,12 +132,8 @@ async fn main() {
     .expect("config");
     let port = daemon::free_port();
     let http: SocketAddr = format!("127.0.0.1:{}", daemon::free_port()).parse().expect("addr");
-    let exe = std::env::current_exe().expect("exe");
-    let lodcloth = exe
-        .parent()
-        .and_then(|p| p.parent())
-        .map(|p| p.join("lodcloth"))
-        .expect("target dir");
+    // The binary cargo built beside this benchmark.
+    let lodcloth = std::path::Path::new(env!("CARGO_BIN_EXE_lodcloth"));
     let log = std::fs::File::create(dir.path().join("serve.log")).expect("log");
     let _daemon = Daemon(
         std::process::Command::new(&lodcloth)

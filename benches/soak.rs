@@ -288,12 +288,8 @@ fn start_daemon(dir: &std::path::Path) -> (Child, String) {
         );
     }
     std::fs::write(&config, text).expect("config");
-    let exe = std::env::current_exe().expect("exe");
-    let lodcloth = exe
-        .parent()
-        .and_then(|p| p.parent())
-        .map(|p| p.join("lodcloth"))
-        .expect("target dir");
+    // The binary cargo built beside this benchmark.
+    let lodcloth = std::path::Path::new(env!("CARGO_BIN_EXE_lodcloth"));
     let daemon = Child(
         std::process::Command::new(&lodcloth)
             .args(["serve", "--config"])
