@@ -333,15 +333,29 @@ fn tail<const ADJ: bool>(
 /// loops with short offsets use [`run_carry`].
 #[inline(always)]
 fn add_pair<const N: usize>(f: &mut [&mut [f64]; 3], a: usize, b: usize, fo: &[[f64; N]; 3]) {
+    // All three components are loaded before any is stored: the component
+    // arrays lie a multiple of 4 KiB apart on power-of-two grids, and a load
+    // of y behind a store of x at the same offset waits on a false
+    // dependency (4K aliasing); 64×64 took twice as long as 62×62.
+    let mut fa = [[0.0; N]; 3];
     for c in 0..3 {
-        let fa: &mut [f64; N] = (&mut f[c][a..a + N]).try_into().expect("N");
+        fa[c] = *<&[f64; N]>::try_from(&f[c][a..a + N]).expect("N");
+    }
+    for c in 0..3 {
         for j in 0..N {
-            fa[j] += fo[c][j];
+            fa[c][j] += fo[c][j];
         }
-        let fb: &mut [f64; N] = (&mut f[c][b..b + N]).try_into().expect("N");
+        f[c][a..a + N].copy_from_slice(&fa[c]);
+    }
+    let mut fb = [[0.0; N]; 3];
+    for c in 0..3 {
+        fb[c] = *<&[f64; N]>::try_from(&f[c][b..b + N]).expect("N");
+    }
+    for c in 0..3 {
         for j in 0..N {
-            fb[j] -= fo[c][j];
+            fb[c][j] -= fo[c][j];
         }
+        f[c][b..b + N].copy_from_slice(&fb[c]);
     }
 }
 
@@ -368,16 +382,22 @@ fn run_carry<const OFF: usize, const ADJ: bool>(
     while i + LANES <= len {
         let o = block::<LANES, ADJ>(run, i, coef, 0);
         local.add(&o);
+        // Loads of all three components before any store (4K aliasing, see
+        // `add_pair`).
+        let mut fa = [[0.0; LANES]; 3];
         for c in 0..3 {
-            let fa: &mut [f64; LANES] = (&mut f[c][a0 + i..a0 + i + LANES]).try_into().expect("LANES");
+            fa[c] = *<&[f64; LANES]>::try_from(&f[c][a0 + i..a0 + i + LANES]).expect("LANES");
+        }
+        for c in 0..3 {
             for j in 0..LANES {
                 let back = if j >= OFF {
                     o.f[c][j - OFF]
                 } else {
                     carry[c][LANES - OFF + j]
                 };
-                fa[j] += o.f[c][j] - back;
+                fa[c][j] += o.f[c][j] - back;
             }
+            f[c][a0 + i..a0 + i + LANES].copy_from_slice(&fa[c]);
             carry[c] = o.f[c];
         }
         i += LANES;

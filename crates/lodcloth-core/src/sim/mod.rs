@@ -8,6 +8,7 @@ mod forces;
 mod implicit;
 mod loads;
 mod membrane;
+mod paged;
 mod params;
 mod simd;
 mod stability;
@@ -33,6 +34,7 @@ pub use topology::{GridShape, Orientation, Padded, Run, SpringGroup, Topology};
 
 use forces::KernelScratch;
 use implicit::{ImplicitInputs, ImplicitWorkspace};
+use paged::Paged;
 use strain::StrainWorkspace;
 
 /// Why a simulation could not be built or changed. Every variant names what
@@ -147,16 +149,25 @@ pub enum StabilityCheck {
 #[derive(Debug, Clone)]
 struct Workspace {
     kernel: KernelScratch,
-    force: Vec<f64>,
+    /// Zero between evaluations; each evaluation uses a window of it placed
+    /// away from the positions and velocities it reads (see [`paged`]).
+    force: Paged,
     normals: Vec<f64>,
-    /// RK4: stage position/velocity, accumulated increments, stage acceleration.
-    stage_pos: Vec<f64>,
-    stage_vel: Vec<f64>,
-    sum_pos: Vec<f64>,
-    sum_vel: Vec<f64>,
-    stage_acc: Vec<f64>,
+    /// RK4: stage position/velocity, accumulated increments, stage
+    /// acceleration; each at its own page offset (see [`paged`]).
+    stage_pos: Paged,
+    stage_vel: Paged,
+    sum_pos: Paged,
+    sum_vel: Paged,
+    stage_acc: Paged,
     implicit: Option<ImplicitWorkspace>,
     strain: Option<StrainWorkspace>,
+}
+
+/// Page offset of the `i`th field buffer the integrators stream through
+/// together (RK4's five and the acceleration): ten cache lines apart.
+fn colour(i: usize) -> usize {
+    i * 640
 }
 
 impl Workspace {
@@ -165,17 +176,17 @@ impl Workspace {
         let rk = if params.integrator == Integrator::Rk4 { n3 } else { 0 };
         Workspace {
             kernel: KernelScratch::new(topology),
-            force: vec![0.0; n3],
+            force: Paged::new(n3, 0),
             normals: if loads.wind.is_some() {
                 vec![0.0; n3]
             } else {
                 Vec::new()
             },
-            stage_pos: vec![0.0; rk],
-            stage_vel: vec![0.0; rk],
-            sum_pos: vec![0.0; rk],
-            sum_vel: vec![0.0; rk],
-            stage_acc: vec![0.0; rk],
+            stage_pos: Paged::new(rk, colour(0)),
+            stage_vel: Paged::new(rk, colour(1)),
+            sum_pos: Paged::new(rk, colour(2)),
+            sum_vel: Paged::new(rk, colour(3)),
+            stage_acc: Paged::new(rk, colour(4)),
             implicit: (params.integrator == Integrator::ImplicitEuler).then(|| ImplicitWorkspace::new(topology)),
             strain: params.strain_limit.map(|_| StrainWorkspace::new(topology)),
         }
@@ -211,8 +222,8 @@ impl Model {
     fn accelerations(&self, t: f64, pos: &[f64], vel: &[f64], acc: &mut [f64], ws: &mut Workspace) -> SpringTotals {
         let topo = &*self.topology;
         let n = topo.n_nodes;
-        let f = &mut ws.force;
-        debug_assert!(f.iter().all(|&x| x == 0.0), "force buffer not cleared");
+        debug_assert!(ws.force.all_zero(), "force buffer not cleared");
+        let f = ws.force.window_away_from(&[pos.as_ptr(), vel.as_ptr()]);
         let totals = forces::spring_forces(
             topo,
             &self.params.material,
@@ -248,7 +259,7 @@ pub struct Simulation {
     state: State,
     ws: Workspace,
     /// Acceleration at `state`; valid while `cached` is true.
-    acc: Vec<f64>,
+    acc: Paged,
     totals: SpringTotals,
     cached: bool,
     modal: ModalEstimate,
@@ -332,7 +343,7 @@ impl Simulation {
                 params,
                 loads,
             },
-            acc: vec![0.0; 3 * n],
+            acc: Paged::new(3 * n, colour(5)),
             state,
             ws,
             totals: SpringTotals::default(),
@@ -464,13 +475,13 @@ impl Simulation {
         let mut solver = (0, 0.0);
         match self.model.params.integrator {
             Integrator::ExplicitEuler => {
-                for ((x, v), a) in self.state.pos.iter_mut().zip(&mut self.state.vel).zip(&self.acc) {
+                for ((x, v), a) in self.state.pos.iter_mut().zip(&mut self.state.vel).zip(self.acc.iter()) {
                     *x += dt * *v;
                     *v += dt * a;
                 }
             }
             Integrator::SymplecticEuler => {
-                for ((x, v), a) in self.state.pos.iter_mut().zip(&mut self.state.vel).zip(&self.acc) {
+                for ((x, v), a) in self.state.pos.iter_mut().zip(&mut self.state.vel).zip(self.acc.iter()) {
                     *v += dt * a;
                     *x += dt * *v;
                 }
@@ -561,13 +572,21 @@ impl Simulation {
             stage_acc,
             ..
         } = &mut self.ws;
-        let (pos, vel) = (&self.state.pos, &self.state.vel);
-        // k1
-        for i in 0..pos.len() {
-            sum_pos[i] = vel[i];
-            sum_vel[i] = self.acc[i];
-            stage_pos[i] = pos[i] + 0.5 * dt * vel[i];
-            stage_vel[i] = vel[i] + 0.5 * dt * self.acc[i];
+        let (pos, vel) = (&self.state.pos[..], &self.state.vel[..]);
+        let len = pos.len();
+        // Plain slices of one length, bound once: indexing through `Paged`'s
+        // deref inside the loops kept their bounds checks and scalar code.
+        {
+            let (acc, vel) = (&self.acc[..len], &vel[..len]);
+            let (sum_pos, sum_vel) = (&mut sum_pos[..len], &mut sum_vel[..len]);
+            let (stage_pos, stage_vel) = (&mut stage_pos[..len], &mut stage_vel[..len]);
+            // k1
+            for i in 0..len {
+                sum_pos[i] = vel[i];
+                sum_vel[i] = acc[i];
+                stage_pos[i] = pos[i] + 0.5 * dt * vel[i];
+                stage_vel[i] = vel[i] + 0.5 * dt * acc[i];
+            }
         }
         let mut stage_pos = std::mem::take(stage_pos);
         let mut stage_vel = std::mem::take(stage_vel);
@@ -588,8 +607,10 @@ impl Simulation {
             }
             self.model
                 .accelerations(t0 + t_stage, &stage_pos, &stage_vel, &mut stage_acc, &mut self.ws);
-            let (sum_pos, sum_vel) = (&mut self.ws.sum_pos, &mut self.ws.sum_vel);
-            for i in 0..pos.len() {
+            let (sum_pos, sum_vel) = (&mut self.ws.sum_pos[..len], &mut self.ws.sum_vel[..len]);
+            let (stage_pos, stage_vel, stage_acc) = (&mut stage_pos[..len], &mut stage_vel[..len], &stage_acc[..len]);
+            let vel = &vel[..len];
+            for i in 0..len {
                 sum_pos[i] += weight * stage_vel[i];
                 sum_vel[i] += weight * stage_acc[i];
                 // Next stage state (unused after k4).
@@ -598,11 +619,12 @@ impl Simulation {
                 stage_vel[i] = vel[i] + next_scale * stage_acc[i];
             }
         }
-        let (pos, vel) = (&mut self.state.pos, &mut self.state.vel);
+        let (pos, vel) = (&mut self.state.pos[..len], &mut self.state.vel[..len]);
+        let (sum_pos, sum_vel) = (&self.ws.sum_pos[..len], &self.ws.sum_vel[..len]);
         let h6 = dt / 6.0;
-        for i in 0..pos.len() {
-            pos[i] += h6 * self.ws.sum_pos[i];
-            vel[i] += h6 * self.ws.sum_vel[i];
+        for i in 0..len {
+            pos[i] += h6 * sum_pos[i];
+            vel[i] += h6 * sum_vel[i];
         }
         self.ws.stage_pos = stage_pos;
         self.ws.stage_vel = stage_vel;
