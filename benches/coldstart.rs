@@ -17,8 +17,10 @@
 //! `coldstart_rtf.svg` (each instance's real-time factor).
 //!
 //! `cargo bench --bench coldstart -- [--minutes 15] [--switch-after 5]
-//! [--switch paper-3=40x40] [--background idle|nice]` (`--background`
-//! replaces the config's `[engine] background`, to compare the classes).
+//! [--switch paper-3=40x40] [--at-once] [--background idle|nice]`
+//! (`--at-once`: the switch goes live with the scene's coefficients and its
+//! estimate follows in place; `--background` replaces the config's
+//! `[engine] background`, to compare the classes).
 
 #[path = "../tests/daemon/mod.rs"]
 mod daemon;
@@ -110,6 +112,7 @@ async fn main() {
     let switch = arg("--switch").unwrap_or_else(|| "paper-3=40x40".into());
     let (switch_instance, switch_level) = switch.split_once('=').expect("--switch INSTANCE=LEVEL");
     let switch_level: Level = switch_level.parse().expect("--switch level");
+    let at_once = std::env::args().any(|a| a == "--at-once");
 
     let config = lodcloth::service::config::ServiceConfig::load(std::path::Path::new(CONFIG)).expect("default config");
     let names: Vec<String> = config.instances.iter().map(|i| i.name.clone()).collect();
@@ -258,6 +261,7 @@ async fn main() {
             let request = v1::SwitchRequest {
                 target: Some(v1::switch_request::Target::Level(switch_level.to_wire())),
                 method: String::new(),
+                at_once,
             };
             switch_task = Some(tokio::spawn(async move {
                 let sent = Instant::now();
@@ -310,7 +314,8 @@ async fn main() {
         ),
     }
     if let Some((secs, _)) = &switch_answer {
-        println!("first switch to an unprepared level ({switch_instance} → {switch_level}, sent at {switch_after} s) answered in {secs:.2} s");
+        let how = if at_once { ", at once" } else { "" };
+        println!("first switch to an unprepared level ({switch_instance} → {switch_level}, sent at {switch_after} s{how}) answered in {secs:.2} s");
     }
 
     let out_dir = format!("out/coldstart-{background}");

@@ -241,6 +241,7 @@ method = "gkd"
     let req = |n| v1::SwitchRequest {
         target: Some(v1::switch_request::Target::Level(Level::new(n, n).to_wire())),
         method: String::new(),
+        at_once: false,
     };
     let t = Duration::from_secs(600);
     // Let the start level's estimate go live first (records the reference).

@@ -462,6 +462,7 @@ async fn soak(c: &Client, pid: u32, minutes: f64) {
         let req = v1::SwitchRequest {
             target: Some(v1::switch_request::Target::Level(levels[i % 3].to_wire())),
             method: String::new(),
+            at_once: false,
         };
         let bounded = Duration::from_secs(40);
         if let Ok(Ok(_)) = tokio::time::timeout(bounded, c.switch("a", &req, Duration::from_secs(30))).await {

@@ -176,6 +176,7 @@ async fn metrics_report_each_instance_and_count_what_the_daemon_did() {
     // the info metric follows the level.
     let t = Duration::from_secs(30);
     let level = |nx, ny| v1::SwitchRequest {
+        at_once: false,
         target: Some(v1::switch_request::Target::Level(Level::new(nx, ny).to_wire())),
         method: String::new(),
     };

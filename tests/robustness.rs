@@ -283,6 +283,7 @@ async fn generated_requests_over_the_bus_are_all_answered_while_publishing_keeps
 
 fn to(level: Level) -> v1::SwitchRequest {
     v1::SwitchRequest {
+        at_once: false,
         target: Some(v1::switch_request::Target::Level(level.to_wire())),
         method: String::new(),
     }

@@ -135,6 +135,7 @@ async fn open(options: ClientOptions, expect_refusal: bool) -> Result<Client, Cl
 
 fn to(level: Level) -> v1::SwitchRequest {
     v1::SwitchRequest {
+        at_once: false,
         target: Some(v1::switch_request::Target::Level(level.to_wire())),
         method: String::new(),
     }

@@ -77,6 +77,7 @@ async fn a_switch_is_answered_and_the_motion_continues_without_a_jump() {
     // Let the cloth fall for a while so that it is moving at the switch.
     tokio::time::sleep(Duration::from_millis(1500)).await;
     let request = v1::SwitchRequest {
+        at_once: false,
         target: Some(v1::switch_request::Target::Level(Level::new(8, 8).to_wire())),
         method: String::new(),
     };
@@ -159,6 +160,61 @@ async fn a_switch_is_answered_and_the_motion_continues_without_a_jump() {
     d.shutdown().await.expect("clean exit");
 }
 
+/// Issue 21: a switch to an unprepared level answers at once when asked to
+/// (`at_once`), with the scene's own coefficients, and the requested
+/// method's estimate goes live in place afterwards, at the same level.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_at_once_switch_answers_before_its_estimate_which_follows_in_place() {
+    let _serial = daemon::serial().await;
+    let d = Daemon::start(("now", "now-fixed"));
+    let c = client(&[d.endpoint()]).await;
+    wait_info(&c, "now").await;
+    // `bcd` is not the configured method (`same`): nothing prepares it in
+    // the background, so 12x12 with bcd is unprepared when asked for.
+    let request = v1::SwitchRequest {
+        target: Some(v1::switch_request::Target::Level(Level::new(12, 12).to_wire())),
+        method: "bcd".into(),
+        at_once: true,
+    };
+    let reply = within(30, "at-once switch", c.switch("now", &request, Duration::from_secs(30)))
+        .await
+        .expect("switch accepted");
+    assert_eq!(Level::from_wire(reply.level.as_ref().unwrap()), Ok(Level::new(12, 12)));
+    assert!(reply.refining, "an unprepared level goes live before its estimate");
+    assert_eq!(reply.method, "same", "live with the scene's own coefficients first");
+    assert_eq!(reply.predicted_error, None, "no prediction before the estimate");
+    assert!(!reply.cached);
+    // The estimate follows in place: same level, method bcd, one more
+    // coefficient version, a prediction.
+    let info = within(60, "the estimate in place", async {
+        loop {
+            let info = c.info("now").await.expect("info");
+            if info.coefficient_version > reply.coefficient_version {
+                return info;
+            }
+            tokio::time::sleep(Duration::from_millis(100)).await;
+        }
+    })
+    .await;
+    assert_eq!(Level::from_wire(info.level.as_ref().unwrap()), Ok(Level::new(12, 12)));
+    assert_eq!(info.method, "bcd");
+    assert_eq!(info.coefficient_version, reply.coefficient_version + 1);
+    assert!(info.o_max > 0.0, "the prepared level's normaliser is live");
+    // Asked again, now prepared: an ordinary switch answers from the cache
+    // (at_once changes nothing for a prepared level).
+    let again = v1::SwitchRequest {
+        target: Some(v1::switch_request::Target::Level(Level::new(12, 12).to_wire())),
+        method: "bcd".into(),
+        at_once: true,
+    };
+    let reply = within(30, "prepared switch", c.switch("now", &again, Duration::from_secs(30)))
+        .await
+        .expect("switch accepted");
+    assert!(!reply.refining && reply.cached && reply.method == "bcd");
+    assert!(reply.predicted_error.is_some());
+    d.shutdown().await.expect("clean exit");
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn bad_requests_get_errors_naming_the_problem_and_publishing_goes_on() {
     let _serial = daemon::serial().await;
@@ -166,10 +222,12 @@ async fn bad_requests_get_errors_naming_the_problem_and_publishing_goes_on() {
     let c = client(&[d.endpoint()]).await;
     wait_info(&c, "bad").await;
     let level = |nx, ny| v1::SwitchRequest {
+        at_once: false,
         target: Some(v1::switch_request::Target::Level(v1::Level { nx, ny, points: 0 })),
         method: String::new(),
     };
     let max_error = |e| v1::SwitchRequest {
+        at_once: false,
         target: Some(v1::switch_request::Target::MaxError(e)),
         method: String::new(),
     };
@@ -526,6 +584,7 @@ async fn a_surface_publishes_its_whole_cloud_and_switches_size_without_a_jump() 
     // Bad requests name the problem.
     let t = Duration::from_secs(30);
     let grid = v1::SwitchRequest {
+        at_once: false,
         target: Some(v1::switch_request::Target::Level(Level::new(16, 16).to_wire())),
         method: String::new(),
     };
@@ -533,6 +592,7 @@ async fn a_surface_publishes_its_whole_cloud_and_switches_size_without_a_jump() 
     assert_eq!(code, "CODE_LEVEL_NOT_ALLOWED", "{message}");
     assert!(message.contains("100pts") && message.contains("200pts"), "{message}");
     let mixed = v1::SwitchRequest {
+        at_once: false,
         target: Some(v1::switch_request::Target::Level(v1::Level {
             nx: 16,
             ny: 16,
@@ -551,6 +611,7 @@ async fn a_surface_publishes_its_whole_cloud_and_switches_size_without_a_jump() 
         .await
         .expect("subscriber");
     let request = v1::SwitchRequest {
+        at_once: false,
         target: Some(v1::switch_request::Target::Level(Level::Points(100).to_wire())),
         method: String::new(),
     };
@@ -619,6 +680,7 @@ async fn a_surface_publishes_its_whole_cloud_and_switches_size_without_a_jump() 
     // The paper's GKD on the local rings (the all-points run recorded with
     // estimation samples, mapped onto the simulated points).
     let gkd = v1::SwitchRequest {
+        at_once: false,
         target: Some(v1::switch_request::Target::Level(Level::Points(200).to_wire())),
         method: "gkd".into(),
     };
@@ -637,6 +699,7 @@ async fn a_surface_fit_is_cached_and_reused_by_the_next_daemon() {
     let _serial = daemon::serial().await;
     let dir = tempfile::tempdir().expect("temp dir");
     let request = v1::SwitchRequest {
+        at_once: false,
         target: Some(v1::switch_request::Target::Level(Level::Points(100).to_wire())),
         method: String::new(),
     };

@@ -91,6 +91,7 @@ async fn a_restarted_daemon_resumes_each_instance_where_it_was() {
     wait_info(&c, "a").await;
     wait_info(&c, "b").await;
     let req = v1::SwitchRequest {
+        at_once: false,
         target: Some(v1::switch_request::Target::Level(Level::new(12, 12).to_wire())),
         method: String::new(),
     };

@@ -402,6 +402,11 @@ pub struct SwitchArgs {
     /// Estimation method (default: the instance's).
     #[arg(long)]
     pub method: Option<String>,
+    /// When the level is not prepared yet: go live at once with the scene's
+    /// own coefficients and let the method's estimate follow in place
+    /// (coefficient version + 1), instead of waiting for it.
+    #[arg(long)]
+    pub at_once: bool,
     /// Seconds to wait for the reply (an uncached level is estimated first).
     #[arg(long, default_value_t = 600.0)]
     pub timeout: f64,
@@ -416,6 +421,7 @@ pub fn switch(c: Connect, args: SwitchArgs) -> Result<()> {
     let request = v1::SwitchRequest {
         target: Some(target),
         method: args.method.unwrap_or_default(),
+        at_once: args.at_once,
     };
     runtime()?.block_on(async {
         let client = connect(&c).await?;
@@ -432,7 +438,13 @@ pub fn switch(c: Connect, args: SwitchArgs) -> Result<()> {
             pct(r.predicted_error),
             r.dt,
             r.seconds,
-            if r.cached { " (prepared)" } else { " (estimated now)" },
+            if r.refining {
+                " (at once: the scene's coefficients; the estimate follows in place)"
+            } else if r.cached {
+                " (prepared)"
+            } else {
+                " (estimated now)"
+            },
             r.coefficient_version
         );
         let m = lodcloth::proto::material(&k);

@@ -15,12 +15,13 @@ impl Runner {
     pub(super) fn apply(&mut self, command: Command) {
         match command {
             Command::Switch {
+                level,
                 prepared,
                 sim,
                 cloud,
                 reply,
             } => {
-                let outcome = self.switch(prepared, *sim, cloud.map(|c| *c));
+                let outcome = self.switch(level, prepared, *sim, cloud.map(|c| *c));
                 let _ = reply.send(outcome);
             }
             Command::Pause { paused, reply } => {

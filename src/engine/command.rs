@@ -5,16 +5,20 @@ use std::sync::Arc;
 use tokio::sync::oneshot;
 
 use super::{ControlOutcome, Snapshot, SwitchOutcome};
-use crate::plan::Prepared;
+use crate::plan::{Level, Prepared};
 use crate::points::cloud::CloudMap;
 use crate::sim::Simulation;
 
 /// Commands, applied between steps.
 pub enum Command {
-    /// Continue at `prepared`'s level from the current state (transferred).
-    /// `sim` is the new level at rest, built off the stepping thread.
+    /// Continue at `level` from the current state (transferred). `sim` is
+    /// the new level at rest, built off the stepping thread: with
+    /// `prepared`'s coefficients, or for an at-once switch (`prepared`
+    /// `None`) with the scene's own (method `same`; no prediction and no
+    /// shadow reference until the estimate follows as a same-level switch).
     Switch {
-        prepared: Arc<Prepared>,
+        level: Level,
+        prepared: Option<Arc<Prepared>>,
         sim: Box<Simulation>,
         /// Surfaces: the new level's cloud map (built off the stepping thread too).
         cloud: Option<Box<CloudMap>>,

@@ -7,18 +7,26 @@ use std::time::Instant;
 use super::runner::Runner;
 use super::shadow::Shadow;
 use super::SwitchOutcome;
+use crate::estimate::Method;
 use crate::lod::transfer_state;
-use crate::plan::Prepared;
+use crate::plan::{Level, Prepared};
 use crate::points::cloud::CloudMap;
 use crate::sim::Simulation;
 
 impl Runner {
     pub(super) fn switch(
         &mut self,
-        prepared: Arc<Prepared>,
+        level: Level,
+        prepared: Option<Arc<Prepared>>,
         mut sim: Simulation,
         cloud: Option<CloudMap>,
     ) -> Result<SwitchOutcome, String> {
+        if prepared.as_ref().is_some_and(|p| p.level != level) {
+            return Err(format!(
+                "prepared for {}, asked for {level}",
+                prepared.map_or(level, |p| p.level)
+            ));
+        }
         let previous = self.level;
         let old_topology = self.sim.topology().clone();
         let before = self.snapshot(true);
@@ -40,15 +48,27 @@ impl Runner {
         if cloud.is_some() {
             self.cloud = cloud;
         }
-        self.level = prepared.level;
-        self.method = prepared.method;
-        self.material = prepared.material;
-        self.predicted_error = Some(prepared.predicted_error);
-        self.o_max = Some(prepared.o_max);
+        self.level = level;
         self.coefficient_version += 1;
-        self.shadow = self
-            .shadow_wanted
-            .then(|| Shadow::new(prepared.clone(), self.sim.topology().n_nodes));
+        match prepared {
+            Some(prepared) => {
+                self.method = prepared.method;
+                self.material = prepared.material;
+                self.predicted_error = Some(prepared.predicted_error);
+                self.o_max = Some(prepared.o_max);
+                self.shadow = self
+                    .shadow_wanted
+                    .then(|| Shadow::new(prepared.clone(), self.sim.topology().n_nodes));
+            }
+            None => {
+                // At once: the coefficients the simulation was built with.
+                self.method = Method::Same;
+                self.material = self.sim.params().material;
+                self.predicted_error = None;
+                self.o_max = None;
+                self.shadow = None;
+            }
+        }
         self.live_error = None;
         self.reanchor(Instant::now());
         self.update_status();

@@ -88,12 +88,48 @@ pub(super) async fn precompute(ctx: Arc<Context>, all_levels: bool, resumes: BTr
 }
 
 pub(super) async fn switch_to(handle: &InstanceHandle, ready: Ready) -> Result<SwitchOutcome, String> {
+    let level = ready.prepared.level;
+    send_switch(handle, level, Some(ready.prepared), ready.sim, ready.cloud).await
+}
+
+/// An at-once switch: `level` built with the scene's own coefficients
+/// ([`Preparer::quick`], on a blocking thread at normal priority: a client
+/// waits), live before its estimate is prepared.
+pub(super) async fn switch_at_once(
+    handle: &InstanceHandle,
+    preparer: Arc<Preparer>,
+    level: Level,
+) -> Result<SwitchOutcome, PrepareError> {
+    let start = tokio::task::spawn_blocking(move || preparer.quick(level))
+        .await
+        .map_err(|e| PrepareError::Failed {
+            level,
+            method: Method::Same,
+            message: format!("building the level stopped: {e}"),
+        })??;
+    send_switch(handle, level, None, start.sim, start.cloud)
+        .await
+        .map_err(|message| PrepareError::Failed {
+            level,
+            method: Method::Same,
+            message,
+        })
+}
+
+async fn send_switch(
+    handle: &InstanceHandle,
+    level: Level,
+    prepared: Option<Arc<Prepared>>,
+    sim: Simulation,
+    cloud: Option<CloudMap>,
+) -> Result<SwitchOutcome, String> {
     let (tx, rx) = oneshot::channel();
     handle
         .send(Command::Switch {
-            prepared: ready.prepared,
-            sim: Box::new(ready.sim),
-            cloud: ready.cloud.map(Box::new),
+            level,
+            prepared,
+            sim: Box::new(sim),
+            cloud: cloud.map(Box::new),
             reply: tx,
         })
         .map_err(str::to_string)?;

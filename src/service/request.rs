@@ -53,6 +53,9 @@ pub enum SwitchTarget {
 pub struct SwitchPlan {
     pub target: SwitchTarget,
     pub method: Method,
+    /// Go live at once with the scene's coefficients when the level is not
+    /// prepared (level targets only).
+    pub at_once: bool,
 }
 
 /// The one instance `key` (`<prefix>/<instance>/<leaf>`) names, if `known`.
@@ -143,7 +146,12 @@ pub fn switch_plan(config: &InstancePlan, req: &v1::SwitchRequest) -> Result<Swi
             SwitchTarget::MaxError(*e)
         }
     };
-    Ok(SwitchPlan { target, method })
+    let at_once = req.at_once && matches!(target, SwitchTarget::Level(_));
+    Ok(SwitchPlan {
+        target,
+        method,
+        at_once,
+    })
 }
 
 /// Check a control request: one of the known actions.

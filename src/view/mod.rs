@@ -289,6 +289,10 @@ enum Command {
         level: Option<String>,
         max_error: Option<f64>,
         method: Option<String>,
+        /// Live at once with the scene's coefficients when the level is not
+        /// prepared; the estimate follows in place.
+        #[serde(default)]
+        at_once: bool,
     },
 }
 
@@ -297,6 +301,7 @@ pub fn switch_request(
     level: Option<&str>,
     max_error: Option<f64>,
     method: Option<&str>,
+    at_once: bool,
 ) -> Result<v1::SwitchRequest, String> {
     use v1::switch_request::Target;
     let target = match (level, max_error) {
@@ -308,6 +313,7 @@ pub fn switch_request(
     Ok(v1::SwitchRequest {
         target: Some(target),
         method: method.unwrap_or_default().to_string(),
+        at_once,
     })
 }
 
@@ -336,11 +342,11 @@ fn switch_reply(id: u64, result: Result<v1::SwitchReply, String>) -> Message {
             "type": "switch", "id": id, "ok": true,
             "previous": level_text(&r.previous), "level": level_text(&r.level),
             "method": r.method, "predicted_error": r.predicted_error, "dt": r.dt,
-            "coefficient_version": r.coefficient_version,
+            "coefficient_version": r.coefficient_version, "refining": r.refining,
             "message": format!(
                 "switched {} → {} ({}, {}) in {:.2} s{}",
                 level_text(&r.previous), level_text(&r.level), r.method, pct(r.predicted_error), r.seconds,
-                if r.cached { ", cached" } else { "" }
+                if r.refining { ", the estimate follows" } else if r.cached { ", cached" } else { "" }
             ),
         })),
         Err(message) => {
@@ -475,12 +481,13 @@ fn command(cmd: Command, hub: &Arc<Hub>, selected: &mut Selected, out: &mpsc::Se
             level,
             max_error,
             method,
+            at_once,
         } => {
             let Some(name) = selected.name.clone() else {
                 let _ = out.try_send(switch_reply(id, Err("select an instance first".into())));
                 return;
             };
-            let request = switch_request(level.as_deref(), max_error, method.as_deref());
+            let request = switch_request(level.as_deref(), max_error, method.as_deref(), at_once);
             let (hub, out) = (hub.clone(), out.clone());
             tokio::spawn(async move {
                 let result = match request {
@@ -518,20 +525,22 @@ mod tests {
 
     #[test]
     fn page_commands_become_switch_requests_or_clear_refusals() {
-        let r = switch_request(Some("16x16"), None, Some("bcd")).unwrap();
+        let r = switch_request(Some("16x16"), None, Some("bcd"), true).unwrap();
         assert_eq!(r.method, "bcd");
         assert!(matches!(r.target, Some(v1::switch_request::Target::Level(l)) if l.nx == 16 && l.ny == 16));
-        let r = switch_request(None, Some(0.05), None).unwrap();
+        let r = switch_request(None, Some(0.05), None, false).unwrap();
         assert!(matches!(r.target, Some(v1::switch_request::Target::MaxError(e)) if e == 0.05));
-        assert!(switch_request(Some("16by16"), None, None)
+        assert!(switch_request(Some("16by16"), None, None, false)
             .unwrap_err()
             .contains("16by16"));
-        assert!(switch_request(None, Some(f64::NAN), None)
+        assert!(switch_request(None, Some(f64::NAN), None, false)
             .unwrap_err()
             .contains("max_error"));
-        assert!(switch_request(None, Some(-0.1), None).unwrap_err().contains("positive"));
-        assert!(switch_request(Some("8x8"), Some(0.1), None).is_err());
-        assert!(switch_request(None, None, None).is_err());
+        assert!(switch_request(None, Some(-0.1), None, false)
+            .unwrap_err()
+            .contains("positive"));
+        assert!(switch_request(Some("8x8"), Some(0.1), None, false).is_err());
+        assert!(switch_request(None, None, None, false).is_err());
         let cmd: Command = serde_json::from_str(r#"{"op":"switch","id":3,"max_error":0.1}"#).unwrap();
         assert!(matches!(
             cmd,

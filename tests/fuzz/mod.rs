@@ -96,6 +96,7 @@ pub fn switch_request(rng: &mut Rng) -> v1::SwitchRequest {
         })),
     };
     v1::SwitchRequest {
+        at_once: false,
         target,
         method: method(rng),
     }

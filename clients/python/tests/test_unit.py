@@ -190,6 +190,14 @@ class Requests(unittest.TestCase):
         again = v1.SwitchRequest.FromString(r.SerializeToString())
         self.assertEqual(again, r)
 
+    def test_switch_at_once(self):
+        r = lc.switch_request("24x24", at_once=True)
+        self.assertTrue(r.at_once)
+        self.assertTrue(v1.SwitchRequest.FromString(r.SerializeToString()).at_once)
+        self.assertFalse(lc.switch_request("24x24").at_once)
+        with self.assertRaises(ValueError):
+            lc.switch_request(max_error=0.05, at_once=True)
+
     def test_switch_by_error(self):
         r = lc.switch_request(max_error=0.05)
         self.assertEqual(r.WhichOneof("target"), "max_error")

@@ -10,11 +10,12 @@ use prost::Message;
 use zenoh::query::Query;
 
 use super::{decode, refuse, reply_error, reply_ok, target};
+use crate::engine::SwitchOutcome;
 use crate::estimate::Method;
 use crate::plan::{Level, PrepareError};
 use crate::proto::v1::error::Code;
 use crate::proto::{self, schema, v1, WireLevel};
-use crate::service::prepare::{prepare, switch_to, Ready};
+use crate::service::prepare::{prepare, switch_at_once, switch_to, Ready};
 use crate::service::request::{self, SwitchTarget};
 use crate::service::{keys, Context, Instance, MAX_PENDING_SWITCHES};
 
@@ -77,46 +78,108 @@ pub(in crate::service) async fn answer_switch(ctx: Arc<Context>, q: Query) {
     }
     let was_ready = inst.preparer.get(level, method).is_some();
     let _guard = inst.switching.lock().await;
+    if plan.at_once && !was_ready {
+        match switch_at_once(&inst.handle, inst.preparer.clone(), level).await {
+            Ok(o) => {
+                tokio::spawn(refine(
+                    ctx.clone(),
+                    config.name.clone(),
+                    level,
+                    method,
+                    o.coefficient_version,
+                ));
+                return reply_switched(&ctx, &q, &config.name, &o, arrived, false, true).await;
+            }
+            Err(e) => return reply_error(&ctx, &q, prepare_code(&e), e.to_string()).await,
+        }
+    }
     let ready = match prepare(inst.preparer.clone(), level, method).await {
         Ok(p) => p,
-        Err(e) => {
-            let code = match e {
-                PrepareError::Unstable { .. } => Code::Unstable,
-                PrepareError::NotAllowed { .. } => Code::LevelNotAllowed,
-                _ => Code::EstimationFailed,
-            };
-            return reply_error(&ctx, &q, code, e.to_string()).await;
-        }
+        Err(e) => return reply_error(&ctx, &q, prepare_code(&e), e.to_string()).await,
     };
     let cached = was_ready || ready.prepared.cached;
     match switch_to(&inst.handle, ready).await {
-        Ok(o) => {
-            tracing::info!(instance = %config.name, from = %o.previous, to = %o.level, %method, "switched");
-            let reply = v1::SwitchReply {
-                instance: config.name.clone(),
-                previous: Some(o.previous.to_wire()),
-                level: Some(o.level.to_wire()),
-                method: o.method.to_string(),
-                coefficients: Some(proto::coefficients(&o.material)),
-                predicted_error: o.predicted_error,
-                dt: o.dt,
-                seconds: arrived.elapsed().as_secs_f64(),
-                cached,
-                coefficient_version: o.coefficient_version,
-                frame: o.frame,
-            };
-            if let Some(c) = ctx.telemetry.instance(&config.name) {
-                c.switches.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-            }
-            reply_ok(
-                &q,
-                keys::switch(&ctx.prefix, &config.name),
-                schema::SWITCH_REPLY,
-                reply.encode_to_vec(),
-            )
-            .await;
-        }
+        Ok(o) => reply_switched(&ctx, &q, &config.name, &o, arrived, cached, false).await,
         Err(e) => reply_error(&ctx, &q, Code::Unavailable, e).await,
+    }
+}
+
+/// The wire code of a preparation that failed.
+fn prepare_code(e: &PrepareError) -> Code {
+    match e {
+        PrepareError::Unstable { .. } => Code::Unstable,
+        PrepareError::NotAllowed { .. } => Code::LevelNotAllowed,
+        _ => Code::EstimationFailed,
+    }
+}
+
+/// Count the switch and answer it.
+async fn reply_switched(
+    ctx: &Context,
+    q: &Query,
+    name: &str,
+    o: &SwitchOutcome,
+    arrived: Instant,
+    cached: bool,
+    refining: bool,
+) {
+    tracing::info!(instance = %name, from = %o.previous, to = %o.level, method = %o.method, refining, "switched");
+    let reply = v1::SwitchReply {
+        instance: name.to_string(),
+        previous: Some(o.previous.to_wire()),
+        level: Some(o.level.to_wire()),
+        method: o.method.to_string(),
+        coefficients: Some(proto::coefficients(&o.material)),
+        predicted_error: o.predicted_error,
+        dt: o.dt,
+        seconds: arrived.elapsed().as_secs_f64(),
+        cached,
+        coefficient_version: o.coefficient_version,
+        frame: o.frame,
+        refining,
+    };
+    if let Some(c) = ctx.telemetry.instance(name) {
+        c.switches.fetch_add(1, Ordering::Relaxed);
+    }
+    reply_ok(
+        q,
+        keys::switch(&ctx.prefix, name),
+        schema::SWITCH_REPLY,
+        reply.encode_to_vec(),
+    )
+    .await;
+}
+
+/// After an at-once switch: prepare `level` with `method` in the background
+/// and put the estimate live in place (a same-level switch) unless the
+/// instance has been switched since (its coefficient version moved on).
+async fn refine(ctx: Arc<Context>, name: String, level: Level, method: Method, version: u32) {
+    let Some(inst) = ctx.instances.get(&name).cloned() else {
+        return;
+    };
+    let prepared = prepare(inst.preparer.clone(), level, method).await;
+    let _guard = inst.switching.lock().await;
+    let status = inst.handle.status();
+    if status.level != level || status.coefficient_version != version {
+        tracing::info!(instance = %name, %level, %method, "estimate prepared; the instance has switched since, not applied");
+        return;
+    }
+    match prepared {
+        Ok(ready) => match switch_to(&inst.handle, ready).await {
+            Ok(o) => {
+                // Not counted as a switch: the client's was, at once.
+                tracing::info!(
+                    instance = %name,
+                    %level,
+                    %method,
+                    predicted_error = o.predicted_error,
+                    coefficient_version = o.coefficient_version,
+                    "estimate live after an at-once switch"
+                );
+            }
+            Err(e) => tracing::error!(instance = %name, %level, "applying the estimate: {e}"),
+        },
+        Err(e) => tracing::warn!(instance = %name, %level, %method, "cannot prepare after an at-once switch: {e}"),
     }
 }
 

@@ -104,6 +104,11 @@ def parser() -> argparse.ArgumentParser:
     )
     s.add_argument("--method", help="estimation method (same, bcd, gkd, lsq, fit); default: the instance's")
     s.add_argument(
+        "--at-once",
+        action="store_true",
+        help="an unprepared level goes live at once with the scene's coefficients; the estimate follows in place",
+    )
+    s.add_argument(
         "--timeout",
         type=_positive,
         default=600.0,
@@ -197,7 +202,14 @@ def print_metrics(m: "v1.Metrics") -> None:
 
 def cmd_switch(args, client: Client) -> None:
     started = time.monotonic()
-    r = client.switch(args.instance, args.level, max_error=args.max_error, method=args.method, timeout=args.timeout)
+    r = client.switch(
+        args.instance,
+        args.level,
+        max_error=args.max_error,
+        method=args.method,
+        at_once=args.at_once,
+        timeout=args.timeout,
+    )
     c = r.coefficients
     print(
         f"{r.instance}: {level_str(r.previous)} -> {level_str(r.level)} ({r.method}), "

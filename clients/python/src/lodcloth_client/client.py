@@ -177,16 +177,19 @@ class Client:
         *,
         max_error: Optional[float] = None,
         method: Optional[str] = None,
+        at_once: bool = False,
         timeout: float = DEFAULT_SWITCH_TIMEOUT,
     ) -> "v1.SwitchReply":
         """Switch ``instance`` to ``level`` (``"16x16"``, ``300`` points,
         ``(nx, ny)`` or a ``Level``) or to the cheapest allowed level whose
         predicted error is at most ``max_error`` (0.05 = 5 %). An unprepared
-        level is estimated first, hence the long default ``timeout``.
+        level is estimated first, hence the long default ``timeout``, unless
+        ``at_once``: then it goes live at once with the scene's own
+        coefficients (``reply.refining``) and the estimate follows in place.
         Raises :class:`RefusedError` (e.g. ``CODE_LEVEL_NOT_ALLOWED``,
         ``CODE_UNKNOWN_INSTANCE``, ``CODE_NO_LEVEL_MEETS_ERROR``,
         ``CODE_BUSY``) or :class:`NoReplyError`."""
-        request = switch_request(level, max_error=max_error, method=method)
+        request = switch_request(level, max_error=max_error, method=method, at_once=at_once)
         return self._request(v1.SwitchReply, keys.switch(self.prefix, instance), timeout, request)
 
     def control(self, instance: str, action: Union[str, int], timeout: Optional[float] = None) -> "v1.ControlReply":

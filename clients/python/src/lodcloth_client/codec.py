@@ -237,14 +237,19 @@ def switch_request(
     *,
     max_error: Optional[float] = None,
     method: Optional[str] = None,
+    at_once: bool = False,
 ) -> "v1.SwitchRequest":
     """A ``SwitchRequest`` for exactly one target: a ``level`` (see
     :func:`parse_level`) or ``max_error`` (relative, 0.05 = 5 %: the
     cheapest allowed level predicted within it). ``method`` (same, bcd,
-    gkd, lsq, fit) defaults to the instance's."""
+    gkd, lsq, fit) defaults to the instance's. ``at_once``: an unprepared
+    level goes live with the scene's own coefficients and the estimate
+    follows in place (the reply says ``refining``); level targets only."""
     if (level is None) == (max_error is None):
         raise ValueError("a switch needs exactly one of level and max_error")
-    req = v1.SwitchRequest(method=method or "")
+    if at_once and level is None:
+        raise ValueError("at_once applies to a level target, not max_error")
+    req = v1.SwitchRequest(method=method or "", at_once=at_once)
     if level is not None:
         req.level.CopyFrom(parse_level(level))
     else:

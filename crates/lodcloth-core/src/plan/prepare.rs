@@ -656,7 +656,20 @@ impl Preparer {
     /// seconds); lets an instance step at once while its estimate is
     /// prepared.
     pub fn quick_start(&self) -> Result<Start, PrepareError> {
-        let level = self.plan.start;
+        self.quick(self.plan.start)
+    }
+
+    /// Any allowed `level` at rest with the scene's own coefficients at that
+    /// resolution (what `same` estimates), without a reference: what an
+    /// at-once switch goes live with while the level is prepared. A cloth
+    /// takes milliseconds; a surface is simplified first.
+    pub fn quick(&self, level: Level) -> Result<Start, PrepareError> {
+        if !self.plan.levels.contains(&level) {
+            return Err(PrepareError::NotAllowed {
+                level,
+                allowed: allowed(&self.plan.levels),
+            });
+        }
         let failed = |message: String| PrepareError::Failed {
             level,
             method: Method::Same,

@@ -198,17 +198,19 @@ class InstanceList(_message.Message):
     def __init__(self, daemon: _Optional[str] = ..., instances: _Optional[_Iterable[_Union[InstanceSummary, _Mapping]]] = ...) -> None: ...
 
 class SwitchRequest(_message.Message):
-    __slots__ = ("level", "max_error", "method")
+    __slots__ = ("level", "max_error", "method", "at_once")
     LEVEL_FIELD_NUMBER: _ClassVar[int]
     MAX_ERROR_FIELD_NUMBER: _ClassVar[int]
     METHOD_FIELD_NUMBER: _ClassVar[int]
+    AT_ONCE_FIELD_NUMBER: _ClassVar[int]
     level: Level
     max_error: float
     method: str
-    def __init__(self, level: _Optional[_Union[Level, _Mapping]] = ..., max_error: _Optional[float] = ..., method: _Optional[str] = ...) -> None: ...
+    at_once: bool
+    def __init__(self, level: _Optional[_Union[Level, _Mapping]] = ..., max_error: _Optional[float] = ..., method: _Optional[str] = ..., at_once: bool = ...) -> None: ...
 
 class SwitchReply(_message.Message):
-    __slots__ = ("instance", "previous", "level", "method", "coefficients", "predicted_error", "dt", "seconds", "cached", "coefficient_version", "frame")
+    __slots__ = ("instance", "previous", "level", "method", "coefficients", "predicted_error", "dt", "seconds", "cached", "coefficient_version", "frame", "refining")
     INSTANCE_FIELD_NUMBER: _ClassVar[int]
     PREVIOUS_FIELD_NUMBER: _ClassVar[int]
     LEVEL_FIELD_NUMBER: _ClassVar[int]
@@ -220,6 +222,7 @@ class SwitchReply(_message.Message):
     CACHED_FIELD_NUMBER: _ClassVar[int]
     COEFFICIENT_VERSION_FIELD_NUMBER: _ClassVar[int]
     FRAME_FIELD_NUMBER: _ClassVar[int]
+    REFINING_FIELD_NUMBER: _ClassVar[int]
     instance: str
     previous: Level
     level: Level
@@ -231,7 +234,8 @@ class SwitchReply(_message.Message):
     cached: bool
     coefficient_version: int
     frame: int
-    def __init__(self, instance: _Optional[str] = ..., previous: _Optional[_Union[Level, _Mapping]] = ..., level: _Optional[_Union[Level, _Mapping]] = ..., method: _Optional[str] = ..., coefficients: _Optional[_Union[Coefficients, _Mapping]] = ..., predicted_error: _Optional[float] = ..., dt: _Optional[float] = ..., seconds: _Optional[float] = ..., cached: bool = ..., coefficient_version: _Optional[int] = ..., frame: _Optional[int] = ...) -> None: ...
+    refining: bool
+    def __init__(self, instance: _Optional[str] = ..., previous: _Optional[_Union[Level, _Mapping]] = ..., level: _Optional[_Union[Level, _Mapping]] = ..., method: _Optional[str] = ..., coefficients: _Optional[_Union[Coefficients, _Mapping]] = ..., predicted_error: _Optional[float] = ..., dt: _Optional[float] = ..., seconds: _Optional[float] = ..., cached: bool = ..., coefficient_version: _Optional[int] = ..., frame: _Optional[int] = ..., refining: bool = ...) -> None: ...
 
 class ControlRequest(_message.Message):
     __slots__ = ("action",)
