@@ -223,7 +223,7 @@ impl Model {
         let topo = &*self.topology;
         let n = topo.n_nodes;
         debug_assert!(ws.force.all_zero(), "force buffer not cleared");
-        let f = ws.force.window_away_from(&[pos.as_ptr(), vel.as_ptr()]);
+        let f = ws.force.window_away_from([pos.as_ptr(), vel.as_ptr()]);
         let totals = forces::spring_forces(
             topo,
             &self.params.material,
