@@ -139,7 +139,7 @@ async fn main() {
     let lodcloth = std::path::Path::new(env!("CARGO_BIN_EXE_lodcloth"));
     let log = std::fs::File::create(dir.path().join("serve.log")).expect("log");
     let _daemon = Daemon(
-        std::process::Command::new(&lodcloth)
+        std::process::Command::new(lodcloth)
             .arg("serve")
             .arg("--config")
             .arg(&config_path)
@@ -234,7 +234,7 @@ async fn main() {
                 .map(|n| per_instance(&m, "lodcloth_levels_prepared", n))
                 .sum(),
         };
-        if samples.len() % 10 == 0 {
+        if samples.len().is_multiple_of(10) {
             let worst = s
                 .states
                 .iter()

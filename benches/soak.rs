@@ -291,7 +291,7 @@ fn start_daemon(dir: &std::path::Path) -> (Child, String) {
     // The binary cargo built beside this benchmark.
     let lodcloth = std::path::Path::new(env!("CARGO_BIN_EXE_lodcloth"));
     let daemon = Child(
-        std::process::Command::new(&lodcloth)
+        std::process::Command::new(lodcloth)
             .args(["serve", "--config"])
             .arg(&config)
             .stdout(std::process::Stdio::null())
