@@ -56,7 +56,7 @@ fn main() {
         let cost = time_steps(t, &scene) - base;
         println!(
             "group {i} {:<10} offset {:?}: {:5} springs, {:.1} µs, {:.2} ns/spring",
-            g.kind.name(),
+            g.class.name(),
             g.stencil_offset,
             g.len(),
             cost * 1e6,

@@ -111,7 +111,7 @@ fn main() {
     let bad = est
         .iter()
         .zip(big.normals.as_ref().unwrap())
-        .filter(|(a, b)| lodcloth::sim::vec3::dot(**a, **b) < 0.95)
+        .filter(|(a, b)| lodcloth_core::sim::vec3::dot(**a, **b) < 0.95)
         .count();
     println!("normals estimated and oriented (k = 12) in {normals_s:.2} s; {bad} of {big_n} off by more than 18°\n");
     println!("| simulation points | build s (simplify + springs + transfer weights) | simulation µs | transfer + normals µs | total µs | reads per point |");
