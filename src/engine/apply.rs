@@ -5,7 +5,6 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use super::runner::Runner;
-use super::shadow::Shadow;
 use super::{Coefficients, Command, ControlOutcome, Snapshot};
 use crate::plan::Prepared;
 use crate::points::cloud::CloudMap;
@@ -96,11 +95,8 @@ impl Runner {
                     && self.dt() == prepared.dt
                     && self.predicted_error.is_none();
                 if same {
-                    self.predicted_error = Some(prepared.predicted_error);
-                    self.o_max = Some(prepared.o_max);
-                    self.shadow = self
-                        .shadow_wanted
-                        .then(|| Shadow::new(prepared.clone(), self.sim.topology().n_nodes));
+                    // Method and material are already the prepared ones.
+                    self.adopt(&prepared);
                     self.update_status();
                 }
                 let _ = reply.send(same);
@@ -132,13 +128,7 @@ impl Runner {
                 if cloud.is_some() {
                     self.cloud = cloud;
                 }
-                self.method = prepared.method;
-                self.material = prepared.material;
-                self.predicted_error = Some(prepared.predicted_error);
-                self.o_max = Some(prepared.o_max);
-                self.shadow = self
-                    .shadow_wanted
-                    .then(|| Shadow::new(prepared.clone(), self.sim.topology().n_nodes));
+                self.adopt(&prepared);
             }
             (None, Some(mut sim)) => {
                 let Some(saved_with) = saved.coefficients else {

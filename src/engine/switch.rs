@@ -14,6 +14,19 @@ use crate::points::cloud::CloudMap;
 use crate::sim::Simulation;
 
 impl Runner {
+    /// Run with `prepared`'s method and coefficients, its predicted error and
+    /// error normaliser, and (when wanted) its shadow reference. The
+    /// simulation must already be built with them at its level.
+    pub(super) fn adopt(&mut self, prepared: &Arc<Prepared>) {
+        self.method = prepared.method;
+        self.material = prepared.material;
+        self.predicted_error = Some(prepared.predicted_error);
+        self.o_max = Some(prepared.o_max);
+        self.shadow = self
+            .shadow_wanted
+            .then(|| Shadow::new(prepared.clone(), self.sim.topology().n_nodes));
+    }
+
     pub(super) fn switch(
         &mut self,
         level: Level,
@@ -51,15 +64,7 @@ impl Runner {
         self.level = level;
         self.coefficient_version += 1;
         match prepared {
-            Some(prepared) => {
-                self.method = prepared.method;
-                self.material = prepared.material;
-                self.predicted_error = Some(prepared.predicted_error);
-                self.o_max = Some(prepared.o_max);
-                self.shadow = self
-                    .shadow_wanted
-                    .then(|| Shadow::new(prepared.clone(), self.sim.topology().n_nodes));
-            }
+            Some(prepared) => self.adopt(&prepared),
             None => {
                 // At once: the coefficients the simulation was built with.
                 self.method = Method::Same;

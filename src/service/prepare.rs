@@ -8,7 +8,7 @@ use std::time::Duration;
 use tokio::sync::oneshot;
 
 use super::persist::resume;
-use super::{lower_priority, Context};
+use super::{lower_priority, Context, Instance};
 use crate::engine::{Command, InstanceHandle, Snapshot, SwitchOutcome};
 use crate::estimate::Method;
 use crate::plan::{Level, PrepareError, Prepared, Preparer};
@@ -50,28 +50,8 @@ pub(super) async fn precompute(ctx: Arc<Context>, all_levels: bool, resumes: BTr
     resume(ctx.clone(), resumes).await;
     for inst in ctx.instances.values() {
         let config = inst.preparer.plan().clone();
-        let level = config.start;
-        // Prepare without holding the switch lock (client switches go on
-        // meanwhile); apply only if nobody has switched the instance since.
-        let prepared = prepare(inst.preparer.clone(), level, config.method).await;
-        let _guard = inst.switching.lock().await;
-        let status = inst.handle.status();
-        if status.level != level || status.coefficient_version != 1 {
-            continue;
-        }
-        match prepared {
-            Ok(ready) => match switch_to(&inst.handle, ready).await {
-                Ok(o) => tracing::info!(
-                    instance = %config.name,
-                    %level,
-                    method = %config.method,
-                    predicted_error = o.predicted_error,
-                    "estimated coefficients live"
-                ),
-                Err(e) => tracing::error!(instance = %config.name, "applying the estimate: {e}"),
-            },
-            Err(e) => tracing::error!(instance = %config.name, "preparing the start level: {e}"),
-        }
+        // Version 1: the quick start's coefficients, nobody switched since.
+        estimate_in_place(inst, config.start, config.method, 1).await;
     }
     if !all_levels {
         return;
@@ -85,6 +65,36 @@ pub(super) async fn precompute(ctx: Arc<Context>, all_levels: bool, resumes: BTr
         }
     }
     tracing::info!("every configured level is prepared");
+}
+
+/// Prepare `level` with `method` without holding the instance's switch lock
+/// (client switches go on meanwhile), then put the estimate live in place
+/// (a same-level switch) only if the instance still runs `level` at
+/// coefficient `version`: nobody has switched it since. What happened is
+/// logged.
+pub(super) async fn estimate_in_place(inst: &Instance, level: Level, method: Method, version: u32) {
+    let name = &inst.handle.name;
+    let prepared = prepare(inst.preparer.clone(), level, method).await;
+    let _guard = inst.switching.lock().await;
+    let status = inst.handle.status();
+    if status.level != level || status.coefficient_version != version {
+        tracing::info!(instance = %name, %level, %method, "estimate prepared; the instance has switched since, not applied");
+        return;
+    }
+    match prepared {
+        Ok(ready) => match switch_to(&inst.handle, ready).await {
+            Ok(o) => tracing::info!(
+                instance = %name,
+                %level,
+                %method,
+                predicted_error = o.predicted_error,
+                coefficient_version = o.coefficient_version,
+                "estimated coefficients live"
+            ),
+            Err(e) => tracing::error!(instance = %name, %level, "applying the estimate: {e}"),
+        },
+        Err(e) => tracing::error!(instance = %name, %level, %method, "preparing the estimate: {e}"),
+    }
 }
 
 pub(super) async fn switch_to(handle: &InstanceHandle, ready: Ready) -> Result<SwitchOutcome, String> {

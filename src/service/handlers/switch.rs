@@ -15,7 +15,7 @@ use crate::estimate::Method;
 use crate::plan::{Level, PrepareError};
 use crate::proto::v1::error::Code;
 use crate::proto::{self, schema, v1, WireLevel};
-use crate::service::prepare::{prepare, switch_at_once, switch_to, Ready};
+use crate::service::prepare::{estimate_in_place, prepare, switch_at_once, switch_to, Ready};
 use crate::service::request::{self, SwitchTarget};
 use crate::service::{keys, Context, Instance, MAX_PENDING_SWITCHES};
 
@@ -150,36 +150,12 @@ async fn reply_switched(
     .await;
 }
 
-/// After an at-once switch: prepare `level` with `method` in the background
-/// and put the estimate live in place (a same-level switch) unless the
-/// instance has been switched since (its coefficient version moved on).
+/// After an at-once switch: the requested method's estimate, live in place
+/// unless the instance is switched again first.
 async fn refine(ctx: Arc<Context>, name: String, level: Level, method: Method, version: u32) {
-    let Some(inst) = ctx.instances.get(&name).cloned() else {
-        return;
-    };
-    let prepared = prepare(inst.preparer.clone(), level, method).await;
-    let _guard = inst.switching.lock().await;
-    let status = inst.handle.status();
-    if status.level != level || status.coefficient_version != version {
-        tracing::info!(instance = %name, %level, %method, "estimate prepared; the instance has switched since, not applied");
-        return;
-    }
-    match prepared {
-        Ok(ready) => match switch_to(&inst.handle, ready).await {
-            Ok(o) => {
-                // Not counted as a switch: the client's was, at once.
-                tracing::info!(
-                    instance = %name,
-                    %level,
-                    %method,
-                    predicted_error = o.predicted_error,
-                    coefficient_version = o.coefficient_version,
-                    "estimate live after an at-once switch"
-                );
-            }
-            Err(e) => tracing::error!(instance = %name, %level, "applying the estimate: {e}"),
-        },
-        Err(e) => tracing::warn!(instance = %name, %level, %method, "cannot prepare after an at-once switch: {e}"),
+    if let Some(inst) = ctx.instances.get(&name) {
+        // Not counted as a switch: the client's was, at once.
+        estimate_in_place(inst, level, method, version).await;
     }
 }
 
