@@ -7,6 +7,13 @@
 //! pass (counting an overrun when that is not enough) and, beyond `max_lag`
 //! behind, drops the backlog (a lag reset). dt is never stretched.
 //!
+//! A cloth large enough to split its step (`sim::SPLIT_MIN_NODES`) borrows
+//! a second core for it: stepping threads come in pairs, each serving the
+//! other's [`Lender`] whenever it is idle (between its own steps), and a
+//! lone stepping thread gets a helper thread that does nothing else. A
+//! half nobody picked up is run by the stepping thread itself, so a busy
+//! partner never delays a step; the result does not depend on who ran it.
+//!
 //! Commands (switch, pause, reset) arrive on a channel and are applied
 //! between steps. States and metrics leave through `watch` channels that
 //! hold only the newest value, so a slow publisher drops frames and never
@@ -34,7 +41,7 @@ use tokio::sync::watch;
 use crate::estimate::Method;
 use crate::plan::Level;
 use crate::points::cloud::CloudMap;
-use crate::sim::Simulation;
+use crate::sim::{Lender, Simulation};
 use runner::Runner;
 
 pub use command::Command;
@@ -134,14 +141,41 @@ impl Engine {
             receivers.push(b);
             pending.push((index, tx, handle_parts));
         }
+        // Thread i posts halves to lenders[i]; its partner (i ^ 1, or a
+        // helper when it has none) serves them.
+        let lenders: Vec<Arc<Lender>> = (0..n_threads).map(|_| Arc::new(Lender::new())).collect();
         let mut threads = Vec::new();
         for (i, (_, runners)) in buckets.into_iter().enumerate() {
             let stop = stop.clone();
+            let own = lenders[i].clone();
+            let serves = lenders.get(i ^ 1).cloned();
             let h = std::thread::Builder::new()
                 .name(format!("lodcloth-step-{i}"))
-                .spawn(move || worker(runners, stop, settings))?;
+                .spawn(move || worker(runners, stop, settings, own, serves))?;
             threads.push(h);
         }
+        let mut helpers = Vec::new();
+        if settings.threads >= 2 && n_threads % 2 == 1 {
+            // The last stepping thread has no partner: a helper of its own.
+            let lender = lenders[n_threads - 1].clone();
+            let stop = stop.clone();
+            let h = std::thread::Builder::new()
+                .name(format!("lodcloth-help-{}", n_threads - 1))
+                .spawn(move || helper(lender, stop))?;
+            helpers.push(h);
+        }
+        for (i, lender) in lenders.iter().enumerate() {
+            match (threads.get(i ^ 1), n_threads % 2 == 1 && i == n_threads - 1) {
+                (Some(partner), false) => lender.set_helper(partner.thread().clone()),
+                (_, true) => {
+                    if let Some(h) = helpers.first() {
+                        lender.set_helper(h.thread().clone());
+                    }
+                }
+                (None, false) => {}
+            }
+        }
+        threads.extend(helpers);
         let mut handles: Vec<(usize, InstanceHandle)> = pending
             .into_iter()
             .zip(receivers)
@@ -206,20 +240,64 @@ struct HandleParts {
 /// Longest a stepping thread sleeps before looking at its commands again.
 const MAX_IDLE: Duration = Duration::from_millis(5);
 
-fn worker(mut runners: Vec<Runner>, stop: Arc<AtomicBool>, _settings: EngineSettings) {
+fn worker(
+    mut runners: Vec<Runner>,
+    stop: Arc<AtomicBool>,
+    _settings: EngineSettings,
+    own: Arc<Lender>,
+    serves: Option<Arc<Lender>>,
+) {
     while !stop.load(Ordering::Relaxed) {
         let now = Instant::now();
         let mut wake = now + MAX_IDLE;
         for r in &mut runners {
             r.poll_commands();
-            r.advance(now);
+            r.advance(now, &*own);
             r.publish(Instant::now());
             wake = wake.min(r.next_due()).min(r.next_publish).min(r.next_metrics);
         }
-        let now = Instant::now();
-        if wake > now {
-            std::thread::park_timeout(wake - now);
+        match &serves {
+            // Idle until `wake`: lend this core to the partner's halves
+            // (its join unparks this thread).
+            Some(partner) => serve_until(partner, wake),
+            None => {
+                let now = Instant::now();
+                if wake > now {
+                    std::thread::park_timeout(wake - now);
+                }
+            }
         }
+    }
+}
+
+/// How long a thread that just ran a half keeps watching for the next one
+/// before it parks: the halves of one step follow each other within
+/// microseconds (or after the longer of two halves), and waking a parked
+/// thread costs tens of them.
+const LINGER: Duration = Duration::from_micros(200);
+
+/// Run `lender`'s halves until `until`, parking while none is posted.
+fn serve_until(lender: &Lender, until: Instant) {
+    loop {
+        if lender.help_lingering(LINGER, until) > 0 {
+            continue;
+        }
+        let now = Instant::now();
+        if now >= until {
+            return;
+        }
+        std::thread::park_timeout(until - now);
+        if !lender.posted() {
+            // Woken for its own work (a command, the stop) or timed out.
+            return;
+        }
+    }
+}
+
+/// A thread that only serves `lender` (the partner of a lone stepping thread).
+fn helper(lender: Arc<Lender>, stop: Arc<AtomicBool>) {
+    while !stop.load(Ordering::Relaxed) {
+        serve_until(&lender, Instant::now() + MAX_IDLE);
     }
 }
 

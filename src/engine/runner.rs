@@ -14,7 +14,7 @@ use super::{lock, Command, EngineSettings, HandleParts, InstanceSetup, MetricsFr
 use crate::estimate::Method;
 use crate::plan::Level;
 use crate::points::cloud::CloudMap;
-use crate::sim::{Material, Simulation, State, StepReport};
+use crate::sim::{Material, Pair, Simulation, State, StepReport};
 
 /// One instance on its stepping thread.
 pub(super) struct Runner {
@@ -200,7 +200,7 @@ impl Runner {
     }
 
     /// Take the steps due at `now`.
-    pub(super) fn advance(&mut self, now: Instant) {
+    pub(super) fn advance(&mut self, now: Instant, pair: &dyn Pair) {
         if self.paused || self.held {
             self.reanchor(now);
             return;
@@ -223,7 +223,7 @@ impl Runner {
         }
         let t0 = Instant::now();
         for _ in 0..n {
-            self.step_once();
+            self.step_once(pair);
             if self.paused {
                 break;
             }
@@ -234,8 +234,8 @@ impl Runner {
         self.steps_since_origin += n;
     }
 
-    pub(super) fn step_once(&mut self) {
-        let report = self.sim.step();
+    pub(super) fn step_once(&mut self, pair: &dyn Pair) {
+        let report = self.sim.step_on(pair);
         self.frames += 1;
         // Non-finite, or finite but absurd (springs at 11× their rest
         // length: positions soon overflow f32 on the wire).

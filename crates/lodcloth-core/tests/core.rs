@@ -22,3 +22,4 @@ mod scenes;
 mod stability;
 mod strain_control;
 mod symmetry_determinism;
+mod two_threads;

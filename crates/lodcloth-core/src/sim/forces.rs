@@ -25,7 +25,9 @@
 //! twice ((x₊ − 2x + x₋)/dt² at dt ≈ 1e-4 s); in f32 that second difference
 //! would be rounding noise of the order of gravity itself.
 
+use super::pair::Pair;
 use super::params::{Material, SpringClass, SpringKind};
+use super::simd::{self, Isa};
 use super::topology::{SpringGroup, Topology};
 
 /// Springs processed together by the kernel (8 f64 = one AVX-512 or two AVX2 registers).
@@ -153,30 +155,65 @@ fn all_springs<const ADJ: bool>(
 ) -> SpringTotals {
     let n = topology.n_nodes;
     assert!(pos.len() == 3 * n && vel.len() == 3 * n && force.len() == 3 * n);
-    let (px, rest) = pos.split_at(n);
-    let (py, pz) = rest.split_at(n);
-    let (vx, rest) = vel.split_at(n);
-    let (vy, vz) = rest.split_at(n);
-    let p = [px, py, pz];
-    let v = [vx, vy, vz];
+    let (p, v) = (components(pos, n), components(vel, n));
     let (fx, rest) = force.split_at_mut(n);
     let (fy, fz) = rest.split_at_mut(n);
     let mut f = [fx, fy, fz];
-    let coef = |group: &SpringGroup| {
-        let sc = material.get(group.class);
-        Coef {
-            k: sc.k,
-            c: sc.c,
-            adjust_ratio,
-        }
-    };
-
     let mut acc = [Acc::EMPTY; 5];
+    stencil_springs::<ADJ>(topology, material, adjust_ratio, p, v, &mut f, 0, |_| (0, n), &mut acc);
     let KernelScratch {
         out,
         gather,
         gather_len,
     } = scratch;
+    for group in &topology.groups {
+        if group.stencil_offset.is_none() {
+            let ws = GatherScratch {
+                out,
+                gather,
+                cap: *gather_len,
+            };
+            let coef = coef(material, group, adjust_ratio);
+            gather_group::<ADJ>(group, p, v, coef, &mut f, ws, &mut acc[group.class.index()]);
+        }
+    }
+    totals(material, &acc)
+}
+
+/// The three components of a `[x…, y…, z…]` field of `n` nodes.
+#[inline(always)]
+fn components(field: &[f64], n: usize) -> [&[f64]; 3] {
+    let (x, rest) = field.split_at(n);
+    let (y, z) = rest.split_at(n);
+    [x, y, &z[..n]]
+}
+
+#[inline(always)]
+fn coef(material: &Material, group: &SpringGroup, adjust_ratio: f64) -> Coef {
+    let sc = material.get(group.class);
+    Coef {
+        k: sc.k,
+        c: sc.c,
+        adjust_ratio,
+    }
+}
+
+/// The springs of every stencil group whose `a` end lies in `range(offset)`
+/// (clipped to the group's runs), added to `f`, whose slices start at node
+/// `base` (every node a spring of the range touches must lie in them).
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn stencil_springs<const ADJ: bool>(
+    topology: &Topology,
+    material: &Material,
+    adjust_ratio: f64,
+    p: [&[f64]; 3],
+    v: [&[f64]; 3],
+    f: &mut [&mut [f64]; 3],
+    base: usize,
+    range: impl Fn(usize) -> (usize, usize),
+    acc: &mut [Acc; 5],
+) {
     #[inline(always)]
     fn sl(s: &[f64], at: usize, len: usize) -> &[f64] {
         &s[at..at + len]
@@ -185,7 +222,8 @@ fn all_springs<const ADJ: bool>(
         let Some(offset) = group.stencil_offset.map(|o| o as usize) else {
             continue;
         };
-        let coef = coef(group);
+        let (lo, hi) = range(offset);
+        let coef = coef(material, group, adjust_ratio);
         let acc = &mut acc[group.class.index()];
         // One padded run when the group has one (masked slots between
         // rows), else its runs one by one.
@@ -206,8 +244,17 @@ fn all_springs<const ADJ: bool>(
             Some(one) => &mut std::iter::once(one),
             None => &mut { runs },
         };
-        for (a0, rest, inv_rest, live) in all {
+        for (start, rest, inv_rest, live) in all {
+            // The part of the run with `a` in lo..hi.
+            let i0 = lo.saturating_sub(start).min(rest.len());
+            let i1 = hi.saturating_sub(start).min(rest.len());
+            if i1 <= i0 {
+                continue;
+            }
+            let (rest, inv_rest) = (&rest[i0..i1], &inv_rest[i0..i1]);
+            let live = if live.is_empty() { live } else { &live[i0..i1] };
             let len = rest.len();
+            let a0 = start + i0;
             let b0 = a0 + offset;
             let run = Run {
                 xa: [sl(p[0], a0, len), sl(p[1], a0, len), sl(p[2], a0, len)],
@@ -218,24 +265,18 @@ fn all_springs<const ADJ: bool>(
                 inv_rest,
                 live,
             };
+            let (wa, wb) = (a0 - base, b0 - base);
             match offset {
-                1 => run_carry::<1, ADJ>(&run, a0, coef, &mut f, acc),
-                2 => run_carry::<2, ADJ>(&run, a0, coef, &mut f, acc),
-                _ => run_direct::<ADJ>(&run, a0, b0, coef, &mut f, acc),
+                1 => run_carry::<1, ADJ>(&run, wa, coef, f, acc),
+                2 => run_carry::<2, ADJ>(&run, wa, coef, f, acc),
+                _ => run_direct::<ADJ>(&run, wa, wb, coef, f, acc),
             }
         }
     }
-    for group in &topology.groups {
-        if group.stencil_offset.is_none() {
-            let ws = GatherScratch {
-                out,
-                gather,
-                cap: *gather_len,
-            };
-            gather_group::<ADJ>(group, p, v, coef(group), &mut f, ws, &mut acc[group.class.index()]);
-        }
-    }
+}
 
+/// Energy and largest strain per kind from the kernel's lane accumulators.
+fn totals(material: &Material, acc: &[Acc; 5]) -> SpringTotals {
     let mut totals = SpringTotals {
         elastic_energy: 0.0,
         max_strain: [0.0; 3],
@@ -258,6 +299,138 @@ fn all_springs<const ADJ: bool>(
         }
     }
     totals
+}
+
+/// Whether [`spring_forces_split`] can evaluate `topology` split at node
+/// `split`: every group a stencil (no gathered pairs) with offsets below
+/// `split`, and `split` inside the cloth.
+pub(crate) fn can_split(topology: &Topology, split: usize) -> bool {
+    split > 0
+        && split < topology.n_nodes
+        && topology.groups.iter().all(|g| {
+            g.stencil_offset
+                .is_some_and(|o| (o as usize) < split && o as usize <= topology.n_nodes - split)
+        })
+}
+
+/// [`spring_forces`] in two halves on `pair`: the springs with both ends
+/// below node `split`, those with both ends at or above it (at the same
+/// time, each into its own part of `force`), then the few that cross
+/// `split`. The result depends on `split`, never on who ran the halves.
+/// `isa` is the caller's instruction set, for the halves that run on
+/// another thread.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn spring_forces_split(
+    topology: &Topology,
+    material: &Material,
+    adjust_ratio: f64,
+    pos: &[f64],
+    vel: &[f64],
+    force: &mut [f64],
+    split: usize,
+    pair: &dyn Pair,
+    isa: Isa,
+) -> SpringTotals {
+    if adjust_ratio < f64::INFINITY {
+        split_impl::<true>(topology, material, adjust_ratio, pos, vel, force, split, pair, isa)
+    } else {
+        split_impl::<false>(topology, material, adjust_ratio, pos, vel, force, split, pair, isa)
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+fn split_impl<const ADJ: bool>(
+    topology: &Topology,
+    material: &Material,
+    adjust_ratio: f64,
+    pos: &[f64],
+    vel: &[f64],
+    force: &mut [f64],
+    split: usize,
+    pair: &dyn Pair,
+    isa: Isa,
+) -> SpringTotals {
+    let n = topology.n_nodes;
+    assert!(pos.len() == 3 * n && vel.len() == 3 * n && force.len() == 3 * n);
+    assert!(can_split(topology, split), "split {split} of {n} nodes");
+    let (p, v) = (components(pos, n), components(vel, n));
+    let (fx, rest) = force.split_at_mut(n);
+    let (fy, fz) = rest.split_at_mut(n);
+    let (mut acc_lo, mut acc_hi, mut acc_cross) = ([Acc::EMPTY; 5], [Acc::EMPTY; 5], [Acc::EMPTY; 5]);
+    {
+        let (fx0, fx1) = fx.split_at_mut(split);
+        let (fy0, fy1) = fy.split_at_mut(split);
+        let (fz0, fz1) = fz.split_at_mut(split);
+        let (mut lo, mut hi) = ([fx0, fy0, fz0], [fx1, fy1, fz1]);
+        pair.join(
+            &mut || {
+                simd::run(
+                    isa,
+                    #[inline(always)]
+                    || {
+                        stencil_springs::<ADJ>(
+                            topology,
+                            material,
+                            adjust_ratio,
+                            p,
+                            v,
+                            &mut lo,
+                            0,
+                            |o| (0, split - o),
+                            &mut acc_lo,
+                        )
+                    },
+                )
+            },
+            &mut || {
+                simd::run(
+                    isa,
+                    #[inline(always)]
+                    || {
+                        stencil_springs::<ADJ>(
+                            topology,
+                            material,
+                            adjust_ratio,
+                            p,
+                            v,
+                            &mut hi,
+                            split,
+                            |_| (split, n),
+                            &mut acc_hi,
+                        )
+                    },
+                )
+            },
+        );
+    }
+    let mut f = [fx, fy, fz];
+    simd::run(
+        isa,
+        #[inline(always)]
+        || {
+            stencil_springs::<ADJ>(
+                topology,
+                material,
+                adjust_ratio,
+                p,
+                v,
+                &mut f,
+                0,
+                |o| (split - o, split),
+                &mut acc_cross,
+            )
+        },
+    );
+    let mut acc = acc_lo;
+    for (k, a) in acc.iter_mut().enumerate() {
+        for part in [&acc_hi[k], &acc_cross[k]] {
+            for j in 0..LANES {
+                a.ext2[j] += part.ext2[j];
+                a.max_ratio[j] = a.max_ratio[j].max(part.max_ratio[j]);
+            }
+        }
+    }
+    totals(material, &acc)
 }
 
 /// Endpoint data of a batch of springs as parallel slices of equal length.
@@ -745,6 +918,102 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// The split evaluation adds the same springs as the whole one, in
+    /// another order: forces equal to rounding, every spring counted once
+    /// (energy), the same largest strain; and the same bits whether the
+    /// halves ran on one thread or two.
+    #[test]
+    fn a_split_evaluation_adds_every_spring_once() {
+        use super::super::pair::{Lender, Serial};
+        use std::sync::atomic::{AtomicBool, Ordering};
+        use std::sync::Arc;
+        let material = Material {
+            springs: [
+                SpringCoeffs { k: 40.0, c: 0.3 },
+                SpringCoeffs { k: 31.0, c: 0.2 },
+                SpringCoeffs { k: 9.0, c: 0.07 },
+                SpringCoeffs { k: 2.5, c: 0.02 },
+                SpringCoeffs { k: 1.5, c: 0.03 },
+            ],
+        };
+        let lender = Arc::new(Lender::new());
+        let stop = Arc::new(AtomicBool::new(false));
+        let helper = {
+            let (lender, stop) = (lender.clone(), stop.clone());
+            std::thread::spawn(move || {
+                lender.set_helper(std::thread::current());
+                while !stop.load(Ordering::Relaxed) {
+                    if !lender.help() {
+                        std::thread::park_timeout(std::time::Duration::from_millis(1));
+                    }
+                }
+            })
+        };
+        for (nx, ny, orientation) in [
+            (12, 9, Orientation::Horizontal),
+            (33, 20, Orientation::Vertical),
+            (64, 64, Orientation::Horizontal),
+        ] {
+            let shape = GridShape {
+                nx,
+                ny,
+                width: 0.4,
+                height: 0.3,
+            };
+            let topology = Topology::grid(shape, orientation);
+            let (pos, vel) = random_state(&topology, (nx * 7 + ny) as u64, 0.02);
+            let isa = Isa::best();
+            for adjust_ratio in [f64::INFINITY, 1.05] {
+                let mut whole = vec![0.0; pos.len()];
+                let mut scratch = KernelScratch::new(&topology);
+                let t = spring_forces(&topology, &material, adjust_ratio, &pos, &vel, &mut whole, &mut scratch);
+                // Splits at a row boundary, mid-row, and one row from each end.
+                let n = topology.n_nodes;
+                for split in [n / 2, n / 2 + 3, 2 * nx + 1, n - 2 * nx - 1] {
+                    assert!(can_split(&topology, split), "{nx}x{ny} at {split}");
+                    let mut serial = vec![0.0; pos.len()];
+                    let ts = spring_forces_split(
+                        &topology,
+                        &material,
+                        adjust_ratio,
+                        &pos,
+                        &vel,
+                        &mut serial,
+                        split,
+                        &Serial,
+                        isa,
+                    );
+                    let mut lent = vec![0.0; pos.len()];
+                    let tl = spring_forces_split(
+                        &topology,
+                        &material,
+                        adjust_ratio,
+                        &pos,
+                        &vel,
+                        &mut lent,
+                        split,
+                        &*lender,
+                        isa,
+                    );
+                    assert!(serial.iter().zip(&lent).all(|(a, b)| a.to_bits() == b.to_bits()));
+                    assert_eq!(ts.elastic_energy.to_bits(), tl.elastic_energy.to_bits());
+                    let scale = whole.iter().fold(0.0f64, |m, f| m.max(f.abs()));
+                    for (k, (a, b)) in whole.iter().zip(&serial).enumerate() {
+                        assert!(
+                            (a - b).abs() <= 1e-13 * scale,
+                            "{nx}x{ny} split {split}: force {k} {a} against {b}"
+                        );
+                    }
+                    let rel = (ts.elastic_energy - t.elastic_energy).abs() / t.elastic_energy;
+                    assert!(rel < 1e-13, "{nx}x{ny} split {split}: energy off by {rel:e}");
+                    assert_eq!(ts.max_strain, t.max_strain);
+                }
+            }
+        }
+        stop.store(true, Ordering::Relaxed);
+        helper.join().expect("helper");
     }
 
     #[test]

@@ -9,6 +9,7 @@ mod implicit;
 mod loads;
 mod membrane;
 mod paged;
+mod pair;
 mod params;
 mod simd;
 mod stability;
@@ -22,6 +23,7 @@ use std::sync::Arc;
 pub use forces::SpringTotals;
 pub use loads::{Loads, NodeLoad, Pin, PinPath, Profile, Tether, Wind};
 pub use membrane::{Membrane, Moduli};
+pub use pair::{Lender, Pair, Serial};
 pub use params::{
     CgSettings, Integrator, Material, SimParams, SpringClass, SpringCoeffs, SpringKind, StiffnessAdjustment,
     StrainLimit,
@@ -35,6 +37,7 @@ pub use topology::{GridShape, Orientation, Padded, Run, SpringGroup, Topology};
 use forces::KernelScratch;
 use implicit::{ImplicitInputs, ImplicitWorkspace};
 use paged::Paged;
+use simd::Isa;
 use strain::StrainWorkspace;
 
 /// Why a simulation could not be built or changed. Every variant names what
@@ -219,37 +222,152 @@ impl Model {
     /// turns forces into accelerations, clears it while it is in cache,
     /// instead of a separate pass to clear it before the next evaluation.
     #[inline(always)]
-    fn accelerations(&self, t: f64, pos: &[f64], vel: &[f64], acc: &mut [f64], ws: &mut Workspace) -> SpringTotals {
+    fn accelerations(
+        &self,
+        t: f64,
+        pos: &[f64],
+        vel: &[f64],
+        acc: &mut [f64],
+        ws: &mut Workspace,
+        par: Par,
+    ) -> SpringTotals {
         let topo = &*self.topology;
         let n = topo.n_nodes;
         debug_assert!(ws.force.all_zero(), "force buffer not cleared");
         let f = ws.force.window_away_from([pos.as_ptr(), vel.as_ptr()]);
-        let totals = forces::spring_forces(
-            topo,
-            &self.params.material,
-            self.adjust_ratio(),
-            pos,
-            vel,
-            f,
-            &mut ws.kernel,
-        );
+        let (material, adjust) = (&self.params.material, self.adjust_ratio());
+        let totals = match par.split {
+            Some(split) => forces::spring_forces_split(topo, material, adjust, pos, vel, f, split, par.pair, par.isa),
+            None => forces::spring_forces(topo, material, adjust, pos, vel, f, &mut ws.kernel),
+        };
         self.loads.add_forces(topo, t, pos, vel, f, &mut ws.normals);
-        let g = self.params.gravity;
-        let drag = self.params.drag;
+        let (g, drag) = (self.params.gravity, self.params.drag);
+        // Force → acceleration node by node: any split gives the same bits.
         let (inv_mass, free) = (&self.inv_mass[..n], &self.free[..n]);
-        for c in 0..3 {
-            let (fc, vc, ac) = (
-                &mut f[c * n..(c + 1) * n],
-                &vel[c * n..(c + 1) * n],
-                &mut acc[c * n..(c + 1) * n],
-            );
-            for k in 0..n {
-                ac[k] = fc[k] * inv_mass[k] + free[k] * (g[c] - drag * vc[k]);
-                fc[k] = 0.0;
-            }
-        }
+        let vel = [&vel[..n], &vel[n..2 * n], &vel[2 * n..3 * n]];
+        let (f0, f1) = node_halves_mut(f, n, par.split.unwrap_or(n));
+        let (a0, a1) = node_halves_mut(acc, n, par.split.unwrap_or(n));
+        let cut = par.split.unwrap_or(n);
+        let convert = inlined(
+            #[inline(always)]
+            |lo: usize, f: [&mut [f64]; 3], a: [&mut [f64]; 3]| {
+                let len = f[0].len();
+                let (inv_mass, free) = (&inv_mass[lo..lo + len], &free[lo..lo + len]);
+                for (c, (fc, ac)) in f.into_iter().zip(a).enumerate() {
+                    let vc = &vel[c][lo..lo + len];
+                    let ac = &mut ac[..len];
+                    for k in 0..len {
+                        ac[k] = fc[k] * inv_mass[k] + free[k] * (g[c] - drag * vc[k]);
+                        fc[k] = 0.0;
+                    }
+                }
+            },
+        );
+        par.both(
+            #[inline(always)]
+            || convert(0, f0, a0),
+            #[inline(always)]
+            || convert(cut, f1, a1),
+        );
         totals
     }
+}
+
+/// How a step may split its work: the pair that runs the halves, where the
+/// nodes are split (None: the cloth is too small to gain, one piece), and
+/// the instruction set the halves are compiled for.
+#[derive(Clone, Copy)]
+struct Par<'a> {
+    pair: &'a dyn Pair,
+    split: Option<usize>,
+    isa: Isa,
+}
+
+impl Par<'_> {
+    /// Run `a` and `b` on the pair when split, else both here (already
+    /// inside the caller's dispatch).
+    #[inline(always)]
+    fn both(self, a: impl FnOnce() + Send, b: impl FnOnce() + Send) {
+        if self.split.is_none() {
+            a();
+            b();
+            return;
+        }
+        let isa = self.isa;
+        let (mut a, mut b) = (Some(a), Some(b));
+        self.pair.join(
+            &mut || {
+                if let Some(a) = a.take() {
+                    simd::run(isa, a)
+                }
+            },
+            &mut || {
+                if let Some(b) = b.take() {
+                    simd::run(isa, b)
+                }
+            },
+        );
+    }
+
+    /// The flat index where elementwise passes over `[x…, y…, z…]` fields of
+    /// `len` entries split: the middle, on a cache-line boundary.
+    fn flat_mid(self, len: usize) -> usize {
+        if self.split.is_some() {
+            (len / 2) & !7
+        } else {
+            len
+        }
+    }
+}
+
+/// The node split of a cloth of `topology`: the middle node, on a
+/// cache-line boundary, for cloths large enough that two threads gain;
+/// None for smaller ones and for topologies that cannot be split.
+fn node_split(topology: &Topology) -> Option<usize> {
+    let split = (topology.n_nodes / 2) & !7;
+    (topology.n_nodes >= SPLIT_MIN_NODES && forces::can_split(topology, split)).then_some(split)
+}
+
+/// Cloths of at least this many nodes step in two halves (see
+/// [`Simulation::step_on`]).
+pub const SPLIT_MIN_NODES: usize = 8192;
+
+/// The three components of a `[x…, y…, z…]` field of `n` nodes, each cut
+/// at node `cut` (`cut == n`: the second pieces are empty).
+#[inline(always)]
+fn node_halves_mut(field: &mut [f64], n: usize, cut: usize) -> ([&mut [f64]; 3], [&mut [f64]; 3]) {
+    let (x, rest) = field.split_at_mut(n);
+    let (y, z) = rest.split_at_mut(n);
+    let (x0, x1) = x.split_at_mut(cut);
+    let (y0, y1) = y.split_at_mut(cut);
+    let (z0, z1) = z[..n].split_at_mut(cut);
+    ([x0, y0, z0], [x1, y1, z1])
+}
+
+/// `f` itself: lets a closure bound to a name carry `#[inline(always)]`
+/// (attributes are allowed on call arguments, not on `let` initialisers).
+#[inline(always)]
+fn inlined<F>(f: F) -> F {
+    f
+}
+
+/// Every slice cut at `mid`.
+#[inline(always)]
+fn halves<const R: usize>(s: [&[f64]; R], mid: usize) -> ([&[f64]; R], [&[f64]; R]) {
+    (s.map(|x| &x[..mid]), s.map(|x| &x[mid..]))
+}
+
+/// Every slice cut at `mid`.
+#[inline(always)]
+fn halves_mut<'a, const W: usize>(s: [&'a mut [f64]; W], mid: usize) -> ([&'a mut [f64]; W], [&'a mut [f64]; W]) {
+    let mut highs: [Option<&'a mut [f64]>; W] = [const { None }; W];
+    let mut s = s.map(Some);
+    let lows = std::array::from_fn(|i| {
+        let (lo, hi) = s[i].take().expect("each slice once").split_at_mut(mid);
+        highs[i] = Some(hi);
+        lo
+    });
+    (lows, highs.map(|h| h.expect("set with its low half")))
 }
 
 /// A cloth being simulated. See the module docs.
@@ -269,6 +387,8 @@ pub struct Simulation {
     /// from the count (no drift) yet correct when a state arrives from a run
     /// with another dt (a level switch).
     epoch: (f64, u64),
+    /// Where a step splits its work in two (see [`Simulation::step_on`]).
+    split: Option<usize>,
 }
 
 impl Simulation {
@@ -351,7 +471,9 @@ impl Simulation {
             modal,
             last: None,
             epoch: (0.0, 0),
+            split: None,
         };
+        sim.split = node_split(&sim.model.topology);
         sim.epoch = (sim.state.time, sim.state.step);
         sim.apply_pins();
         Ok(sim)
@@ -423,8 +545,23 @@ impl Simulation {
 
     /// Acceleration at the current state, [x…, y…, z…] (m/s²).
     pub fn accelerations(&mut self) -> &[f64] {
-        self.ensure_cache();
+        let par = Par {
+            pair: &Serial,
+            split: self.split,
+            isa: simd::current(),
+        };
+        simd::run(
+            par.isa,
+            #[inline(always)]
+            || self.ensure_cache(par),
+        );
         &self.acc
+    }
+
+    /// The node where a step splits its work in two, for cloths of at least
+    /// [`SPLIT_MIN_NODES`] nodes.
+    pub fn split(&self) -> Option<usize> {
+        self.split
     }
 
     /// Every force on each node except the springs' at (t, pos, vel), SoA,
@@ -455,38 +592,85 @@ impl Simulation {
     /// Advance by one `dt`. Never fails and never allocates. After a
     /// divergence it does nothing and returns the divergence report again.
     pub fn step(&mut self) -> StepReport {
+        self.step_on(&Serial)
+    }
+
+    /// [`Simulation::step`] with a second thread lent by `pair`. A cloth of
+    /// at least [`SPLIT_MIN_NODES`] nodes always splits its step in two
+    /// fixed halves (springs on each side of a middle node, then the few
+    /// across it; node passes by halves); `pair` decides only whether they
+    /// run at the same time, so the result is bit-identical with [`Serial`]
+    /// and with a [`Lender`]. Smaller cloths ignore `pair`.
+    pub fn step_on(&mut self, pair: &dyn Pair) -> StepReport {
+        let par = Par {
+            pair,
+            split: self.split,
+            isa: simd::current(),
+        };
         // Compiled for the CPU's best vector instruction set (see `simd`):
         // the node loops of the integrators, the strain check and the
-        // report all run inlined into this closure.
-        simd::dispatch(
+        // report all run inlined into this closure (halves run on another
+        // thread are dispatched again there, see `Par::both`).
+        simd::run(
+            par.isa,
             #[inline(always)]
-            || self.step_impl(),
+            || self.step_impl(par),
         )
     }
 
     #[inline(always)]
-    fn step_impl(&mut self) -> StepReport {
+    fn step_impl(&mut self, par: Par) -> StepReport {
         if let Some(last) = self.last.filter(|r| !r.finite) {
             return last;
         }
-        self.ensure_cache();
+        self.ensure_cache(par);
         let dt = self.model.params.dt;
         let t0 = self.state.time;
         let mut solver = (0, 0.0);
         match self.model.params.integrator {
             Integrator::ExplicitEuler => {
-                for ((x, v), a) in self.state.pos.iter_mut().zip(&mut self.state.vel).zip(self.acc.iter()) {
-                    *x += dt * *v;
-                    *v += dt * a;
-                }
+                let mid = par.flat_mid(self.acc.len());
+                let (p0, p1) = self.state.pos.split_at_mut(mid);
+                let (v0, v1) = self.state.vel.split_at_mut(mid);
+                let (a0, a1) = self.acc.split_at(mid);
+                let update = inlined(
+                    #[inline(always)]
+                    |pos: &mut [f64], vel: &mut [f64], acc: &[f64]| {
+                        for ((x, v), a) in pos.iter_mut().zip(vel).zip(acc) {
+                            *x += dt * *v;
+                            *v += dt * a;
+                        }
+                    },
+                );
+                par.both(
+                    #[inline(always)]
+                    || update(p0, v0, a0),
+                    #[inline(always)]
+                    || update(p1, v1, a1),
+                );
             }
             Integrator::SymplecticEuler => {
-                for ((x, v), a) in self.state.pos.iter_mut().zip(&mut self.state.vel).zip(self.acc.iter()) {
-                    *v += dt * a;
-                    *x += dt * *v;
-                }
+                let mid = par.flat_mid(self.acc.len());
+                let (p0, p1) = self.state.pos.split_at_mut(mid);
+                let (v0, v1) = self.state.vel.split_at_mut(mid);
+                let (a0, a1) = self.acc.split_at(mid);
+                let update = inlined(
+                    #[inline(always)]
+                    |pos: &mut [f64], vel: &mut [f64], acc: &[f64]| {
+                        for ((x, v), a) in pos.iter_mut().zip(vel).zip(acc) {
+                            *v += dt * a;
+                            *x += dt * *v;
+                        }
+                    },
+                );
+                par.both(
+                    #[inline(always)]
+                    || update(p0, v0, a0),
+                    #[inline(always)]
+                    || update(p1, v1, a1),
+                );
             }
-            Integrator::Rk4 => self.rk4(t0, dt),
+            Integrator::Rk4 => self.rk4(t0, dt, par),
             Integrator::ImplicitEuler => {
                 let m = &self.model;
                 let inputs = ImplicitInputs {
@@ -533,9 +717,9 @@ impl Simulation {
             strain_iterations = out.iterations;
         }
         self.cached = false;
-        self.ensure_cache();
+        self.ensure_cache(par);
 
-        let report = self.measure(solver, strain_iterations);
+        let report = self.measure(solver, strain_iterations, par);
         self.last = Some(report);
         report
     }
@@ -551,19 +735,19 @@ impl Simulation {
     }
 
     #[inline(always)]
-    fn ensure_cache(&mut self) {
+    fn ensure_cache(&mut self, par: Par) {
         if !self.cached {
             let s = &self.state;
             self.totals = self
                 .model
-                .accelerations(s.time, &s.pos, &s.vel, &mut self.acc, &mut self.ws);
+                .accelerations(s.time, &s.pos, &s.vel, &mut self.acc, &mut self.ws, par);
             self.cached = true;
         }
     }
 
     /// Classic RK4 on y = (x, v), y' = (v, a(t, x, v)); k1 is the cached acceleration.
     #[inline(always)]
-    fn rk4(&mut self, t0: f64, dt: f64) {
+    fn rk4(&mut self, t0: f64, dt: f64, par: Par) {
         let Workspace {
             stage_pos,
             stage_vel,
@@ -574,19 +758,41 @@ impl Simulation {
         } = &mut self.ws;
         let (pos, vel) = (&self.state.pos[..], &self.state.vel[..]);
         let len = pos.len();
+        let mid = par.flat_mid(len);
         // Plain slices of one length, bound once: indexing through `Paged`'s
         // deref inside the loops kept their bounds checks and scalar code.
         {
-            let (acc, vel) = (&self.acc[..len], &vel[..len]);
-            let (sum_pos, sum_vel) = (&mut sum_pos[..len], &mut sum_vel[..len]);
-            let (stage_pos, stage_vel) = (&mut stage_pos[..len], &mut stage_vel[..len]);
-            // k1
-            for i in 0..len {
-                sum_pos[i] = vel[i];
-                sum_vel[i] = acc[i];
-                stage_pos[i] = pos[i] + 0.5 * dt * vel[i];
-                stage_vel[i] = vel[i] + 0.5 * dt * acc[i];
-            }
+            let k1 = inlined(
+                #[inline(always)]
+                |[pos, vel, acc]: [&[f64]; 3], [sum_pos, sum_vel, stage_pos, stage_vel]: [&mut [f64]; 4]| {
+                    let len = pos.len();
+                    let (vel, acc) = (&vel[..len], &acc[..len]);
+                    let (sum_pos, sum_vel) = (&mut sum_pos[..len], &mut sum_vel[..len]);
+                    let (stage_pos, stage_vel) = (&mut stage_pos[..len], &mut stage_vel[..len]);
+                    for i in 0..len {
+                        sum_pos[i] = vel[i];
+                        sum_vel[i] = acc[i];
+                        stage_pos[i] = pos[i] + 0.5 * dt * vel[i];
+                        stage_vel[i] = vel[i] + 0.5 * dt * acc[i];
+                    }
+                },
+            );
+            let (r0, r1) = halves([pos, vel, &self.acc[..len]], mid);
+            let (w0, w1) = halves_mut(
+                [
+                    &mut sum_pos[..len],
+                    &mut sum_vel[..len],
+                    &mut stage_pos[..len],
+                    &mut stage_vel[..len],
+                ],
+                mid,
+            );
+            par.both(
+                #[inline(always)]
+                || k1(r0, w0),
+                #[inline(always)]
+                || k1(r1, w1),
+            );
         }
         let mut stage_pos = std::mem::take(stage_pos);
         let mut stage_vel = std::mem::take(stage_vel);
@@ -606,26 +812,61 @@ impl Simulation {
                 }
             }
             self.model
-                .accelerations(t0 + t_stage, &stage_pos, &stage_vel, &mut stage_acc, &mut self.ws);
-            let (sum_pos, sum_vel) = (&mut self.ws.sum_pos[..len], &mut self.ws.sum_vel[..len]);
-            let (stage_pos, stage_vel, stage_acc) = (&mut stage_pos[..len], &mut stage_vel[..len], &stage_acc[..len]);
-            let vel = &vel[..len];
-            for i in 0..len {
-                sum_pos[i] += weight * stage_vel[i];
-                sum_vel[i] += weight * stage_acc[i];
-                // Next stage state (unused after k4).
-                let sv = stage_vel[i];
-                stage_pos[i] = pos[i] + next_scale * sv;
-                stage_vel[i] = vel[i] + next_scale * stage_acc[i];
-            }
+                .accelerations(t0 + t_stage, &stage_pos, &stage_vel, &mut stage_acc, &mut self.ws, par);
+            let stage = inlined(
+                #[inline(always)]
+                |[pos, vel, stage_acc]: [&[f64]; 3], [sum_pos, sum_vel, stage_pos, stage_vel]: [&mut [f64]; 4]| {
+                    let len = pos.len();
+                    let (vel, stage_acc) = (&vel[..len], &stage_acc[..len]);
+                    let (sum_pos, sum_vel) = (&mut sum_pos[..len], &mut sum_vel[..len]);
+                    let (stage_pos, stage_vel) = (&mut stage_pos[..len], &mut stage_vel[..len]);
+                    for i in 0..len {
+                        sum_pos[i] += weight * stage_vel[i];
+                        sum_vel[i] += weight * stage_acc[i];
+                        // Next stage state (unused after k4).
+                        let sv = stage_vel[i];
+                        stage_pos[i] = pos[i] + next_scale * sv;
+                        stage_vel[i] = vel[i] + next_scale * stage_acc[i];
+                    }
+                },
+            );
+            let (r0, r1) = halves([&pos[..len], &vel[..len], &stage_acc[..len]], mid);
+            let (w0, w1) = halves_mut(
+                [
+                    &mut self.ws.sum_pos[..len],
+                    &mut self.ws.sum_vel[..len],
+                    &mut stage_pos[..len],
+                    &mut stage_vel[..len],
+                ],
+                mid,
+            );
+            par.both(
+                #[inline(always)]
+                || stage(r0, w0),
+                #[inline(always)]
+                || stage(r1, w1),
+            );
         }
-        let (pos, vel) = (&mut self.state.pos[..len], &mut self.state.vel[..len]);
-        let (sum_pos, sum_vel) = (&self.ws.sum_pos[..len], &self.ws.sum_vel[..len]);
         let h6 = dt / 6.0;
-        for i in 0..len {
-            pos[i] += h6 * sum_pos[i];
-            vel[i] += h6 * sum_vel[i];
-        }
+        let last = inlined(
+            #[inline(always)]
+            |[sum_pos, sum_vel]: [&[f64]; 2], [pos, vel]: [&mut [f64]; 2]| {
+                let len = pos.len();
+                let (vel, sum_pos, sum_vel) = (&mut vel[..len], &sum_pos[..len], &sum_vel[..len]);
+                for i in 0..len {
+                    pos[i] += h6 * sum_pos[i];
+                    vel[i] += h6 * sum_vel[i];
+                }
+            },
+        );
+        let (r0, r1) = halves([&self.ws.sum_pos[..len], &self.ws.sum_vel[..len]], mid);
+        let (w0, w1) = halves_mut([&mut self.state.pos[..len], &mut self.state.vel[..len]], mid);
+        par.both(
+            #[inline(always)]
+            || last(r0, w0),
+            #[inline(always)]
+            || last(r1, w1),
+        );
         self.ws.stage_pos = stage_pos;
         self.ws.stage_vel = stage_vel;
         self.ws.stage_acc = stage_acc;
@@ -633,10 +874,12 @@ impl Simulation {
 
     /// The report of the current state. One pass over the nodes gives the
     /// energies and finiteness, with `LANES` partial sums (a sequential sum
-    /// is one long chain of dependent additions, several µs at 64×64).
+    /// is one long chain of dependent additions, several µs at 64×64); a
+    /// split step sums each half's lanes and adds the halves lane by lane.
     #[inline(always)]
-    fn measure(&self, solver: (u32, f64), strain_iterations: u32) -> StepReport {
+    fn measure(&self, solver: (u32, f64), strain_iterations: u32, par: Par) -> StepReport {
         const LANES: usize = 8;
+        type Sums = ([f64; LANES], [f64; LANES], [f64; LANES]);
         let n = self.model.topology.n_nodes;
         let (pos, vel) = (&self.state.pos, &self.state.vel);
         let g = self.model.params.gravity;
@@ -645,7 +888,6 @@ impl Simulation {
         let (py, pz) = rest.split_at(n);
         let (vx, rest) = vel.split_at(n);
         let (vy, vz) = rest.split_at(n);
-        let (mut ke, mut pe, mut zero) = ([0.0; LANES], [0.0; LANES], [0.0; LANES]);
         #[inline(always)]
         fn arr<const N: usize>(s: &[f64], k: usize) -> [f64; N] {
             *<&[f64; N]>::try_from(&s[k..k + N]).expect("N")
@@ -656,9 +898,7 @@ impl Simulation {
             k: usize,
             [masses, free, px, py, pz, vx, vy, vz]: [&[f64]; 8],
             g: [f64; 3],
-            ke: &mut [f64; LANES],
-            pe: &mut [f64; LANES],
-            zero: &mut [f64; LANES],
+            (ke, pe, zero): &mut Sums,
         ) {
             let (m, fr) = (arr::<N>(masses, k), arr::<N>(free, k));
             let (x, y, z) = (arr::<N>(px, k), arr::<N>(py, k), arr::<N>(pz, k));
@@ -671,14 +911,39 @@ impl Simulation {
                 zero[j] += x[j] * 0.0 + y[j] * 0.0 + z[j] * 0.0 + u[j] * 0.0 + v[j] * 0.0 + w[j] * 0.0;
             }
         }
-        let arrays = [masses, free, px, py, pz, vx, vy, vz];
-        let mut k = 0;
-        while k + LANES <= n {
-            nodes::<LANES>(k, arrays, g, &mut ke, &mut pe, &mut zero);
-            k += LANES;
-        }
-        for k in k..n {
-            nodes::<1>(k, arrays, g, &mut ke, &mut pe, &mut zero);
+        let sums = inlined(
+            #[inline(always)]
+            |arrays: [&[f64]; 8], out: &mut Sums| {
+                let n = arrays[0].len();
+                let mut s: Sums = ([0.0; LANES], [0.0; LANES], [0.0; LANES]);
+                let mut k = 0;
+                while k + LANES <= n {
+                    nodes::<LANES>(k, arrays, g, &mut s);
+                    k += LANES;
+                }
+                for k in k..n {
+                    nodes::<1>(k, arrays, g, &mut s);
+                }
+                *out = s;
+            },
+        );
+        let cut = par.split.unwrap_or(n);
+        let (lo, hi) = halves([masses, free, px, py, &pz[..n], vx, vy, &vz[..n]], cut);
+        let zero: Sums = ([0.0; LANES], [0.0; LANES], [0.0; LANES]);
+        let (mut s0, mut s1) = (zero, zero);
+        par.both(
+            #[inline(always)]
+            || sums(lo, &mut s0),
+            #[inline(always)]
+            || sums(hi, &mut s1),
+        );
+        let (mut ke, mut pe, mut zero) = s0;
+        if par.split.is_some() {
+            for j in 0..LANES {
+                ke[j] += s1.0[j];
+                pe[j] += s1.1[j];
+                zero[j] += s1.2[j];
+            }
         }
         let sum = |a: [f64; LANES]| a.iter().sum::<f64>();
         let (ke, pe) = (sum(ke), sum(pe));

@@ -92,7 +92,7 @@ pub fn active_isa_name() -> &'static str {
     }
 }
 
-fn current() -> Isa {
+pub(crate) fn current() -> Isa {
     match PATH.with(std::cell::Cell::get) {
         VectorPath::Best => Isa::best(),
         VectorPath::Baseline => Isa::Generic,
