@@ -2,12 +2,15 @@
 //! step with only that group (plus the fixed per-node work, measured with no
 //! springs and subtracted). Diagnoses which spring direction is slow.
 //!
-//! `cargo bench -p lodcloth-core --bench group_cost`
+//! `--path avx2` times the AVX2+FMA path on a CPU with AVX-512 (what an
+//! AVX2-only CPU runs), `--path baseline` the target's baseline.
+//!
+//! `cargo bench -p lodcloth-core --bench group_cost -- [--path avx2|baseline]`
 use std::sync::Arc;
 use std::time::Instant;
 
 use lodcloth_core::scene::Scene;
-use lodcloth_core::sim::{Loads, Simulation, StabilityCheck, State, Topology};
+use lodcloth_core::sim::{active_isa_name, force_path, Loads, Simulation, StabilityCheck, State, Topology, VectorPath};
 
 fn time_steps(topology: Topology, scene: &Scene) -> f64 {
     let topology = Arc::new(topology);
@@ -39,6 +42,23 @@ fn time_steps(topology: Topology, scene: &Scene) -> f64 {
 }
 
 fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    match args
+        .iter()
+        .position(|a| a == "--path")
+        .and_then(|i| args.get(i + 1))
+        .map(String::as_str)
+    {
+        None | Some("best") => {}
+        Some("avx2") => {
+            force_path(VectorPath::Avx2);
+        }
+        Some("baseline") => {
+            force_path(VectorPath::Baseline);
+        }
+        Some(other) => panic!("--path {other}: expected best, avx2 or baseline"),
+    }
+    println!("vector path: {}", active_isa_name());
     let scene = Scene::load(std::path::Path::new(concat!(
         env!("CARGO_MANIFEST_DIR"),
         "/../../config/scenes/hanging.toml"

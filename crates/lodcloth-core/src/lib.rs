@@ -3,8 +3,9 @@
 //! This crate depends on no async runtime, bus, web or plotting crate, so the
 //! compiler keeps it pure; its tests and step benchmark build without zenoh.
 //! Nothing here starts a thread of its own (the `fit` estimator and the
-//! experiments use rayon's pool), reads a clock to pace anything or allocates
-//! per step.
+//! experiments use rayon's pool; a large cloth's step hands its second half
+//! to a thread the caller lends, [`sim::Pair`]), reads a clock to pace
+//! anything or allocates per step.
 //!
 //! # Layout
 //! Dependencies point one way: `plan → {cache, estimate, points} → {lod,

@@ -1,5 +1,6 @@
-//! The pure simulation core: no I/O, no threads, no clock, no allocation per
-//! step. A [`Simulation`] owns a cloth's topology, masses, parameters, loads
+//! The pure simulation core: no I/O, no threads of its own, no clock, no
+//! allocation per step. A large cloth's step may run half its work on a
+//! thread the caller lends ([`Simulation::step_on`], [`Pair`]). A [`Simulation`] owns a cloth's topology, masses, parameters, loads
 //! and [`State`]; [`Simulation::step`] advances it by exactly one fixed `dt`
 //! and returns a [`StepReport`]. Numerical trouble comes back as data
 //! (`report.finite == false`), never as a panic or an error.
