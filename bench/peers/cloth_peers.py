@@ -149,12 +149,40 @@ def print_tables(results, steps, repeats):
     return ok
 
 
+def print_ratio(results, path):
+    """lodcloth's median step time against the fastest peer's, per integrator."""
+    import json
+
+    with open(path) as f:
+        ours = json.load(f)
+    keys = {"euler": "symplectic_euler", "rk4": "rk4"}
+    print("\n### lodcloth against the fastest peer (this sitting, one CPU thread each)\n")
+    print("| integrator | lodcloth us/step | fastest peer | peer us/step | ratio (peer / lodcloth) |")
+    print("|---|---:|---|---:|---:|")
+    for integ, key in keys.items():
+        peers = [r for r in results if r["integrator"] == integ]
+        if key not in ours or not peers:
+            continue
+        best = min(peers, key=lambda r: r["us_per_step"])
+        us = ours[key]["us_per_step"]
+        print(
+            f"| {INTEGRATOR_NAMES[integ]} | {us:.1f} ({ours[key]['isa']}) | {best['framework']} {best['variant']} "
+            f"{best['precision']} | {best['us_per_step']:.1f} | {best['us_per_step'] / us:.2f}x |"
+        )
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--framework", choices=("taichi", "numpy", "newton", "all"), default="all")
     ap.add_argument("--steps", type=int, default=1000, help="timed steps per repeat (default 1000)")
     ap.add_argument("--repeats", type=int, default=3, help="timed repeats, median reported (default 3)")
     ap.add_argument("--warmup", type=int, default=50, help="untimed steps first (default 50)")
+    ap.add_argument(
+        "--lodcloth",
+        metavar="JSON",
+        help="lodcloth's step times of this sitting (run.sh writes them with the peer_step bench): "
+        "print lodcloth against the fastest peer per integrator",
+    )
     args = ap.parse_args()
 
     cloth = spec.build()
@@ -184,6 +212,8 @@ def main():
             flush=True,
         )
     ok = print_tables(results, args.steps, args.repeats)
+    if args.lodcloth:
+        print_ratio(results, args.lodcloth)
     if not ok:
         print("\nWARNING: runs disagree beyond tolerance (f64: 1e-6 rel, f32: 1e-3 rel)")
         return 1

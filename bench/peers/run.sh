@@ -1,6 +1,8 @@
 #!/usr/bin/env bash
 # Peer-comparison benchmark: make a venv (bench/peers/.venv, gitignored),
-# install the pinned PyPI requirements, run cloth_peers.py.
+# install the pinned PyPI requirements, time lodcloth's own 64x64 step
+# (cargo bench -p lodcloth-core --bench peer_step), run cloth_peers.py and
+# print lodcloth against the fastest peer.
 # Usage: bench/peers/run.sh [--framework taichi|numpy|newton|all] [--steps N] [--repeats N] [--warmup N]
 # Env: PYTHON (default python3.11, else python3), VENV (default bench/peers/.venv).
 set -euo pipefail
@@ -27,5 +29,13 @@ export OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1
 # Taichi/Newton (no per-step allocation).
 export MALLOC_MMAP_THRESHOLD_="${MALLOC_MMAP_THRESHOLD_:-33554432}"
 export MALLOC_TRIM_THRESHOLD_="${MALLOC_TRIM_THRESHOLD_:-134217728}"
+# lodcloth's own step first, in the same sitting, for the ratio at the end
+# (LODCLOTH_PEERS_SKIP=1 leaves it out: the peers alone, no Rust build).
+extra=()
+if [ "${LODCLOTH_PEERS_SKIP:-0}" != 1 ]; then
+    json="$venv/lodcloth_step.json"
+    (cd "$here/../.." && cargo bench -q -p lodcloth-core --bench peer_step -- --json "$json")
+    extra=(--lodcloth "$json")
+fi
 cd "$here"
-exec "$venv/bin/python" cloth_peers.py "$@"
+exec "$venv/bin/python" cloth_peers.py "${extra[@]}" "$@"
