@@ -1110,3 +1110,64 @@ fn validate_loads(loads: &Loads, n: usize) -> Result<(), SimError> {
     }
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::Scene;
+
+    /// The split step against the whole one on the same cloth: the halves
+    /// must add up to the same step, for every integrator, with wind,
+    /// strain limiting and pins in play. Only the order of additions at the
+    /// seam differs, so the states agree to rounding. (The tests in
+    /// `tests/two_threads.rs` compare one thread with two, the same split
+    /// both times; this one is the independent check of the split itself.)
+    #[test]
+    fn a_split_step_is_the_whole_step_to_rounding() {
+        let scenes = [
+            (include_str!("../../../../config/scenes/flag-2to1-wind.toml"), "flag"),
+            (include_str!("../../../../config/scenes/curtain-shaken.toml"), "curtain"),
+        ];
+        for (text, name) in scenes {
+            let base = Scene::from_toml(text, name).expect("shipped scene");
+            for integrator in Integrator::ALL {
+                let mut scene = base.clone();
+                scene.params.integrator = integrator;
+                scene.stability = StabilityCheck::Force;
+                let (nx, ny) = (128, SPLIT_MIN_NODES / 128);
+                let probe = scene.build_at(nx, ny).expect("builds");
+                scene.params.dt = 0.3
+                    * probe
+                        .dt_limit()
+                        .min(probe.modal().dt_limit(Integrator::SymplecticEuler));
+                let mut split = scene.build_at(nx, ny).expect("builds");
+                assert!(split.split().is_some());
+                let mut whole = split.clone();
+                whole.split = None;
+                let steps = if integrator == Integrator::ImplicitEuler { 5 } else { 30 };
+                for _ in 0..steps {
+                    let (a, b) = (split.step(), whole.step());
+                    assert!(a.finite && b.finite, "{name} {integrator} diverged");
+                    let rel = |x: f64, y: f64| (x - y).abs() / x.abs().max(y.abs()).max(1e-300);
+                    assert!(
+                        rel(a.kinetic_energy, b.kinetic_energy) < 1e-9,
+                        "{name} {integrator}: kinetic energy"
+                    );
+                    assert!(
+                        rel(a.elastic_energy, b.elastic_energy) < 1e-9,
+                        "{name} {integrator}: elastic energy"
+                    );
+                }
+                let (s, w) = (split.state(), whole.state());
+                let scale = w.vel.iter().fold(0.0f64, |m, v| m.max(v.abs())).max(1e-9);
+                let dv = s.vel.iter().zip(&w.vel).fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+                let dx = s.pos.iter().zip(&w.pos).fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+                assert!(
+                    dv <= 1e-9 * scale,
+                    "{name} {integrator}: velocities differ by {dv:e} (scale {scale:e})"
+                );
+                assert!(dx <= 1e-12, "{name} {integrator}: positions differ by {dx:e} m");
+            }
+        }
+    }
+}
