@@ -844,6 +844,20 @@ mod tests {
         (pos, vel)
     }
 
+    /// Different K and C per spring class, so a spring counted in the wrong
+    /// class shows.
+    fn test_material() -> Material {
+        Material {
+            springs: [
+                SpringCoeffs { k: 40.0, c: 0.3 },
+                SpringCoeffs { k: 31.0, c: 0.2 },
+                SpringCoeffs { k: 9.0, c: 0.07 },
+                SpringCoeffs { k: 2.5, c: 0.02 },
+                SpringCoeffs { k: 1.5, c: 0.03 },
+            ],
+        }
+    }
+
     fn gathered(topology: &Topology) -> Topology {
         let mut t = topology.clone();
         t.grid = None;
@@ -856,15 +870,7 @@ mod tests {
 
     #[test]
     fn dispatch_paths_are_bit_identical() {
-        let material = Material {
-            springs: [
-                SpringCoeffs { k: 40.0, c: 0.3 },
-                SpringCoeffs { k: 31.0, c: 0.2 },
-                SpringCoeffs { k: 9.0, c: 0.07 },
-                SpringCoeffs { k: 2.5, c: 0.02 },
-                SpringCoeffs { k: 1.5, c: 0.03 },
-            ],
-        };
+        let material = test_material();
         let isas: Vec<Isa> = Isa::supported().collect();
         eprintln!("instruction sets compared: {isas:?}");
         for (nx, ny) in [(2, 2), (3, 7), (9, 4), (17, 6), (64, 64), (63, 5)] {
@@ -929,15 +935,7 @@ mod tests {
         use super::super::pair::{Lender, Serial};
         use std::sync::atomic::{AtomicBool, Ordering};
         use std::sync::Arc;
-        let material = Material {
-            springs: [
-                SpringCoeffs { k: 40.0, c: 0.3 },
-                SpringCoeffs { k: 31.0, c: 0.2 },
-                SpringCoeffs { k: 9.0, c: 0.07 },
-                SpringCoeffs { k: 2.5, c: 0.02 },
-                SpringCoeffs { k: 1.5, c: 0.03 },
-            ],
-        };
+        let material = test_material();
         let lender = Arc::new(Lender::new());
         let stop = Arc::new(AtomicBool::new(false));
         let helper = {

@@ -345,6 +345,20 @@ fn node_halves_mut(field: &mut [f64], n: usize, cut: usize) -> ([&mut [f64]; 3],
     ([x0, y0, z0], [x1, y1, z1])
 }
 
+/// One (explicit or symplectic) Euler update of x and v from a.
+#[inline(always)]
+fn euler_update<const SYMPLECTIC: bool>(pos: &mut [f64], vel: &mut [f64], acc: &[f64], dt: f64) {
+    for ((x, v), a) in pos.iter_mut().zip(vel).zip(acc) {
+        if SYMPLECTIC {
+            *v += dt * a;
+            *x += dt * *v;
+        } else {
+            *x += dt * *v;
+            *v += dt * a;
+        }
+    }
+}
+
 /// `f` itself: lets a closure bound to a name carry `#[inline(always)]`
 /// (attributes are allowed on call arguments, not on `let` initialisers).
 #[inline(always)]
@@ -629,7 +643,9 @@ impl Simulation {
         let t0 = self.state.time;
         let mut solver = (0, 0.0);
         match self.model.params.integrator {
-            Integrator::ExplicitEuler => {
+            integrator @ (Integrator::ExplicitEuler | Integrator::SymplecticEuler) => {
+                // Explicit Euler moves x with the old v, symplectic with the new.
+                let symplectic = integrator == Integrator::SymplecticEuler;
                 let mid = par.flat_mid(self.acc.len());
                 let (p0, p1) = self.state.pos.split_at_mut(mid);
                 let (v0, v1) = self.state.vel.split_at_mut(mid);
@@ -637,30 +653,12 @@ impl Simulation {
                 let update = inlined(
                     #[inline(always)]
                     |pos: &mut [f64], vel: &mut [f64], acc: &[f64]| {
-                        for ((x, v), a) in pos.iter_mut().zip(vel).zip(acc) {
-                            *x += dt * *v;
-                            *v += dt * a;
-                        }
-                    },
-                );
-                par.both(
-                    #[inline(always)]
-                    || update(p0, v0, a0),
-                    #[inline(always)]
-                    || update(p1, v1, a1),
-                );
-            }
-            Integrator::SymplecticEuler => {
-                let mid = par.flat_mid(self.acc.len());
-                let (p0, p1) = self.state.pos.split_at_mut(mid);
-                let (v0, v1) = self.state.vel.split_at_mut(mid);
-                let (a0, a1) = self.acc.split_at(mid);
-                let update = inlined(
-                    #[inline(always)]
-                    |pos: &mut [f64], vel: &mut [f64], acc: &[f64]| {
-                        for ((x, v), a) in pos.iter_mut().zip(vel).zip(acc) {
-                            *v += dt * a;
-                            *x += dt * *v;
+                        // The choice outside the loop: one inside it kept
+                        // the loop scalar (64² symplectic 56 → 76 µs).
+                        if symplectic {
+                            euler_update::<true>(pos, vel, acc, dt);
+                        } else {
+                            euler_update::<false>(pos, vel, acc, dt);
                         }
                     },
                 );
