@@ -10,8 +10,8 @@ use std::sync::Arc;
 
 use common::{as_gather_topology, build, grid, lumped_masses, material, params, Rng};
 use lodcloth::sim::{
-    Integrator, Loads, NodeLoad, Orientation, PinPath, Profile, SimParams, Simulation, SpringKind, StabilityCheck,
-    State, StiffnessAdjustment, Tether, Topology, Wind,
+    Integrator, Loads, NodeLoad, Orientation, PinPath, Profile, SimParams, Simulation, SpringKernel, SpringKind,
+    StabilityCheck, State, StiffnessAdjustment, Tether, Topology, Wind,
 };
 
 /// Random state: rest shape moved by up to ±30% of the spacing, velocities
@@ -242,6 +242,58 @@ fn wind_force_equals_half_rho_cd_area_times_normal_relative_speed_squared() {
         let err = kernel_error(&mut sim_on(topo, state, None, true));
         assert!(err < 1e-12, "{nx}x{ny}: relative error {err:e}");
     }
+}
+
+/// The f32 kernel (issue 21's live path) is the scalar f64 model to f32
+/// rounding: on a state both can hold exactly (rounded to f32 first), every
+/// force within 2e-6 of the largest force, energy within 1e-5 and strains
+/// within 1e-6, on grids and on gathered pairs, with and without the
+/// stiffness adjustment. Measured: 8e-7, 4e-7 and 3e-7 at worst.
+#[test]
+fn the_f32_kernel_equals_scalar_sung_eq1_to_f32_rounding() {
+    let mut rng = Rng::new(23);
+    let (mut worst_force, mut worst_energy, mut worst_strain) = (0.0f64, 0.0f64, 0.0f64);
+    for (nx, ny) in SIZES.into_iter().chain([(64, 64), (63, 17)]) {
+        let grid_topology = grid(nx, ny, 0.4, 0.3, Orientation::Horizontal);
+        let mut state = random_state(&grid_topology, &mut rng, 0.3 / (ny - 1) as f64);
+        for x in state.pos.iter_mut().chain(state.vel.iter_mut()) {
+            *x = f64::from(*x as f32);
+        }
+        let pos: Vec<f32> = state.pos.iter().map(|&x| x as f32).collect();
+        let vel: Vec<f32> = state.vel.iter().map(|&x| x as f32).collect();
+        let material = test_params(None).material;
+        for topology in [grid_topology.clone(), Arc::new(as_gather_topology(&grid_topology))] {
+            let mut kernel = SpringKernel::<f32>::new(topology.clone());
+            for adjust in [None, Some(0.05)] {
+                let ratio = adjust.map_or(f64::INFINITY, |a| 1.0 + a);
+                let expected = common::scalar_spring_forces(&topology, &material, ratio, &state);
+                let mut force = vec![0.0f32; pos.len()];
+                let totals = kernel.add_forces(&material, adjust, &pos, &vel, &mut force);
+                let n = topology.n_nodes;
+                let scale = expected.iter().map(|f| common::norm(*f)).fold(0.0, f64::max);
+                for (k, e) in expected.iter().enumerate() {
+                    for c in 0..3 {
+                        worst_force = worst_force.max((f64::from(force[c * n + k]) - e[c]).abs() / scale);
+                    }
+                }
+                let energy = common::scalar_elastic_energy(&topology, &material, &state);
+                worst_energy = worst_energy.max((totals.elastic_energy - energy).abs() / energy);
+                for kind in SpringKind::ALL {
+                    let mut kinds = [false; 3];
+                    kinds[kind.index()] = true;
+                    let strain = common::scalar_max_strain(&topology, &state, kinds);
+                    if strain == f64::NEG_INFINITY {
+                        continue; // no spring of this kind (a 2×2 grid has no bend springs)
+                    }
+                    worst_strain = worst_strain.max((totals.max_strain[kind.index()] - strain).abs());
+                }
+            }
+        }
+    }
+    eprintln!("f32 kernel against scalar f64: force {worst_force:.1e} of the largest, energy {worst_energy:.1e}, strain {worst_strain:.1e}");
+    assert!(worst_force < 2e-6, "forces off by {worst_force:e} of the largest");
+    assert!(worst_energy < 1e-5, "energy off by {worst_energy:e}");
+    assert!(worst_strain < 1e-6, "strain off by {worst_strain:e}");
 }
 
 #[test]

@@ -4,7 +4,6 @@
 
 use std::f64::consts::TAU;
 
-use super::forces::node_normals;
 use super::topology::Topology;
 
 /// A dimensionless time profile s(t) that scales a load.
@@ -252,6 +251,37 @@ impl Loads {
                     f[c * n + k] += mag * nk[c];
                 }
             }
+        }
+    }
+}
+
+/// Area-weighted node normals (unit length; zero for nodes with no area).
+/// `normals` has the same [x…, y…, z…] layout as positions.
+pub(crate) fn node_normals(topology: &Topology, pos: &[f64], normals: &mut [f64]) {
+    let n = topology.n_nodes;
+    normals.fill(0.0);
+    let p = |k: u32, c: usize| pos[c * n + k as usize];
+    for tri in &topology.triangles {
+        let [a, b, c] = *tri;
+        let u = [p(b, 0) - p(a, 0), p(b, 1) - p(a, 1), p(b, 2) - p(a, 2)];
+        let w = [p(c, 0) - p(a, 0), p(c, 1) - p(a, 1), p(c, 2) - p(a, 2)];
+        // Cross product = twice the triangle's area times its unit normal.
+        let cr = [
+            u[1] * w[2] - u[2] * w[1],
+            u[2] * w[0] - u[0] * w[2],
+            u[0] * w[1] - u[1] * w[0],
+        ];
+        for k in [a, b, c] {
+            for d in 0..3 {
+                normals[d * n + k as usize] += cr[d];
+            }
+        }
+    }
+    for k in 0..n {
+        let l = (normals[k].powi(2) + normals[n + k].powi(2) + normals[2 * n + k].powi(2)).sqrt();
+        let inv = if l > 0.0 { 1.0 / l } else { 0.0 };
+        for d in 0..3 {
+            normals[d * n + k] *= inv;
         }
     }
 }

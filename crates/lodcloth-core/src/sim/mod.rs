@@ -12,6 +12,7 @@ mod membrane;
 mod paged;
 mod pair;
 mod params;
+mod real;
 mod simd;
 mod stability;
 mod state;
@@ -21,7 +22,7 @@ pub mod vec3;
 
 use std::sync::Arc;
 
-pub use forces::SpringTotals;
+pub use forces::{SpringKernel, SpringTotals};
 pub use loads::{Loads, NodeLoad, Pin, PinPath, Profile, Tether, Wind};
 pub use membrane::{Membrane, Moduli};
 pub use pair::{Lender, Pair, Serial};
@@ -29,6 +30,7 @@ pub use params::{
     CgSettings, Integrator, Material, SimParams, SpringClass, SpringCoeffs, SpringKind, StiffnessAdjustment,
     StrainLimit,
 };
+pub use real::Real;
 pub use simd::{active_isa_name, force_path, VectorPath};
 pub use stability::{amplification, dt_limit, modal_estimate, ModalEstimate};
 pub use state::State;
@@ -152,7 +154,7 @@ pub enum StabilityCheck {
 /// Scratch buffers; allocated once when the simulation is built.
 #[derive(Debug, Clone)]
 struct Workspace {
-    kernel: KernelScratch,
+    kernel: KernelScratch<f64>,
     /// Zero between evaluations; each evaluation uses a window of it placed
     /// away from the positions and velocities it reads (see [`paged`]).
     force: Paged,
@@ -238,7 +240,18 @@ impl Model {
         let f = ws.force.window_away_from([pos.as_ptr(), vel.as_ptr()]);
         let (material, adjust) = (&self.params.material, self.adjust_ratio());
         let totals = match par.split {
-            Some(split) => forces::spring_forces_split(topo, material, adjust, pos, vel, f, split, par.pair, par.isa),
+            Some(split) => forces::spring_forces_split(
+                topo,
+                &ws.kernel.rest,
+                material,
+                adjust,
+                pos,
+                vel,
+                f,
+                split,
+                par.pair,
+                par.isa,
+            ),
             None => forces::spring_forces(topo, material, adjust, pos, vel, f, &mut ws.kernel),
         };
         self.loads.add_forces(topo, t, pos, vel, f, &mut ws.normals);

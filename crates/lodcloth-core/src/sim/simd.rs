@@ -14,7 +14,7 @@
 
 /// An instruction-set level the hot loops are compiled for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(crate) enum Isa {
+pub enum Isa {
     /// x86-64 AVX-512F (8 f64 lanes).
     #[cfg(target_arch = "x86_64")]
     Avx512,
