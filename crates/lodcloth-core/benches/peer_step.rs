@@ -5,15 +5,18 @@
 //! the peers are: 50 warm-up steps, then `--repeats` runs of `--steps`
 //! steps, median and fastest (7 runs by default, not the peers' 3: at
 //! 0.06–0.24 s a run, one disturbed run moved a median of 3 by 15 %). dt is half the predicted limit (the step's
-//! cost does not depend on it). Prints one line per integrator and, with
-//! `--json PATH`, writes the figures for `cloth_peers.py --lodcloth PATH`.
+//! cost does not depend on it). Each integrator twice: springs in f64 and
+//! in f32 (`SpringPrecision::F32`, the rest of the step in f64). Prints one
+//! line per run and, with `--json PATH`, writes the figures for
+//! `cloth_peers.py --lodcloth PATH`. `--path avx2` times the AVX2+FMA path
+//! on a CPU with AVX-512 (what AVX2-only CPUs run).
 //!
-//! `cargo bench -p lodcloth-core --bench peer_step -- [--steps 1000] [--repeats 7] [--json PATH]`
+//! `cargo bench -p lodcloth-core --bench peer_step -- [--steps 1000] [--repeats 7] [--json PATH] [--path avx2]`
 
 use std::time::Instant;
 
 use lodcloth_core::scene::Scene;
-use lodcloth_core::sim::{active_isa_name, Integrator, StabilityCheck};
+use lodcloth_core::sim::{active_isa_name, force_path, Integrator, SpringPrecision, StabilityCheck, VectorPath};
 
 const SCENE: &str = include_str!("../../../config/scenes/hanging.toml");
 
@@ -26,9 +29,19 @@ fn arg(name: &str) -> Option<String> {
 
 fn main() {
     let steps: usize = arg("--steps").map_or(1000, |s| s.parse().expect("--steps: a count"));
+    match arg("--path").as_deref() {
+        None | Some("best") => {}
+        Some("avx2") => {
+            force_path(VectorPath::Avx2);
+        }
+        Some(other) => panic!("--path {other}: expected best or avx2"),
+    }
     let repeats: usize = arg("--repeats").map_or(7, |s| s.parse().expect("--repeats: a count"));
     let mut entries = Vec::new();
-    for integrator in [Integrator::SymplecticEuler, Integrator::Rk4] {
+    for (integrator, precision) in [Integrator::SymplecticEuler, Integrator::Rk4]
+        .into_iter()
+        .flat_map(|i| SpringPrecision::ALL.map(|p| (i, p)))
+    {
         let mut scene = Scene::from_toml(SCENE, "hanging.toml").expect("shipped scene is valid");
         scene.stability = StabilityCheck::Force;
         scene.params.integrator = integrator;
@@ -36,6 +49,7 @@ fn main() {
         scene.params.stiffness_adjustment = None;
         scene.params.dt = 0.5 * scene.build_at(64, 64).expect("builds").dt_limit();
         let mut sim = scene.build_at(64, 64).expect("builds");
+        sim.set_spring_precision(precision);
         let start = sim.clone();
         for _ in 0..50 {
             sim.step();
@@ -52,14 +66,22 @@ fn main() {
         assert!(!sim.diverged(), "{integrator} diverged");
         times.sort_by(f64::total_cmp);
         let (median, min) = (times[times.len() / 2], times[0]);
+        let springs = match precision {
+            SpringPrecision::F64 => "f64",
+            SpringPrecision::F32 => "f32 springs",
+        };
         println!(
-            "  lodcloth {:<17} f64 ({}): {median:9.1} us/step (min {min:.1}), {} springs",
+            "  lodcloth {:<17} {springs:<11} ({}): {median:9.1} us/step (min {min:.1}), {} springs",
             integrator.name(),
             active_isa_name(),
             sim.topology().spring_count()
         );
+        let key = match precision {
+            SpringPrecision::F64 => integrator.name().to_string(),
+            SpringPrecision::F32 => format!("{integrator}_f32"),
+        };
         entries.push(format!(
-            "\"{integrator}\": {{\"us_per_step\": {median}, \"us_min\": {min}, \"isa\": \"{}\"}}",
+            "\"{key}\": {{\"us_per_step\": {median}, \"us_min\": {min}, \"isa\": \"{}\"}}",
             active_isa_name()
         ));
     }

@@ -18,6 +18,7 @@ mod estimation;
 mod kernel;
 mod membrane;
 mod oscillator;
+mod precision;
 mod scenes;
 mod stability;
 mod strain_control;

@@ -1,6 +1,7 @@
 //! A cloth large enough to split its step (`SPLIT_MIN_NODES`) gives the
 //! same bits whether the halves run on one thread or on two, for every
-//! integrator, with wind (normals), strain limiting and moving pins in play;
+//! integrator and both spring precisions, with wind (normals), strain
+//! limiting and moving pins in play;
 //! and the split changes nothing a cloth can tell from the whole evaluation
 //! beyond rounding (the spring sums are compared in the kernel's own test,
 //! `a_split_evaluation_adds_every_spring_once`).
@@ -9,7 +10,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
 use lodcloth::scene::Scene;
-use lodcloth::sim::{Integrator, Lender, Serial, Simulation, StabilityCheck, SPLIT_MIN_NODES};
+use lodcloth::sim::{Integrator, Lender, Serial, Simulation, SpringPrecision, StabilityCheck, SPLIT_MIN_NODES};
 
 const FLAG: &str = include_str!("../../../config/scenes/flag-2to1-wind.toml");
 const CURTAIN: &str = include_str!("../../../config/scenes/curtain-shaken.toml");
@@ -72,33 +73,37 @@ fn a_split_step_is_bit_identical_on_one_thread_or_two() {
                 * probe
                     .dt_limit()
                     .min(probe.modal().dt_limit(Integrator::SymplecticEuler));
-            let mut one = scene.build_at(nx, ny).expect("builds");
-            assert!(one.split().is_some(), "{name} {nx}x{ny} does not split");
-            let mut two = one.clone();
-            let steps = if integrator == Integrator::ImplicitEuler {
-                10
-            } else {
-                60
-            };
-            for step in 0..steps {
-                let (r1, r2) = (one.step_on(&Serial), two.step_on(&*lender));
-                assert!(r1.finite, "{name} {integrator} diverged");
-                assert_eq!(r1.kinetic_energy.to_bits(), r2.kinetic_energy.to_bits());
-                assert_eq!(r1.elastic_energy.to_bits(), r2.elastic_energy.to_bits());
+            for precision in SpringPrecision::ALL {
+                let mut one = scene.build_at(nx, ny).expect("builds");
+                one.set_spring_precision(precision);
+                assert!(one.split().is_some(), "{name} {nx}x{ny} does not split");
+                let mut two = one.clone();
+                let steps = if integrator == Integrator::ImplicitEuler {
+                    10
+                } else {
+                    60
+                };
+                for step in 0..steps {
+                    let (r1, r2) = (one.step_on(&Serial), two.step_on(&*lender));
+                    assert!(r1.finite, "{name} {integrator} diverged");
+                    assert_eq!(r1.kinetic_energy.to_bits(), r2.kinetic_energy.to_bits());
+                    assert_eq!(r1.elastic_energy.to_bits(), r2.elastic_energy.to_bits());
+                    assert!(
+                        bits(&one) == bits(&two),
+                        "{name} {integrator} {precision}: states differ after step {step}"
+                    );
+                }
+                // Plain `step` is the serial split.
+                let mut three = scene.build_at(nx, ny).expect("builds");
+                three.set_spring_precision(precision);
+                for _ in 0..steps {
+                    three.step();
+                }
                 assert!(
-                    bits(&one) == bits(&two),
-                    "{name} {integrator}: states differ after step {step}"
+                    bits(&three) == bits(&one),
+                    "{name} {integrator} {precision}: step() differs from step_on(Serial)"
                 );
             }
-            // Plain `step` is the serial split.
-            let mut three = scene.build_at(nx, ny).expect("builds");
-            for _ in 0..steps {
-                three.step();
-            }
-            assert!(
-                bits(&three) == bits(&one),
-                "{name} {integrator}: step() differs from step_on(Serial)"
-            );
         }
     }
     let ran = helper.finish();

@@ -37,7 +37,9 @@ pub use reference::{RecordSpec, Reference, ReferenceError, Sample};
 
 use crate::lod::{Correlation, LodError};
 use crate::scene::{MassConvention, Scene, SceneError};
-use crate::sim::{Integrator, Loads, Material, SimError, SimParams, Simulation, StabilityCheck, State, Topology};
+use crate::sim::{
+    Integrator, Loads, Material, SimError, SimParams, Simulation, SpringPrecision, StabilityCheck, State, Topology,
+};
 
 /// Progress of a long estimation stage.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -311,8 +313,22 @@ impl LodProblem {
         frames: Range<usize>,
         progress: ProgressFn<'_>,
     ) -> Result<ErrorReport, EstimateError> {
+        self.score_in(material, SpringPrecision::F64, frames, progress)
+    }
+
+    /// [`LodProblem::score`] with the coarse cloth's springs evaluated in
+    /// `precision` (what a live instance in f32 would show; estimation
+    /// itself stays f64).
+    pub fn score_in(
+        &self,
+        material: Material,
+        precision: SpringPrecision,
+        frames: Range<usize>,
+        progress: ProgressFn<'_>,
+    ) -> Result<ErrorReport, EstimateError> {
         self.check_range(&frames)?;
         let mut sim = self.simulation(material)?;
+        sim.set_spring_precision(precision);
         let n = self.topology.n_nodes;
         let mut acc = ErrorAccumulator::new(self.reference.o_max, n, frames.len());
         let mut mapped = vec![0.0; 3 * n];

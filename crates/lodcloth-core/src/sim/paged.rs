@@ -22,17 +22,14 @@ use std::ops::{Deref, DerefMut};
 const PAGE: usize = 4096;
 /// Bytes in a cache line; colours are whole lines.
 const LINE: usize = 64;
-const F64: usize = std::mem::size_of::<f64>();
-/// Spare elements behind a window so it can start anywhere in a page.
-const SPARE: usize = PAGE / F64;
 
-/// A zero-initialised `f64` buffer of fixed length whose first element lies
-/// at a chosen offset from a 4-KiB boundary. Dereferences to its slice.
-/// Cloning keeps the colour (the clone is placed again in its new
-/// allocation).
+/// A zero-initialised buffer (of `f64` or `f32`) of fixed length whose
+/// first element lies at a chosen offset from a 4-KiB boundary.
+/// Dereferences to its slice. Cloning keeps the colour (the clone is placed
+/// again in its new allocation).
 #[derive(Debug, Default)]
-pub(crate) struct Paged {
-    data: Vec<f64>,
+pub(crate) struct Paged<T = f64> {
+    data: Vec<T>,
     start: usize,
     len: usize,
     colour: usize,
@@ -43,7 +40,7 @@ pub(crate) struct Paged {
 }
 
 /// The offset of `ptr` from the 4-KiB boundary below it.
-fn colour_of(ptr: *const f64) -> usize {
+fn colour_of<T>(ptr: *const T) -> usize {
     ptr as usize % PAGE
 }
 
@@ -53,11 +50,15 @@ fn distance(a: usize, b: usize) -> usize {
     d.min(PAGE - d)
 }
 
-impl Paged {
+impl<T: Copy + Default + PartialEq> Paged<T> {
+    /// Bytes per element.
+    const SIZE: usize = std::mem::size_of::<T>();
+
     /// `len` zeros starting `colour` bytes (rounded down to a line) past a
     /// 4-KiB boundary.
-    pub(crate) fn new(len: usize, colour: usize) -> Paged {
-        let data = vec![0.0; len + SPARE];
+    pub(crate) fn new(len: usize, colour: usize) -> Paged<T> {
+        // Spare elements behind the slice so it can start anywhere in a page.
+        let data = vec![T::default(); len + PAGE / Self::SIZE];
         let colour = (colour % PAGE) / LINE * LINE;
         let start = Self::start_for(&data, colour);
         Paged {
@@ -69,13 +70,21 @@ impl Paged {
         }
     }
 
-    /// Index in `data` whose address has page offset `colour`. `f64`
-    /// allocations are 8-byte aligned, so the offset is reachable exactly.
-    fn start_for(data: &[f64], colour: usize) -> usize {
+    /// Index in `data` whose address has page offset `colour`. Allocations
+    /// are aligned to the element size, so the offset is reachable exactly.
+    fn start_for(data: &[T], colour: usize) -> usize {
         let here = colour_of(data.as_ptr());
-        (colour + PAGE - here) % PAGE / F64
+        (colour + PAGE - here) % PAGE / Self::SIZE
     }
 
+    /// True when every element of the whole allocation is zero (for debug
+    /// checks of [`Paged::window_away_from`]'s contract).
+    pub(crate) fn all_zero(&self) -> bool {
+        self.data.iter().all(|&x| x == T::default())
+    }
+}
+
+impl Paged<f64> {
     /// A window of `len` elements, all zero unless the caller writes them,
     /// placed where it competes least with the arrays starting at `avoid`
     /// (the line offset farthest from all of theirs). The caller must leave
@@ -105,33 +114,27 @@ impl Paged {
                 (nearest, std::cmp::Reverse(c))
             })
             .unwrap_or(0);
-        (best + PAGE - here) % PAGE / F64
-    }
-
-    /// True when every element of the whole allocation is zero (for debug
-    /// checks of [`Paged::window_away_from`]'s contract).
-    pub(crate) fn all_zero(&self) -> bool {
-        self.data.iter().all(|&x| x == 0.0)
+        (best + PAGE - here) % PAGE / Self::SIZE
     }
 }
 
-impl Clone for Paged {
-    fn clone(&self) -> Paged {
+impl<T: Copy + Default + PartialEq> Clone for Paged<T> {
+    fn clone(&self) -> Paged<T> {
         let mut copy = Paged::new(self.len, self.colour);
         copy.copy_from_slice(self);
         copy
     }
 }
 
-impl Deref for Paged {
-    type Target = [f64];
-    fn deref(&self) -> &[f64] {
+impl<T> Deref for Paged<T> {
+    type Target = [T];
+    fn deref(&self) -> &[T] {
         &self.data[self.start..self.start + self.len]
     }
 }
 
-impl DerefMut for Paged {
-    fn deref_mut(&mut self) -> &mut [f64] {
+impl<T> DerefMut for Paged<T> {
+    fn deref_mut(&mut self) -> &mut [T] {
         &mut self.data[self.start..self.start + self.len]
     }
 }
@@ -143,7 +146,7 @@ mod tests {
     #[test]
     fn placed_at_its_colour_and_kept_by_clone() {
         for colour in [0, 64, 640, 2048, 4032] {
-            let mut b = Paged::new(1000, colour);
+            let mut b = Paged::<f64>::new(1000, colour);
             assert_eq!(b.len(), 1000);
             assert_eq!(colour_of(b.as_ptr()), colour);
             assert!(b.iter().all(|&x| x == 0.0));
@@ -154,7 +157,11 @@ mod tests {
             assert_eq!(&*c, &*b);
         }
         // Not a line multiple: rounded down.
-        assert_eq!(colour_of(Paged::new(8, 100).as_ptr()), 64);
+        assert_eq!(colour_of(Paged::<f64>::new(8, 100).as_ptr()), 64);
+        // f32 buffers too.
+        let b = Paged::<f32>::new(1000, 2688);
+        assert_eq!(colour_of(b.as_ptr()), 2688);
+        assert_eq!(colour_of(b.clone().as_ptr()), 2688);
     }
 
     #[test]
