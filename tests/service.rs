@@ -6,6 +6,7 @@
 use crate::daemon;
 
 use std::collections::HashMap;
+use std::sync::Arc;
 use std::time::Duration;
 
 use prost::Message;
@@ -13,13 +14,13 @@ use tokio::sync::oneshot;
 
 use daemon::*;
 use lodcloth::lod::Correlation;
-use lodcloth::plan::Level;
+use lodcloth::plan::{Level, Preparer};
 use lodcloth::proto::{unpack_positions, v1, WireLevel};
 use lodcloth::scene::Scene;
 use lodcloth::service::client::ClientError;
 use lodcloth::service::config::ServiceConfig;
 use lodcloth::service::keys;
-use lodcloth::sim::Topology;
+use lodcloth::sim::{SpringPrecision, Topology};
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn states_arrive_at_the_configured_rate_and_pinned_nodes_stay_put() {
@@ -440,6 +441,7 @@ start = "9x9"
 method = "guess"
 integrator = "leapfrog"
 dt = -1.0
+spring_precision = "f16"
 "#;
     let err = ServiceConfig::from_toml(text, "bad.toml")
         .expect_err("rejected")
@@ -458,11 +460,43 @@ dt = -1.0
         "instances[0].method: 'guess'",
         "instances[0].integrator: 'leapfrog'",
         "instances[0].dt: must be positive and finite, got -1",
+        "instances[0].spring_precision: 'f16' is not one of f64, f32",
     ] {
         assert!(err.contains(needle), "missing '{needle}' in:\n{err}");
     }
     let unknown = ServiceConfig::from_toml("[engine]\nthreadz = 2\n", "typo.toml").expect_err("rejected");
     assert!(unknown.to_string().contains("threadz"), "{unknown}");
+}
+
+/// `spring_precision = "f32"` reaches the instance's live simulations (its
+/// start, an at-once level) and nothing else: the other instances stay f64.
+#[test]
+fn an_instance_steps_its_springs_in_the_configured_precision() {
+    let text = std::fs::read_to_string("config/default.toml").expect("default config");
+    let text = text.replacen(
+        "shadow_reference = true ",
+        "spring_precision = \"f32\"\nshadow_reference = true ",
+        1,
+    );
+    let config = ServiceConfig::from_toml(&text, "default.toml").expect("valid");
+    assert_eq!(config.instances[0].spring_precision, SpringPrecision::F32);
+    assert!(config.instances[1..]
+        .iter()
+        .all(|i| i.spring_precision == SpringPrecision::F64));
+    let plan = Arc::new(config.instances[0].clone());
+    let preparer = Preparer::new(plan.clone(), config.estimation, None);
+    let start = preparer.quick_start().expect("builds");
+    assert_eq!(start.sim.spring_precision(), SpringPrecision::F32);
+    let other = *plan.levels.iter().find(|l| **l != plan.start).expect("two levels");
+    assert_eq!(
+        preparer.quick(other).expect("builds").sim.spring_precision(),
+        SpringPrecision::F32
+    );
+    let f64_plan = Arc::new(config.instances[1].clone());
+    let f64_start = Preparer::new(f64_plan, config.estimation, None)
+        .quick_start()
+        .expect("builds");
+    assert_eq!(f64_start.sim.spring_precision(), SpringPrecision::F64);
 }
 
 // ---------------------------------------------------------------- surfaces

@@ -16,7 +16,7 @@ use crate::plan::{EstimationPlan, InstanceKind, InstancePlan, Level};
 use crate::points::scene::SurfaceScene;
 use crate::problems::Problems;
 use crate::scene::Scene;
-use crate::sim::Integrator;
+use crate::sim::{Integrator, SpringPrecision};
 
 /// Why a config was rejected.
 #[derive(Debug, thiserror::Error)]
@@ -277,6 +277,10 @@ pub struct RawInstance {
     /// Start the scene over when it reaches its duration (default true).
     #[serde(default = "yes", rename = "loop")]
     pub looping: bool,
+    /// Precision of the live level's spring forces: "f64" (default) or
+    /// "f32" (about 1.5x faster steps; the reference, the shadow and every
+    /// estimate stay f64).
+    pub spring_precision: Option<String>,
 }
 
 fn default_method() -> String {
@@ -647,6 +651,12 @@ fn instance(p: &mut Problems, all: &[RawInstance], i: usize, default_publish_hz:
             .map_err(|e| p.push(format!("{at}.integrator: {e}")))
             .ok()
     });
+    let spring_precision = match r.spring_precision.as_deref() {
+        None => Some(SpringPrecision::F64),
+        Some(name) => names::parse::<SpringPrecision>(name)
+            .map_err(|e| p.push(format!("{at}.spring_precision: {e}")))
+            .ok(),
+    };
     if let Some(dt) = r.dt {
         p.positive(&format!("{at}.dt"), dt);
     }
@@ -672,7 +682,7 @@ fn instance(p: &mut Problems, all: &[RawInstance], i: usize, default_publish_hz:
             None
         }
     };
-    let ((kind, scene_integrator), method) = (kind?, method?);
+    let ((kind, scene_integrator), method, spring_precision) = (kind?, method?, spring_precision?);
     Some(InstancePlan {
         name: r.name.clone(),
         kind,
@@ -684,6 +694,7 @@ fn instance(p: &mut Problems, all: &[RawInstance], i: usize, default_publish_hz:
         publish_hz: r.publish_hz.unwrap_or(default_publish_hz),
         shadow_reference: r.shadow_reference,
         looping: r.looping,
+        spring_precision,
     })
 }
 

@@ -32,7 +32,7 @@ pub(super) async fn prepare(preparer: Arc<Preparer>, level: Level, method: Metho
         .spawn(move || {
             let _ = lower_priority();
             let result = preparer.prepare(level, method).and_then(|prepared| {
-                let sim = prepared.simulation()?;
+                let sim = preparer.live_simulation(&prepared)?;
                 let cloud = prepared.cloud_map();
                 Ok(Ready { prepared, sim, cloud })
             });

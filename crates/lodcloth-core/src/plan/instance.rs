@@ -8,7 +8,7 @@ use std::sync::Arc;
 use crate::estimate::{Method, RecordSpec};
 use crate::points::scene::SurfaceScene;
 use crate::scene::Scene;
-use crate::sim::Integrator;
+use crate::sim::{Integrator, SpringPrecision};
 
 use super::Level;
 
@@ -60,6 +60,9 @@ pub struct InstancePlan {
     pub shadow_reference: bool,
     /// Start the scene over when its duration has run.
     pub looping: bool,
+    /// The precision of the live level's spring forces (the reference, the
+    /// shadow and every estimate stay f64).
+    pub spring_precision: SpringPrecision,
 }
 
 impl InstancePlan {

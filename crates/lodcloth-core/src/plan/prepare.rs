@@ -679,7 +679,11 @@ impl Preparer {
             (InstanceKind::Cloth(scene), Level::Grid { nx, ny }) => {
                 let scene = Self::cloth_scene(scene, &self.plan);
                 let (sim, dt) = self.quick_cloth(&scene, nx, ny).map_err(failed)?;
-                Ok(Start { sim, dt, cloud: None })
+                Ok(Start {
+                    sim: self.live(sim),
+                    dt,
+                    cloud: None,
+                })
             }
             (InstanceKind::Surface(scene), Level::Points(n)) => {
                 let model = scene
@@ -688,7 +692,7 @@ impl Preparer {
                 let cloud = CloudMap::of(&model);
                 let dt = model.sim.params().dt;
                 Ok(Start {
-                    sim: model.sim,
+                    sim: self.live(model.sim),
                     dt,
                     cloud: Some(cloud),
                 })
@@ -727,9 +731,22 @@ impl Preparer {
         let scene = Self::cloth_scene(scene, &self.plan);
         Some(
             self.cloth_at(&scene, nx, ny, material, Some(dt))
-                .map(|(sim, _)| sim)
+                .map(|(sim, _)| self.live(sim))
                 .map_err(failed),
         )
+    }
+
+    /// `prepared`'s level at rest, as the instance steps it live (its
+    /// spring precision applied).
+    pub fn live_simulation(&self, prepared: &Prepared) -> Result<Simulation, PrepareError> {
+        prepared.simulation().map(|sim| self.live(sim))
+    }
+
+    /// `sim` made the instance's live simulation: springs in the configured
+    /// precision (estimation and references never pass through here).
+    fn live(&self, mut sim: Simulation) -> Simulation {
+        sim.set_spring_precision(self.plan.spring_precision);
+        sim
     }
 
     /// The quick start: the scene's own coefficients at the configured dt.
