@@ -8,7 +8,9 @@
 //! step on both threads when the other is idle (see `engine`), so a single
 //! such instance may hold real time where one core could not.
 //!
-//! `cargo bench --bench serve_bench -- [--quick] [--bus-only | --capacity-only] [--sizes 24,40,64,128]`
+//! `cargo bench --bench serve_bench -- [--quick] [--bus-only | --capacity-only] [--sizes 24,40,64,128] [--precision f32]`
+//! (`--precision f32`: the capacity instances evaluate their springs in f32,
+//! as an instance with `spring_precision = "f32"`).
 
 use std::time::{Duration, Instant};
 
@@ -23,7 +25,7 @@ use lodcloth::scene::Scene;
 use lodcloth::service::client::Client;
 use lodcloth::service::config::ServiceConfig;
 use lodcloth::service::keys;
-use lodcloth::sim::{Integrator, Simulation};
+use lodcloth::sim::{Integrator, Simulation, SpringPrecision};
 
 const DT: f64 = 1e-3;
 
@@ -33,7 +35,7 @@ const DT: f64 = 1e-3;
 /// softened, a 256×256 cloth stretches past 10× its length within a second
 /// and halts as diverged (and its two-thread step, ~1 ms, would not hold
 /// 1 kHz anyway).
-fn instance(n: usize, integrator: Integrator) -> Simulation {
+fn instance(n: usize, integrator: Integrator, precision: SpringPrecision) -> Simulation {
     let mut scene = Scene::load(std::path::Path::new("config/scenes/paper-1-top-edge.toml")).expect("scene");
     scene.params.integrator = integrator;
     scene.params.dt = DT;
@@ -48,15 +50,17 @@ fn instance(n: usize, integrator: Integrator) -> Simulation {
         }
     }
     scene.stability = lodcloth::sim::StabilityCheck::Enforce;
-    scene.build_at(n, n).expect("stable at 1 kHz")
+    let mut sim = scene.build_at(n, n).expect("stable at 1 kHz");
+    sim.set_spring_precision(precision);
+    sim
 }
 
 /// Run `count` instances for `seconds`; worst real-time factor and total overruns.
-fn trial(n: usize, integrator: Integrator, count: usize, seconds: f64) -> (f64, u64, f64) {
+fn trial(n: usize, integrator: Integrator, precision: SpringPrecision, count: usize, seconds: f64) -> (f64, u64, f64) {
     let setups = (0..count)
         .map(|i| InstanceSetup {
             name: format!("i{i}"),
-            sim: instance(n, integrator),
+            sim: instance(n, integrator, precision),
             cloud: None,
             level: Level::new(n, n),
             method: Method::Same,
@@ -100,8 +104,10 @@ fn trial(n: usize, integrator: Integrator, count: usize, seconds: f64) -> (f64, 
     (worst, overruns, cost / count as f64)
 }
 
-fn capacity(quick: bool, sizes: &[usize]) {
-    println!("## Capacity: instances in real time at 1 kHz physics, 60 Hz snapshots, 2 stepping threads\n");
+fn capacity(quick: bool, sizes: &[usize], precision: SpringPrecision) {
+    println!(
+        "## Capacity: instances in real time at 1 kHz physics, 60 Hz snapshots, 2 stepping threads, springs in {precision}\n"
+    );
     println!("| size | integrator | step µs, alone | instances held | core-µs per step at capacity | at max+1: worst RTF, overruns |");
     println!("|---|---|---|---|---|---|");
     let seconds = if quick { 1.0 } else { 4.0 };
@@ -114,7 +120,7 @@ fn capacity(quick: bool, sizes: &[usize]) {
             let mut step_us = f64::NAN;
             let mut fail = (0.0, 0);
             loop {
-                let (rtf, overruns, cost) = trial(n, integrator, count, seconds);
+                let (rtf, overruns, cost) = trial(n, integrator, precision, count, seconds);
                 if count == 1 {
                     step_us = cost;
                 }
@@ -296,7 +302,14 @@ fn main() {
                     .collect()
             })
             .unwrap_or_else(|| vec![24, 40, 64, 128]);
-        capacity(quick, &sizes);
+        let precision = args
+            .iter()
+            .position(|a| a == "--precision")
+            .and_then(|i| args.get(i + 1))
+            .map_or(SpringPrecision::F64, |s| {
+                SpringPrecision::from_name(s).expect("--precision: f64 or f32")
+            });
+        capacity(quick, &sizes, precision);
     }
     if !std::env::args().any(|a| a == "--capacity-only") {
         rt.block_on(bus(quick));

@@ -7,14 +7,17 @@
 //! batch in one process and the states checked bit-identical at the end.
 //! Prints µs per step, the speed-up and the spring throughput.
 //!
-//! `cargo bench -p lodcloth-core --bench two_threads -- [--sizes 128,256] [--batches 9]`
+//! `cargo bench -p lodcloth-core --bench two_threads -- [--sizes 128,256] [--batches 9] [--precision f32]`
+//! (`--precision f32`: springs in f32, `SpringPrecision::F32`).
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Instant;
 
 use lodcloth_core::scene::Scene;
-use lodcloth_core::sim::{active_isa_name, Integrator, Lender, Pair, Serial, Simulation, StabilityCheck};
+use lodcloth_core::sim::{
+    active_isa_name, Integrator, Lender, Pair, Serial, Simulation, SpringPrecision, StabilityCheck,
+};
 
 /// How long a helper waits for the next half before parking (the daemon's
 /// value).
@@ -31,6 +34,9 @@ fn sim(integrator: Integrator, n: usize) -> Simulation {
     let limit = scene.build_at(n, n).expect("builds").dt_limit();
     scene.params.dt = 0.5 * limit;
     let mut sim = scene.build_at(n, n).expect("builds");
+    sim.set_spring_precision(arg("--precision").map_or(SpringPrecision::F64, |p| {
+        SpringPrecision::from_name(&p).expect("--precision: f64 or f32")
+    }));
     for _ in 0..20 {
         sim.step();
     }
