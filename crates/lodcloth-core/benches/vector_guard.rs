@@ -6,7 +6,9 @@
 //! 3) times faster, which is what happens when a function on the hot path
 //! stops being inlined into the dispatched closure and silently runs
 //! baseline code (the outputs stay bit-identical, so no test sees it). On
-//! a CPU without AVX2 the guard says so and passes.
+//! a CPU without AVX2 the guard says so and passes. Both spring precisions
+//! (`SpringPrecision::F64` and `F32`, the daemon's default cloths) are
+//! guarded, each with its own vector path through the kernel.
 //!
 //! Measured (2 cores, AMD EPYC family 25 model 17, AVX-512, 2026-11-25):
 //! 8.4× for both integrators (the baseline has no hardware FMA, so its
@@ -27,7 +29,9 @@
 use std::time::Instant;
 
 use lodcloth_core::scene::Scene;
-use lodcloth_core::sim::{active_isa_name, force_path, Integrator, Simulation, StabilityCheck, VectorPath};
+use lodcloth_core::sim::{
+    active_isa_name, force_path, Integrator, Simulation, SpringPrecision, StabilityCheck, VectorPath,
+};
 
 const SCENE: &str = include_str!("../../../config/scenes/hanging.toml");
 /// Steps per timed batch, and batches per path (the fastest batch counts:
@@ -35,7 +39,7 @@ const SCENE: &str = include_str!("../../../config/scenes/hanging.toml");
 const STEPS: [(Integrator, usize); 2] = [(Integrator::SymplecticEuler, 400), (Integrator::Rk4, 100)];
 const BATCHES: usize = 15;
 
-fn sim(integrator: Integrator, n: usize) -> Simulation {
+fn sim(integrator: Integrator, n: usize, precision: SpringPrecision) -> Simulation {
     let mut scene = Scene::from_toml(SCENE, "hanging.toml").expect("shipped scene is valid");
     scene.stability = StabilityCheck::Force;
     scene.params.integrator = integrator;
@@ -44,6 +48,7 @@ fn sim(integrator: Integrator, n: usize) -> Simulation {
     let limit = scene.build_at(n, n).expect("builds").dt_limit();
     scene.params.dt = 0.5 * limit;
     let mut sim = scene.build_at(n, n).expect("builds");
+    sim.set_spring_precision(precision);
     for _ in 0..20 {
         sim.step();
     }
@@ -81,11 +86,11 @@ fn main() {
         println!("vector guard: this CPU has no vector path beyond the baseline; nothing to guard");
         return finish(&failed, best, min_ratio);
     }
-    for (integrator, steps) in STEPS {
+    for ((integrator, steps), precision) in STEPS.into_iter().flat_map(|s| SpringPrecision::ALL.map(|p| (s, p))) {
         // One cloth per path, stepped in alternation, so both see the same
         // machine at the same time.
-        let mut fast = sim(integrator, 64);
-        let mut slow = sim(integrator, 64);
+        let mut fast = sim(integrator, 64, precision);
+        let mut slow = sim(integrator, 64, precision);
         let (mut t_best, mut t_base) = (f64::INFINITY, f64::INFINITY);
         for _ in 0..BATCHES {
             force_path(VectorPath::Best);
@@ -97,10 +102,10 @@ fn main() {
         assert!(!fast.diverged() && !slow.diverged(), "{integrator} diverged");
         let ratio = t_base / t_best;
         println!(
-            "vector guard: {integrator:<17} {best} {t_best:8.1} µs/step, baseline {t_base:8.1} µs/step, ratio {ratio:.2} (at least {min_ratio})"
+            "vector guard: {integrator:<17} {precision} springs {best} {t_best:8.1} µs/step, baseline {t_base:8.1} µs/step, ratio {ratio:.2} (at least {min_ratio})"
         );
         if ratio < min_ratio {
-            failed.push(format!("{integrator}: {ratio:.2}"));
+            failed.push(format!("{integrator} {precision}: {ratio:.2}"));
         }
     }
     finish(&failed, best, min_ratio);
@@ -123,9 +128,9 @@ fn layout_guard(max_ratio: f64, failed: &mut Vec<String>) {
     println!(
         "layout guard: time per spring, 64x64 (32-KiB component arrays) against 62x62, fastest of {BATCHES} batches"
     );
-    for (integrator, steps) in STEPS {
-        let mut pow2 = sim(integrator, 64);
-        let mut other = sim(integrator, 62);
+    for ((integrator, steps), precision) in STEPS.into_iter().flat_map(|s| SpringPrecision::ALL.map(|p| (s, p))) {
+        let mut pow2 = sim(integrator, 64, precision);
+        let mut other = sim(integrator, 62, precision);
         let per_spring = |sim: &Simulation, t: f64| t * 1e3 / sim.topology().spring_count() as f64;
         let (mut t_pow2, mut t_other) = (f64::INFINITY, f64::INFINITY);
         for _ in 0..BATCHES {
@@ -136,10 +141,10 @@ fn layout_guard(max_ratio: f64, failed: &mut Vec<String>) {
         let (a, b) = (per_spring(&pow2, t_pow2), per_spring(&other, t_other));
         let ratio = a / b;
         println!(
-            "layout guard: {integrator:<17} 64x64 {a:6.2} ns/spring ({t_pow2:.1} µs/step), 62x62 {b:6.2} ns/spring ({t_other:.1} µs/step), ratio {ratio:.2} (at most {max_ratio})"
+            "layout guard: {integrator:<17} {precision} springs 64x64 {a:6.2} ns/spring ({t_pow2:.1} µs/step), 62x62 {b:6.2} ns/spring ({t_other:.1} µs/step), ratio {ratio:.2} (at most {max_ratio})"
         );
         if ratio > max_ratio {
-            failed.push(format!("layout {integrator}: {ratio:.2}"));
+            failed.push(format!("layout {integrator} {precision}: {ratio:.2}"));
         }
     }
 }
