@@ -13,6 +13,7 @@ use prost::Message;
 use tokio::sync::oneshot;
 
 use daemon::*;
+use lodcloth::estimate::Method;
 use lodcloth::lod::Correlation;
 use lodcloth::plan::{Level, Preparer};
 use lodcloth::proto::{unpack_positions, v1, WireLevel};
@@ -214,6 +215,132 @@ async fn an_at_once_switch_answers_before_its_estimate_which_follows_in_place() 
     assert!(!reply.refining && reply.cached && reply.method == "bcd");
     assert!(reply.predicted_error.is_some());
     d.shutdown().await.expect("clean exit");
+}
+
+/// Issue 21: an ordinary switch to a level whose `fit` is not made yet
+/// does not wait for the fit. It goes live with the quick methods' best
+/// (the lowest predicted error of same, BCD, GKD and least squares, each
+/// prepared here again in-process as independent truth), says `refining`,
+/// and the fit follows in place only if it predicts less (here it does).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_switch_to_an_unfitted_level_goes_live_with_the_quick_best_and_the_fit_follows_if_better() {
+    let _serial = daemon::serial().await;
+    let applied = first_switch_to_an_unfitted_level("").await;
+    assert!(applied, "on this scene the fit predicts less than every quick method");
+}
+
+/// The other side of the rule: a fit of no iterations is one of the quick
+/// methods' coefficients (its best start, or `same` by its guard), so it
+/// never predicts less than their best and must not replace it.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_fit_that_predicts_no_less_than_the_live_quick_best_is_not_applied() {
+    let _serial = daemon::serial().await;
+    let applied = first_switch_to_an_unfitted_level("fit_iterations = 0\n").await;
+    assert!(!applied);
+}
+
+/// A daemon (with `estimation`'s extra lines) asked for 12×12 with `fit`:
+/// checks the provisional level against the truth and what follows it;
+/// returns whether the fit went live in place. The instance's own method
+/// is `fit` (so its levels' `ready` tells when a fit is prepared), and
+/// nothing is prepared beforehand but its start level.
+async fn first_switch_to_an_unfitted_level(estimation: &str) -> bool {
+    let port = daemon::free_port();
+    let dir = tempfile::tempdir().expect("temp dir");
+    let text = daemon::config_text(port, &dir.path().join("cache"), ("first", "first-fixed"))
+        .replace(
+            "[estimation]\n",
+            &format!("[estimation]\nprecompute = false\n{estimation}"),
+        )
+        .replacen("method = \"same\"", "method = \"fit\"", 1);
+    // The truth, in this process, without a cache.
+    let config = ServiceConfig::from_toml(&text, "test").expect("valid config");
+    let plan = config
+        .instances
+        .iter()
+        .find(|p| p.name == "first")
+        .expect("instance")
+        .clone();
+    let truth = Preparer::new(Arc::new(plan), config.estimation, None);
+    let level = Level::new(12, 12);
+    let quick: Vec<(String, f64)> = truth
+        .quick_methods()
+        .iter()
+        .filter_map(|&m| truth.prepare(level, m).ok())
+        .map(|p| (p.method.to_string(), p.predicted_error))
+        .collect();
+    let (best_method, best_error) = quick
+        .iter()
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .cloned()
+        .expect("a quick method prepares");
+    let fit = truth.prepare(level, Method::Fit).expect("the fit prepares");
+    eprintln!(
+        "quick methods {quick:?}: best {best_method}; fit {:.5}",
+        fit.predicted_error
+    );
+
+    let d = Daemon::run(port, &text, dir);
+    let c = client(&[d.endpoint()]).await;
+    wait_info(&c, "first").await;
+    let request = v1::SwitchRequest {
+        target: Some(v1::switch_request::Target::Level(level.to_wire())),
+        method: "fit".into(),
+        at_once: false,
+    };
+    let reply = within(60, "switch", c.switch("first", &request, Duration::from_secs(60)))
+        .await
+        .expect("switch accepted");
+    assert_eq!(Level::from_wire(reply.level.as_ref().unwrap()), Ok(level));
+    assert!(reply.refining, "the fit is still to come");
+    assert!(!reply.cached);
+    assert_eq!(reply.method, best_method, "the quick methods' best goes live");
+    assert_eq!(reply.predicted_error, Some(best_error));
+    let applied = fit.predicted_error < best_error;
+    if applied {
+        let info = within(120, "the fit in place", async {
+            loop {
+                let info = c.info("first").await.expect("info");
+                if info.coefficient_version > reply.coefficient_version {
+                    return info;
+                }
+                tokio::time::sleep(Duration::from_millis(100)).await;
+            }
+        })
+        .await;
+        assert_eq!(info.method, "fit");
+        assert_eq!(Level::from_wire(info.level.as_ref().unwrap()), Ok(level));
+        assert_eq!(info.coefficient_version, reply.coefficient_version + 1);
+    } else {
+        // Once the fit is prepared, the refinement decides at once (under
+        // the instance's switch lock, which a switch also takes): asked for
+        // again, the fit runs one version after the provisional one, so the
+        // refinement did not apply it.
+        within(120, "the fit prepared", async {
+            loop {
+                let info = c.info("first").await.expect("info");
+                let twelve = info.levels.iter().find(|l| l.level == Some(level.to_wire()));
+                if twelve.is_some_and(|l| l.ready) {
+                    return;
+                }
+                tokio::time::sleep(Duration::from_millis(50)).await;
+            }
+        })
+        .await;
+        let again = within(
+            120,
+            "the fit prepared",
+            c.switch("first", &request, Duration::from_secs(120)),
+        )
+        .await
+        .expect("switch accepted");
+        assert_eq!(again.method, "fit");
+        assert!(!again.refining);
+        assert_eq!(again.predicted_error, Some(fit.predicted_error));
+        assert_eq!(again.coefficient_version, reply.coefficient_version + 1);
+    }
+    d.shutdown().await.expect("clean exit");
+    applied
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -234,6 +234,32 @@ pub enum Background {
 /// daemon started in this process sets it).
 static BACKGROUND: AtomicU8 = AtomicU8::new(Background::Idle as u8);
 
+/// Put the calling thread in the class of work a client waits for (a
+/// switch's preparation): nice 19. Below the stepping threads (CFS gives a
+/// nice-19 thread 15/1024 of a nice-0 one's share, and a waking stepping
+/// thread preempts it), above `SCHED_IDLE` background work, which then
+/// gets only what the client's work leaves (weight 3 against 15), so a
+/// switch does not queue behind the start-up's preparation. Where
+/// background work is `nice` (10), the client's is too.
+pub fn client_priority() {
+    let nice = if BACKGROUND.load(Ordering::Relaxed) == Background::Idle as u8 {
+        19
+    } else {
+        10
+    };
+    // SAFETY: setpriority has no memory-safety preconditions; on Linux,
+    // PRIO_PROCESS with id 0 applies to the calling thread only.
+    unsafe {
+        libc::setpriority(libc::PRIO_PROCESS, 0, nice);
+    }
+}
+
+/// The rayon pool of the work clients wait for ([`client_priority`]
+/// threads), built at start-up beside the global (background) pool, so a
+/// switch's parallel estimates neither queue behind background jobs nor run
+/// at their class. `None` until a daemon started.
+pub(crate) static CLIENT_POOL: std::sync::OnceLock<rayon::ThreadPool> = std::sync::OnceLock::new();
+
 /// Put the calling thread in the background class: `SCHED_IDLE` on Linux
 /// (no privilege needed to lower one's own class), else nice 10. Measured
 /// on a cold start of the default config on 2 cores (docs/results.md,

@@ -8,10 +8,10 @@ use std::time::Duration;
 use tokio::sync::oneshot;
 
 use super::persist::resume;
-use super::{lower_priority, Context, Instance};
+use super::{client_priority, lower_priority, Context, Instance, CLIENT_POOL};
 use crate::engine::{Command, InstanceHandle, Snapshot, SwitchOutcome};
 use crate::estimate::Method;
-use crate::plan::{Level, PrepareError, Prepared, Preparer};
+use crate::plan::{InstanceKind, Level, PrepareError, Prepared, Preparer};
 use crate::points::cloud::CloudMap;
 use crate::sim::Simulation;
 
@@ -22,20 +22,100 @@ pub(super) struct Ready {
     pub(super) cloud: Option<CloudMap>,
 }
 
+/// Who waits for a preparation, which sets the class its threads run in.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum Waiting {
+    /// Nobody: start-up's precomputation, resumes, refinements
+    /// ([`lower_priority`]: `SCHED_IDLE`, the global rayon pool).
+    Background,
+    /// A client's request ([`client_priority`]: nice 19, the client pool).
+    Client,
+}
+
 /// Prepare `level` on a background thread; the new level's simulation (and
 /// a surface's cloud map) is built there too, so the stepping thread only
 /// transfers the state.
 pub(super) async fn prepare(preparer: Arc<Preparer>, level: Level, method: Method) -> Result<Ready, PrepareError> {
+    on_thread(Waiting::Background, preparer, level, method, move |p| {
+        p.prepare(level, method)
+    })
+    .await
+}
+
+/// [`prepare`] for a client who waits ([`Waiting::Client`]).
+pub(super) async fn prepare_for_client(
+    preparer: Arc<Preparer>,
+    level: Level,
+    method: Method,
+) -> Result<Ready, PrepareError> {
+    on_thread(Waiting::Client, preparer, level, method, move |p| {
+        p.prepare(level, method)
+    })
+    .await
+}
+
+/// What a switch to `level` waits for, for a client: `method`'s estimate
+/// when it is prepared already, in the on-disk cache, quick to make, or of
+/// a surface; else (a cloth's `fit` to be made) the quick methods' best
+/// ([`Preparer::prepare_quick_best`]: the reference and a few scored runs,
+/// seconds rather than a fit's tens of seconds). The flag says the level is
+/// provisional: `method`'s estimate is still to come.
+pub(super) async fn prepare_first(
+    preparer: Arc<Preparer>,
+    level: Level,
+    method: Method,
+) -> Result<(Ready, bool), PrepareError> {
+    on_thread(Waiting::Client, preparer, level, method, move |p| {
+        let surface = matches!(p.plan().kind, InstanceKind::Surface(_));
+        if surface || p.quick_methods().contains(&method) {
+            return p.prepare(level, method);
+        }
+        match p.prepare_if_cached(level, method)? {
+            Some(prepared) => Ok(prepared),
+            None => p.prepare_quick_best(level),
+        }
+    })
+    .await
+    .map(|ready| {
+        let provisional = ready.prepared.method != method;
+        (ready, provisional)
+    })
+}
+
+/// Run `work` on a thread of `waiting`'s class (its parallel loops in that
+/// class's rayon pool) and build the prepared level's live simulation there.
+async fn on_thread(
+    waiting: Waiting,
+    preparer: Arc<Preparer>,
+    level: Level,
+    method: Method,
+    work: impl FnOnce(&Preparer) -> Result<Arc<Prepared>, PrepareError> + Send + 'static,
+) -> Result<Ready, PrepareError> {
     let (tx, rx) = oneshot::channel();
     let spawned = std::thread::Builder::new()
         .name("lodcloth-prepare".into())
         .spawn(move || {
-            let _ = lower_priority();
-            let result = preparer.prepare(level, method).and_then(|prepared| {
-                let sim = preparer.live_simulation(&prepared)?;
-                let cloud = prepared.cloud_map();
-                Ok(Ready { prepared, sim, cloud })
-            });
+            let run = || {
+                work(&preparer).and_then(|prepared| {
+                    let sim = preparer.live_simulation(&prepared)?;
+                    let cloud = prepared.cloud_map();
+                    Ok(Ready { prepared, sim, cloud })
+                })
+            };
+            let result = match (waiting, CLIENT_POOL.get()) {
+                (Waiting::Client, Some(pool)) => {
+                    client_priority();
+                    pool.install(run)
+                }
+                (Waiting::Client, None) => {
+                    client_priority();
+                    run()
+                }
+                (Waiting::Background, _) => {
+                    let _ = lower_priority();
+                    run()
+                }
+            };
             let _ = tx.send(result);
         });
     let failed = |message: String| PrepareError::Failed { level, method, message };
@@ -51,7 +131,7 @@ pub(super) async fn precompute(ctx: Arc<Context>, all_levels: bool, resumes: BTr
     for inst in ctx.instances.values() {
         let config = inst.preparer.plan().clone();
         // Version 1: the quick start's coefficients, nobody switched since.
-        estimate_in_place(inst, config.start, config.method, 1).await;
+        estimate_in_place(inst, config.start, config.method, 1, None).await;
     }
     if !all_levels {
         return;
@@ -70,9 +150,16 @@ pub(super) async fn precompute(ctx: Arc<Context>, all_levels: bool, resumes: BTr
 /// Prepare `level` with `method` without holding the instance's switch lock
 /// (client switches go on meanwhile), then put the estimate live in place
 /// (a same-level switch) only if the instance still runs `level` at
-/// coefficient `version`: nobody has switched it since. What happened is
-/// logged.
-pub(super) async fn estimate_in_place(inst: &Instance, level: Level, method: Method, version: u32) {
+/// coefficient `version`: nobody has switched it since; and, given
+/// `live_error` (the predicted error of what runs), only if the estimate
+/// predicts less. What happened is logged.
+pub(super) async fn estimate_in_place(
+    inst: &Instance,
+    level: Level,
+    method: Method,
+    version: u32,
+    live_error: Option<f64>,
+) {
     let name = &inst.handle.name;
     let prepared = prepare(inst.preparer.clone(), level, method).await;
     let _guard = inst.switching.lock().await;
@@ -80,6 +167,19 @@ pub(super) async fn estimate_in_place(inst: &Instance, level: Level, method: Met
     if status.level != level || status.coefficient_version != version {
         tracing::info!(instance = %name, %level, %method, "estimate prepared; the instance has switched since, not applied");
         return;
+    }
+    if let (Ok(ready), Some(live)) = (&prepared, live_error) {
+        if !(ready.prepared.predicted_error < live) {
+            tracing::info!(
+                instance = %name,
+                %level,
+                %method,
+                predicted_error = ready.prepared.predicted_error,
+                live_error = live,
+                "estimate prepared; it predicts no less than the live coefficients, not applied"
+            );
+            return;
+        }
     }
     match prepared {
         Ok(ready) => match switch_to(&inst.handle, ready).await {

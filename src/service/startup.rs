@@ -38,6 +38,21 @@ pub(super) fn start_engine(config: &ServiceConfig) -> Result<Started, ServiceErr
             super::lower_priority();
         })
         .build_global();
+    // The client pool's threads start at this thread's class (normal) and
+    // lower themselves; threads made from a SCHED_IDLE thread could not
+    // leave that class without privilege.
+    if super::CLIENT_POOL.get().is_none() {
+        match rayon::ThreadPoolBuilder::new()
+            .thread_name(|i| format!("lodcloth-client-{i}"))
+            .start_handler(|_| super::client_priority())
+            .build()
+        {
+            Ok(pool) => {
+                let _ = super::CLIENT_POOL.set(pool);
+            }
+            Err(e) => tracing::warn!("no client estimation pool ({e}); a switch's estimates share the background's"),
+        }
+    }
     let cache = match CoefficientCache::open(&config.cache) {
         Ok(c) => Some(c),
         Err(e) => {

@@ -15,7 +15,7 @@ use crate::estimate::Method;
 use crate::plan::{Level, PrepareError};
 use crate::proto::v1::error::Code;
 use crate::proto::{self, schema, v1, WireLevel};
-use crate::service::prepare::{estimate_in_place, prepare, switch_at_once, switch_to, Ready};
+use crate::service::prepare::{estimate_in_place, prepare_first, prepare_for_client, switch_at_once, switch_to, Ready};
 use crate::service::request::{self, SwitchTarget};
 use crate::service::{keys, Context, Instance, MAX_PENDING_SWITCHES};
 
@@ -87,19 +87,35 @@ pub(in crate::service) async fn answer_switch(ctx: Arc<Context>, q: Query) {
                     level,
                     method,
                     o.coefficient_version,
+                    None,
                 ));
                 return reply_switched(&ctx, &q, &config.name, &o, arrived, false, true).await;
             }
             Err(e) => return reply_error(&ctx, &q, prepare_code(&e), e.to_string()).await,
         }
     }
-    let ready = match prepare(inst.preparer.clone(), level, method).await {
+    // A level whose estimate is slow to make (`fit`) goes live with the
+    // quick methods' best, the estimate following in place if better.
+    let (ready, provisional) = match prepare_first(inst.preparer.clone(), level, method).await {
         Ok(p) => p,
         Err(e) => return reply_error(&ctx, &q, prepare_code(&e), e.to_string()).await,
     };
-    let cached = was_ready || ready.prepared.cached;
+    let cached = !provisional && (was_ready || ready.prepared.cached);
+    let live_error = ready.prepared.predicted_error;
     match switch_to(&inst.handle, ready).await {
-        Ok(o) => reply_switched(&ctx, &q, &config.name, &o, arrived, cached, false).await,
+        Ok(o) => {
+            if provisional {
+                tokio::spawn(refine(
+                    ctx.clone(),
+                    config.name.clone(),
+                    level,
+                    method,
+                    o.coefficient_version,
+                    Some(live_error),
+                ));
+            }
+            reply_switched(&ctx, &q, &config.name, &o, arrived, cached, provisional).await
+        }
         Err(e) => reply_error(&ctx, &q, Code::Unavailable, e).await,
     }
 }
@@ -150,12 +166,13 @@ async fn reply_switched(
     .await;
 }
 
-/// After an at-once switch: the requested method's estimate, live in place
-/// unless the instance is switched again first.
-async fn refine(ctx: Arc<Context>, name: String, level: Level, method: Method, version: u32) {
+/// After an at-once or provisional switch: the requested method's
+/// estimate, live in place unless the instance is switched again first or
+/// (provisional) its predicted error is not below `live_error`'s.
+async fn refine(ctx: Arc<Context>, name: String, level: Level, method: Method, version: u32, live_error: Option<f64>) {
     if let Some(inst) = ctx.instances.get(&name) {
-        // Not counted as a switch: the client's was, at once.
-        estimate_in_place(inst, level, method, version).await;
+        // Not counted as a switch: the client's was.
+        estimate_in_place(inst, level, method, version, live_error).await;
     }
 }
 
@@ -168,7 +185,7 @@ async fn cheapest_meeting(inst: &Instance, method: Method, bound: f64) -> Result
     levels.sort_by_key(|l| l.nodes());
     let mut best: Option<(Level, f64)> = None;
     for l in levels {
-        match prepare(inst.preparer.clone(), l, method).await {
+        match prepare_for_client(inst.preparer.clone(), l, method).await {
             Ok(Ready { prepared: p, .. }) => {
                 if p.predicted_error <= bound {
                     return Ok(l);

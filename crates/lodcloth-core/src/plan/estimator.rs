@@ -85,8 +85,34 @@ impl Estimator {
         let Some(cache) = self.cache.as_ref().filter(|_| method != Method::Same) else {
             return compute();
         };
+        let key = self.key(problem, method, fit);
+        let mut fresh = None;
+        let (entry, provenance) = cache.get_or_compute(&key, || -> Result<CacheEntry, PlanError> {
+            let e = compute()?;
+            let mut entry = CacheEntry::new(key.clone(), e.material);
+            entry.notes.insert("estimate_seconds".into(), e.seconds);
+            fresh = Some(e);
+            Ok(entry)
+        })?;
+        Ok(match (provenance, fresh) {
+            (Provenance::Hit, _) | (_, None) => hit(&entry),
+            (_, Some(e)) => e,
+        })
+    }
+
+    /// The estimate of `method` on `problem` when the cache holds it,
+    /// without estimating (`None`: no cache, no entry, or `same`, which is
+    /// never cached). A cache that cannot be read counts as no entry.
+    pub fn cached(&self, problem: &LodProblem, method: Method, fit: &FitOptions) -> Option<Estimated> {
+        let cache = self.cache.as_ref().filter(|_| method != Method::Same)?;
+        let entry = cache.get(&self.key(problem, method, fit)).ok()??;
+        Some(hit(&entry))
+    }
+
+    /// The cache key of `method` on `problem` with `fit`'s settings.
+    fn key(&self, problem: &LodProblem, method: Method, fit: &FitOptions) -> CacheKey {
         let train = fit.train_range(problem.frames());
-        let key = CacheKey {
+        CacheKey {
             scene: problem.scene.name.clone(),
             scene_hash: problem.scene.source_hash,
             reference: (problem.scene.nx, problem.scene.ny),
@@ -107,27 +133,20 @@ impl Estimator {
             mass: problem.mass.name().to_string(),
             integrator: problem.integrator.name().to_string(),
             dt: problem.dt,
-        };
-        let mut fresh = None;
-        let (entry, provenance) = cache.get_or_compute(&key, || -> Result<CacheEntry, PlanError> {
-            let e = compute()?;
-            let mut entry = CacheEntry::new(key.clone(), e.material);
-            entry.notes.insert("estimate_seconds".into(), e.seconds);
-            fresh = Some(e);
-            Ok(entry)
-        })?;
-        Ok(match (provenance, fresh) {
-            (Provenance::Hit, _) | (_, None) => Estimated {
-                material: entry.material,
-                notes: format!(
-                    "cached ({:.1} s when computed)",
-                    entry.notes.get("estimate_seconds").copied().unwrap_or(f64::NAN)
-                ),
-                seconds: 0.0,
-                cached: true,
-            },
-            (_, Some(e)) => e,
-        })
+        }
+    }
+}
+
+/// An estimate read from the cache.
+fn hit(entry: &CacheEntry) -> Estimated {
+    Estimated {
+        material: entry.material,
+        notes: format!(
+            "cached ({:.1} s when computed)",
+            entry.notes.get("estimate_seconds").copied().unwrap_or(f64::NAN)
+        ),
+        seconds: 0.0,
+        cached: true,
     }
 }
 

@@ -8,6 +8,8 @@ use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
+use rayon::prelude::*;
+
 use super::estimator::{level_dt, record_reference, stable_problem, Estimator, PlanError};
 use super::{EstimationPlan, InstanceKind, InstancePlan, Level};
 use crate::cache::{CacheEntry, CacheError, CacheKey, CoefficientCache, Provenance};
@@ -150,9 +152,11 @@ pub struct Preparer {
     reference: Mutex<Option<Arc<Reference>>>,
     surface_reference: Mutex<Option<Arc<SurfaceReference>>>,
     prepared: Mutex<HashMap<(Level, Method), Arc<Prepared>>>,
-    /// One preparation at a time per instance: a second request for the same
-    /// level waits for the first and then finds it prepared.
-    work: Mutex<()>,
+    /// One preparation at a time per level and method: a second request for
+    /// the same waits for the first and then finds it prepared, while other
+    /// levels and methods (a client's switch beside the background's fit)
+    /// go on.
+    work: Mutex<HashMap<(Level, Method), Arc<Mutex<()>>>>,
 }
 
 impl Preparer {
@@ -170,7 +174,7 @@ impl Preparer {
             reference: Mutex::new(None),
             surface_reference: Mutex::new(None),
             prepared: Mutex::new(HashMap::new()),
-            work: Mutex::new(()),
+            work: Mutex::new(HashMap::new()),
         }
     }
 
@@ -229,6 +233,24 @@ impl Preparer {
 
     /// Prepare `level` with `method` (blocking; cached after the first time).
     pub fn prepare(&self, level: Level, method: Method) -> Result<Arc<Prepared>, PrepareError> {
+        self.prepare_with(level, method, false)
+            .map(|p| p.expect("an estimate is made when not cached"))
+    }
+
+    /// `level` with `method` prepared only if no estimate has to be made: it
+    /// is prepared already, or a cloth whose coefficients the on-disk cache
+    /// holds (then the reference is recorded if need be, and the level
+    /// scored). `None` otherwise.
+    pub fn prepare_if_cached(&self, level: Level, method: Method) -> Result<Option<Arc<Prepared>>, PrepareError> {
+        self.prepare_with(level, method, true)
+    }
+
+    fn prepare_with(
+        &self,
+        level: Level,
+        method: Method,
+        cached_only: bool,
+    ) -> Result<Option<Arc<Prepared>>, PrepareError> {
         if !self.plan.levels.contains(&level) {
             return Err(PrepareError::NotAllowed {
                 level,
@@ -236,16 +258,28 @@ impl Preparer {
             });
         }
         if let Some(p) = self.get(level, method) {
-            return Ok(p);
+            return Ok(Some(p));
         }
-        let _guard = lock(&self.work);
+        let work = lock(&self.work).entry((level, method)).or_default().clone();
+        let _guard = lock(&work);
         if let Some(p) = self.get(level, method) {
-            return Ok(p);
+            return Ok(Some(p));
         }
         let prepared = match (&self.plan.kind, level) {
             (InstanceKind::Cloth(scene), Level::Grid { nx, ny }) => {
-                self.prepare_cloth(&Self::cloth_scene(scene, &self.plan), level, nx, ny, method)?
+                match self.prepare_cloth(
+                    &Self::cloth_scene(scene, &self.plan),
+                    level,
+                    nx,
+                    ny,
+                    method,
+                    cached_only,
+                )? {
+                    Some(p) => p,
+                    None => return Ok(None),
+                }
             }
+            (InstanceKind::Surface(_), Level::Points(_)) if cached_only => return Ok(None),
             (InstanceKind::Surface(scene), Level::Points(n)) => self.prepare_surface(scene, level, n, method)?,
             _ => {
                 return Err(PrepareError::NotAllowed {
@@ -256,7 +290,57 @@ impl Preparer {
         };
         let prepared = Arc::new(prepared);
         lock(&self.prepared).insert((level, method), prepared.clone());
-        Ok(prepared)
+        Ok(Some(prepared))
+    }
+
+    /// The methods that estimate without re-simulating the level (only their
+    /// scores run it): `same`, BCD, GKD and least squares on a cloth; `same`
+    /// on a surface (its inverse fits need another all-points recording).
+    pub fn quick_methods(&self) -> &'static [Method] {
+        match self.plan.kind {
+            InstanceKind::Cloth(_) => &[Method::Same, Method::Bcd, Method::Gkd, Method::Lsq],
+            InstanceKind::Surface(_) => &[Method::Same],
+        }
+    }
+
+    /// `level` with the lowest predicted error of the [`quick_methods`](Self::quick_methods),
+    /// prepared side by side (rayon) after the reference: what a first
+    /// switch goes live with while a slow estimate (`fit`) is prepared.
+    /// Every method prepared stays prepared. Err: the first method's error
+    /// when none could be prepared.
+    pub fn prepare_quick_best(&self, level: Level) -> Result<Arc<Prepared>, PrepareError> {
+        if !self.plan.levels.contains(&level) {
+            return Err(PrepareError::NotAllowed {
+                level,
+                allowed: allowed(&self.plan.levels),
+            });
+        }
+        // The reference first, on this thread: every method needs it.
+        match &self.plan.kind {
+            InstanceKind::Cloth(scene) => {
+                self.reference(&Self::cloth_scene(scene, &self.plan))?;
+            }
+            InstanceKind::Surface(scene) => {
+                self.surface_reference(scene)?;
+            }
+        }
+        let results: Vec<Result<Arc<Prepared>, PrepareError>> = self
+            .quick_methods()
+            .par_iter()
+            .map(|&method| self.prepare(level, method))
+            .collect();
+        let best = results
+            .iter()
+            .filter_map(|r| r.as_ref().ok())
+            .min_by(|a, b| a.predicted_error.total_cmp(&b.predicted_error))
+            .cloned();
+        match best {
+            Some(p) => Ok(p),
+            None => Err(results
+                .into_iter()
+                .find_map(Result::err)
+                .expect("no method prepared, so one failed")),
+        }
     }
 
     fn prepare_cloth(
@@ -266,7 +350,8 @@ impl Preparer {
         nx: usize,
         ny: usize,
         method: Method,
-    ) -> Result<Prepared, PrepareError> {
+        cached_only: bool,
+    ) -> Result<Option<Prepared>, PrepareError> {
         let started = Instant::now();
         let reference = self.reference(scene)?;
         let failed = |e: PlanError| PrepareError::Failed {
@@ -302,7 +387,14 @@ impl Preparer {
             max_iterations: self.estimation.fit_iterations as usize,
             ..FitOptions::default()
         };
-        let estimated = self.estimator.estimate(&problem, method, &fit).map_err(failed)?;
+        let estimated = if cached_only {
+            match self.estimator.cached(&problem, method, &fit) {
+                Some(e) => e,
+                None => return Ok(None),
+            }
+        } else {
+            self.estimator.estimate(&problem, method, &fit).map_err(failed)?
+        };
         let material = estimated.material;
         let (problem, limit) = if self.plan.dt.is_some() {
             let limit = problem.simulation(material).map_err(|e| failed(e.into()))?.dt_limit();
@@ -339,7 +431,7 @@ impl Preparer {
             seconds = started.elapsed().as_secs_f64(),
             "level prepared"
         );
-        Ok(Prepared {
+        Ok(Some(Prepared {
             level,
             method,
             material,
@@ -350,7 +442,7 @@ impl Preparer {
             estimate_seconds: estimated.seconds,
             cached: estimated.cached,
             basis: Basis::Cloth(Arc::new(problem)),
-        })
+        }))
     }
 
     /// The surface reference: every point simulated over the scene,
