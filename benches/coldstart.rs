@@ -17,7 +17,9 @@
 //! `coldstart_rtf.svg` (each instance's real-time factor).
 //!
 //! `cargo bench --bench coldstart -- [--minutes 15] [--switch-after 5]
-//! [--switch paper-3=40x40] [--at-once] [--background idle|nice]`
+//! [--switch paper-3=40x40] [--at-once] [--background idle|nice] [--log FILE]`
+//! (`--log`: keep the daemon's log there, else it goes with its temporary
+//! directory)
 //! (`--at-once`: the switch goes live with the scene's coefficients and its
 //! estimate follows in place; `--background` replaces the config's
 //! `[engine] background`, to compare the classes).
@@ -137,7 +139,8 @@ async fn main() {
     let http: SocketAddr = format!("127.0.0.1:{}", daemon::free_port()).parse().expect("addr");
     // The binary cargo built beside this benchmark.
     let lodcloth = std::path::Path::new(env!("CARGO_BIN_EXE_lodcloth"));
-    let log = std::fs::File::create(dir.path().join("serve.log")).expect("log");
+    let log_path = arg("--log").map_or_else(|| dir.path().join("serve.log"), std::path::PathBuf::from);
+    let log = std::fs::File::create(&log_path).expect("log");
     let _daemon = Daemon(
         std::process::Command::new(lodcloth)
             .arg("serve")

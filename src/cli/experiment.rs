@@ -220,6 +220,10 @@ pub enum Experiment {
         /// Euler: of 4× the symplectic limit).
         #[arg(long, value_delimiter = ',', default_values_t = vec![0.25, 0.5, 0.8])]
         dt_fractions: Vec<f64>,
+        /// Implicit Euler's own dt fractions (of 4× the symplectic limit; may
+        /// exceed 1, up to the metric frame interval); default: --dt-fractions.
+        #[arg(long, value_delimiter = ',')]
+        implicit_fractions: Vec<f64>,
     },
     /// The coarsest level whose fitted model stays within --max-error on
     /// held-out frames.
@@ -304,6 +308,7 @@ pub fn run(experiment: Experiment) -> Result<()> {
             levels,
             methods,
             dt_fractions,
+            implicit_fractions,
         } => {
             common.apply_quick();
             let levels = if !levels.is_empty() {
@@ -313,7 +318,12 @@ pub fn run(experiment: Experiment) -> Result<()> {
             } else {
                 longs(&[64, 48, 40, 32, 24])
             };
-            pareto_cmd(&common, &levels, &parse_methods(&methods)?, &dt_fractions)
+            let implicit = if implicit_fractions.is_empty() {
+                &dt_fractions
+            } else {
+                &implicit_fractions
+            };
+            pareto_cmd(&common, &levels, &parse_methods(&methods)?, &dt_fractions, implicit)
         }
         Experiment::LodPlan {
             mut common,
@@ -818,7 +828,13 @@ fn write_error_maps(
     Ok(())
 }
 
-fn pareto_cmd(common: &Common, levels: &[GridLevel], methods: &[Method], fractions: &[f64]) -> Result<()> {
+fn pareto_cmd(
+    common: &Common,
+    levels: &[GridLevel],
+    methods: &[Method],
+    fractions: &[f64],
+    implicit_fractions: &[f64],
+) -> Result<()> {
     let out = common.out("out/pareto")?;
     let spec = common.spec()?;
     let scene = common.scenes()?.into_iter().next().context("no scene")?;
@@ -832,6 +848,7 @@ fn pareto_cmd(common: &Common, levels: &[GridLevel], methods: &[Method], fractio
         methods,
         &integrators,
         fractions,
+        implicit_fractions,
         &common.fit(frames)?,
         &common.estimator()?,
         &mut log_line,

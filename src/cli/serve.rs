@@ -438,8 +438,10 @@ pub fn switch(c: Connect, args: SwitchArgs) -> Result<()> {
             pct(r.predicted_error),
             r.dt,
             r.seconds,
-            if r.refining {
+            if r.refining && r.predicted_error.is_none() {
                 " (at once: the scene's coefficients; the estimate follows in place)"
+            } else if r.refining {
+                " (estimated quickly; the fit follows in place if it predicts less)"
             } else if r.cached {
                 " (prepared)"
             } else {

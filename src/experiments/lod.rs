@@ -384,6 +384,7 @@ pub fn pareto(
     methods: &[Method],
     integrators: &[Integrator],
     dt_fractions: &[f64],
+    implicit_fractions: &[f64],
     fit: &FitOptions,
     estimator: &Estimator,
     log: &mut dyn FnMut(String),
@@ -397,14 +398,14 @@ pub fn pareto(
         for &method in methods {
             let material = estimator.estimate(&base, method, fit)?.material;
             for &integrator in integrators {
-                // Implicit Euler is stable at any dt: its fractions are of the
-                // symplectic limit, and may exceed 1.
-                let (probe_integrator, scale) = if integrator == Integrator::ImplicitEuler {
-                    (Integrator::SymplecticEuler, 4.0)
+                // Implicit Euler is stable at any dt: its fractions are of
+                // 4× the symplectic limit, and may exceed 1.
+                let (probe_integrator, scale, fractions) = if integrator == Integrator::ImplicitEuler {
+                    (Integrator::SymplecticEuler, 4.0, implicit_fractions)
                 } else {
-                    (integrator, 1.0)
+                    (integrator, 1.0, dt_fractions)
                 };
-                for &frac in dt_fractions {
+                for &frac in fractions {
                     let (dt, limit) = level_dt(
                         scene,
                         reference,

@@ -183,9 +183,12 @@ class Client:
         """Switch ``instance`` to ``level`` (``"16x16"``, ``300`` points,
         ``(nx, ny)`` or a ``Level``) or to the cheapest allowed level whose
         predicted error is at most ``max_error`` (0.05 = 5 %). An unprepared
-        level is estimated first, hence the long default ``timeout``, unless
-        ``at_once``: then it goes live at once with the scene's own
-        coefficients (``reply.refining``) and the estimate follows in place.
+        level waits for its reference and a scored estimate, hence the long
+        default ``timeout``; a ``fit`` not made yet is replaced by the better
+        of ``same`` and ``bcd`` while the fit is made (``reply.refining``:
+        it follows in place if it predicts less). With ``at_once`` the level
+        goes live at once with the scene's own coefficients
+        (``reply.refining``) and the estimate follows in place.
         Raises :class:`RefusedError` (e.g. ``CODE_LEVEL_NOT_ALLOWED``,
         ``CODE_UNKNOWN_INSTANCE``, ``CODE_NO_LEVEL_MEETS_ERROR``,
         ``CODE_BUSY``) or :class:`NoReplyError`."""
