@@ -10,7 +10,7 @@ use std::time::{Duration, UNIX_EPOCH};
 use tokio::sync::oneshot;
 
 use super::config::Snapshots;
-use super::prepare::prepare;
+use super::prepare::{prepare, Waiting};
 use super::{snapshot, Context};
 use crate::engine::{Command, Snapshot};
 use crate::estimate::Method;
@@ -83,7 +83,7 @@ async fn resume_one(ctx: Arc<Context>, name: String, saved: Box<Snapshot>) {
             if quick {
                 Ok((None, None, None))
             } else {
-                prepare(inst.preparer.clone(), level, method)
+                prepare(Waiting::Background, inst.preparer.clone(), level, method)
                     .await
                     .map(|r| (Some(r.prepared), Some(Box::new(r.sim)), r.cloud.map(Box::new)))
             }
@@ -126,7 +126,7 @@ async fn resume_one(ctx: Arc<Context>, name: String, saved: Box<Snapshot>) {
     // Switches may go on while the level is prepared; the attach is
     // skipped if one lands first.
     drop(guard);
-    let attached = match prepare(inst.preparer.clone(), level, method).await {
+    let attached = match prepare(Waiting::Background, inst.preparer.clone(), level, method).await {
         Ok(ready) => {
             let (tx, rx) = oneshot::channel();
             let command = Command::Attach {

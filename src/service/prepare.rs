@@ -35,23 +35,14 @@ pub(super) enum Waiting {
 /// Prepare `level` on a background thread; the new level's simulation (and
 /// a surface's cloud map) is built there too, so the stepping thread only
 /// transfers the state.
-pub(super) async fn prepare(preparer: Arc<Preparer>, level: Level, method: Method) -> Result<Ready, PrepareError> {
-    on_thread(Waiting::Background, preparer, level, method, move |p| {
-        p.prepare(level, method)
-    })
-    .await
-}
-
-/// [`prepare`] for a client who waits ([`Waiting::Client`]).
-pub(super) async fn prepare_for_client(
+/// `waiting` sets the thread's class.
+pub(super) async fn prepare(
+    waiting: Waiting,
     preparer: Arc<Preparer>,
     level: Level,
     method: Method,
 ) -> Result<Ready, PrepareError> {
-    on_thread(Waiting::Client, preparer, level, method, move |p| {
-        p.prepare(level, method)
-    })
-    .await
+    on_thread(waiting, preparer, level, method, move |p| p.prepare(level, method)).await
 }
 
 /// What a switch to `level` waits for, for a client: `method`'s estimate
@@ -139,7 +130,7 @@ pub(super) async fn precompute(ctx: Arc<Context>, all_levels: bool, resumes: BTr
     for inst in ctx.instances.values() {
         let config = inst.preparer.plan().clone();
         for &level in &config.levels {
-            if let Err(e) = prepare(inst.preparer.clone(), level, config.method).await {
+            if let Err(e) = prepare(Waiting::Background, inst.preparer.clone(), level, config.method).await {
                 tracing::warn!(instance = %config.name, %level, "cannot prepare: {e}");
             }
         }
@@ -161,7 +152,7 @@ pub(super) async fn estimate_in_place(
     live_error: Option<f64>,
 ) {
     let name = &inst.handle.name;
-    let prepared = prepare(inst.preparer.clone(), level, method).await;
+    let prepared = prepare(Waiting::Background, inst.preparer.clone(), level, method).await;
     let _guard = inst.switching.lock().await;
     let status = inst.handle.status();
     if status.level != level || status.coefficient_version != version {

@@ -15,7 +15,7 @@ use crate::estimate::Method;
 use crate::plan::{Level, PrepareError};
 use crate::proto::v1::error::Code;
 use crate::proto::{self, schema, v1, WireLevel};
-use crate::service::prepare::{estimate_in_place, prepare_first, prepare_for_client, switch_at_once, switch_to, Ready};
+use crate::service::prepare::{estimate_in_place, prepare, prepare_first, switch_at_once, switch_to, Ready, Waiting};
 use crate::service::request::{self, SwitchTarget};
 use crate::service::{keys, Context, Instance, MAX_PENDING_SWITCHES};
 
@@ -185,7 +185,7 @@ async fn cheapest_meeting(inst: &Instance, method: Method, bound: f64) -> Result
     levels.sort_by_key(|l| l.nodes());
     let mut best: Option<(Level, f64)> = None;
     for l in levels {
-        match prepare_for_client(inst.preparer.clone(), l, method).await {
+        match prepare(Waiting::Client, inst.preparer.clone(), l, method).await {
             Ok(Ready { prepared: p, .. }) => {
                 if p.predicted_error <= bound {
                     return Ok(l);

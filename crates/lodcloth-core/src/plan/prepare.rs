@@ -156,8 +156,11 @@ pub struct Preparer {
     /// the same waits for the first and then finds it prepared, while other
     /// levels and methods (a client's switch beside the background's fit)
     /// go on.
-    work: Mutex<HashMap<(Level, Method), Arc<Mutex<()>>>>,
+    work: Mutex<HashMap<(Level, Method), WorkLock>>,
 }
+
+/// Held while one level and method is prepared.
+type WorkLock = Arc<Mutex<()>>;
 
 impl Preparer {
     /// A preparer for `plan`'s levels, estimating as `estimation` says and
