@@ -229,9 +229,10 @@ async fn a_switch_to_an_unfitted_level_goes_live_with_the_quick_best_and_the_fit
     assert!(applied, "on this scene the fit predicts less than every quick method");
 }
 
-/// The other side of the rule: a fit of no iterations is one of the quick
-/// methods' coefficients (its best start, or `same` by its guard), so it
-/// never predicts less than their best and must not replace it.
+/// The other side of the rule: a fit of no iterations is its best start
+/// (whichever of same, GKD, BCD and lsq trains best) or `same` by its
+/// guard; on this scene none predicts less than the live quick best (the
+/// truth computed in the helper says so), and it must not replace it.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_fit_that_predicts_no_less_than_the_live_quick_best_is_not_applied() {
     let _serial = daemon::serial().await;
