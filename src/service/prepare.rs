@@ -93,16 +93,15 @@ async fn on_thread(
                     Ok(Ready { prepared, sim, cloud })
                 })
             };
-            let result = match (waiting, CLIENT_POOL.get()) {
-                (Waiting::Client, Some(pool)) => {
+            let result = match waiting {
+                Waiting::Client => {
                     client_priority();
-                    pool.install(run)
+                    match CLIENT_POOL.get() {
+                        Some(pool) => pool.install(run),
+                        None => run(),
+                    }
                 }
-                (Waiting::Client, None) => {
-                    client_priority();
-                    run()
-                }
-                (Waiting::Background, _) => {
+                Waiting::Background => {
                     let _ = lower_priority();
                     run()
                 }

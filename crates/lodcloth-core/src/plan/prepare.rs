@@ -234,6 +234,18 @@ impl Preparer {
         scene
     }
 
+    /// `NotAllowed` unless `level` is one the instance may run.
+    fn check_allowed(&self, level: Level) -> Result<(), PrepareError> {
+        if self.plan.levels.contains(&level) {
+            Ok(())
+        } else {
+            Err(PrepareError::NotAllowed {
+                level,
+                allowed: allowed(&self.plan.levels),
+            })
+        }
+    }
+
     /// Prepare `level` with `method` (blocking; cached after the first time).
     pub fn prepare(&self, level: Level, method: Method) -> Result<Arc<Prepared>, PrepareError> {
         self.prepare_with(level, method, false)
@@ -254,12 +266,7 @@ impl Preparer {
         method: Method,
         cached_only: bool,
     ) -> Result<Option<Arc<Prepared>>, PrepareError> {
-        if !self.plan.levels.contains(&level) {
-            return Err(PrepareError::NotAllowed {
-                level,
-                allowed: allowed(&self.plan.levels),
-            });
-        }
+        self.check_allowed(level)?;
         if let Some(p) = self.get(level, method) {
             return Ok(Some(p));
         }
@@ -318,12 +325,7 @@ impl Preparer {
     /// Every method prepared stays prepared. Err: the first method's error
     /// when none could be prepared.
     pub fn prepare_quick_best(&self, level: Level) -> Result<Arc<Prepared>, PrepareError> {
-        if !self.plan.levels.contains(&level) {
-            return Err(PrepareError::NotAllowed {
-                level,
-                allowed: allowed(&self.plan.levels),
-            });
-        }
+        self.check_allowed(level)?;
         // The reference first, on this thread: every method needs it.
         match &self.plan.kind {
             InstanceKind::Cloth(scene) => {
@@ -765,12 +767,7 @@ impl Preparer {
     /// at-once switch goes live with while the level is prepared. A cloth
     /// takes milliseconds; a surface is simplified first.
     pub fn quick(&self, level: Level) -> Result<Start, PrepareError> {
-        if !self.plan.levels.contains(&level) {
-            return Err(PrepareError::NotAllowed {
-                level,
-                allowed: allowed(&self.plan.levels),
-            });
-        }
+        self.check_allowed(level)?;
         let failed = |message: String| PrepareError::Failed {
             level,
             method: Method::Same,
@@ -823,11 +820,8 @@ impl Preparer {
             method: Method::Same,
             message,
         };
-        if !self.plan.levels.contains(&level) {
-            return Some(Err(PrepareError::NotAllowed {
-                level,
-                allowed: allowed(&self.plan.levels),
-            }));
+        if let Err(e) = self.check_allowed(level) {
+            return Some(Err(e));
         }
         let scene = Self::cloth_scene(scene, &self.plan);
         Some(
