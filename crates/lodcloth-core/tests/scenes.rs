@@ -114,6 +114,23 @@ fn negative_stiffness_is_refused_naming_springs_structural_k() {
     assert!(msg.contains("springs.structural.k"), "{msg}");
 }
 
+/// Found by `parse_fuzz` (2026-11-26): a cloth of 1e-320 m by 5e-321 m
+/// passed (positive, aspect 2:1), and the springs made at another level's
+/// cells came out NaN (squared cell sizes underflow to 0).
+#[test]
+fn a_cloth_too_small_or_too_large_to_make_springs_is_refused_naming_its_size() {
+    let tiny = VALID
+        .replace("width = 1.0", "width = 1e-320")
+        .replace("height = 0.5", "height = 5e-321");
+    let msg = invalid_message(&tiny);
+    assert!(msg.contains("cloth.width") && msg.contains("cloth.height"), "{msg}");
+    let huge = VALID
+        .replace("width = 1.0", "width = 1e300")
+        .replace("height = 0.5", "height = 5e299");
+    let msg = invalid_message(&huge);
+    assert!(msg.contains("cloth.width") && msg.contains("cloth.height"), "{msg}");
+}
+
 #[test]
 fn one_node_per_side_is_refused_naming_cloth_nx() {
     let msg = invalid_message(&VALID.replace("nx = 12", "nx = 1"));

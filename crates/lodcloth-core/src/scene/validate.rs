@@ -99,6 +99,13 @@ impl Problems {
     fn cloth(&mut self, c: &RawCloth) {
         self.positive("cloth.width", c.width);
         self.positive("cloth.height", c.height);
+        // Springs at other levels are made from squared cell sizes: a size
+        // whose square underflows or overflows gives NaN springs.
+        for (path, size) in [("cloth.width", c.width), ("cloth.height", c.height)] {
+            if size.is_finite() && size > 0.0 && !(1e-4..=1e4).contains(&size) {
+                self.push(format!("{path}: must be within 1e-4 and 1e4 m, got {size} m"));
+            }
+        }
         // Springs are made from the material at every level's spacing, scaled
         // by the cells' aspect ratio (squared for the diagonals): keep it sane.
         let aspect = c.width / c.height;
