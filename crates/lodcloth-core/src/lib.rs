@@ -19,6 +19,9 @@
 //! - [`scene`] — scene files (TOML): cloth size and resolution, material,
 //!   pins, forces over time, wind; validated into ready-to-run simulations at
 //!   any resolution.
+//! - [`touch`] — live input (grabs, wind, pin moves, impulses) in material
+//!   coordinates, resolved onto a simulation at any level (`touch → {scene,
+//!   sim}`).
 //! - [`lod`] — barycentric correlation between resolutions, state transfer.
 //! - [`estimate`] — coefficient estimation (same, BCD, GKD, lsq, fit),
 //!   reference recording and the error metric (Sung 2018 eq. 9).
@@ -48,3 +51,4 @@ pub mod points;
 pub mod problems;
 pub mod scene;
 pub mod sim;
+pub mod touch;

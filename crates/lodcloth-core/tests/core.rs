@@ -23,4 +23,5 @@ mod scenes;
 mod stability;
 mod strain_control;
 mod symmetry_determinism;
+mod touch;
 mod two_threads;

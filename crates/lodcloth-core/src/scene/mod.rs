@@ -47,7 +47,7 @@ pub use raw::{
     MassConvention, RawAdjustment, RawCloth, RawCoeffs, RawForce, RawLimit, RawMaterial, RawModuli, RawOrientation,
     RawPin, RawPinPath, RawProfile, RawRegion, RawScene, RawSelector, RawSimulation, RawSprings, RawStrain, RawWind,
 };
-pub use selector::{Edge, Selector};
+pub use selector::{patch_weights, select as select_nodes, Edge, Selector};
 
 /// A validated pin: its node set, its path, and its field path (`pins[i]`)
 /// for messages at a resolution where it selects no node.
@@ -103,6 +103,17 @@ pub struct Scene {
 }
 
 impl Scene {
+    /// The node sets of the scene's pins (`[[pins]]` in file order), which a
+    /// live pin move names by index.
+    pub fn pin_sets(&self) -> Vec<Selector> {
+        self.pins.iter().map(|p| p.0.clone()).collect()
+    }
+
+    /// The scene's own wind, if it has one.
+    pub fn wind(&self) -> Option<Wind> {
+        self.wind
+    }
+
     /// Read and validate a scene file.
     pub fn load(path: &Path) -> Result<Scene, SceneError> {
         let bytes = std::fs::read(path).map_err(|source| SceneError::Io {

@@ -45,7 +45,7 @@ pub enum Edge {
 
 /// Node indices `selector` picks on a grid of `shape` (sorted, unique):
 /// `Points` map to the nearest node, every other selector tests each node.
-pub(super) fn select(selector: &Selector, shape: &GridShape) -> Vec<u32> {
+pub fn select(selector: &Selector, shape: &GridShape) -> Vec<u32> {
     let GridShape { nx, ny, .. } = *shape;
     let edge_has = |e: Edge, i: usize, j: usize| match e {
         Edge::Top => j == 0,
@@ -113,6 +113,15 @@ pub(super) fn region_load(selector: &Selector, shape: &GridShape) -> Option<Vec<
         }
     }
     Some(out)
+}
+
+/// The consistent nodal weights of the patch [u0, u1] × [v0, v1] (material
+/// coordinates, clamped to [0, 1]) on a grid of `shape`: nodes and weights
+/// summing to 1 whose first moment is the patch's centre at every
+/// resolution (see [`region_load`]); a patch of zero size is a point, and
+/// its weights are bilinear interpolation in its cell.
+pub fn patch_weights(shape: &GridShape, u: [f64; 2], v: [f64; 2]) -> Vec<(u32, f64)> {
+    region_load(&Selector::Region { u, v }, shape).unwrap_or_default()
 }
 
 /// For nodes at t_k = k/(n−1), k in 0..n: the mean over [a, b] ⊂ [0, 1] of

@@ -188,6 +188,99 @@ impl Pin {
     }
 }
 
+/// A hand on the cloth: a spring from a patch of the cloth to a point in the
+/// world, with damping against the patch's velocity. The patch is given by
+/// node `weights` (summing to 1; the touch layer makes them the patch's
+/// consistent nodal weights, so their first moment is the same material
+/// point at every level). With x̄ = Σ wᵢ xᵢ and v̄ = Σ wᵢ vᵢ the patch's
+/// position and velocity, the force is `F = stiffness · (target − x̄) −
+/// damping · v̄`, and node i carries wᵢ·F: the total is F and its moment
+/// acts at x̄ at every resolution.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Grab {
+    /// Nodes of the patch.
+    pub nodes: Vec<u32>,
+    /// Each node's weight (summing to 1).
+    pub weights: Vec<f64>,
+    /// Where the patch is pulled to (m).
+    pub target: [f64; 3],
+    /// Spring constant (N/m, ≥ 0).
+    pub stiffness: f64,
+    /// Damping (N·s/m, ≥ 0).
+    pub damping: f64,
+}
+
+impl Grab {
+    /// The patch's position and velocity, Σ wᵢ xᵢ and Σ wᵢ vᵢ (SoA fields).
+    pub fn patch(&self, pos: &[f64], vel: &[f64]) -> ([f64; 3], [f64; 3]) {
+        let n = pos.len() / 3;
+        let mut x = [0.0; 3];
+        let mut v = [0.0; 3];
+        for (&k, &w) in self.nodes.iter().zip(&self.weights) {
+            for c in 0..3 {
+                x[c] += w * pos[c * n + k as usize];
+                v[c] += w * vel[c * n + k as usize];
+            }
+        }
+        (x, v)
+    }
+
+    /// The total force at (pos, vel).
+    pub fn force(&self, pos: &[f64], vel: &[f64]) -> [f64; 3] {
+        let (x, v) = self.patch(pos, vel);
+        [0, 1, 2].map(|c| self.stiffness * (self.target[c] - x[c]) - self.damping * v[c])
+    }
+
+    /// Add each node's share of the force to `f` (SoA).
+    pub(crate) fn add_force(&self, pos: &[f64], vel: &[f64], f: &mut [f64]) {
+        let n = pos.len() / 3;
+        let total = self.force(pos, vel);
+        for (&k, &w) in self.nodes.iter().zip(&self.weights) {
+            for c in 0..3 {
+                f[c * n + k as usize] += w * total[c];
+            }
+        }
+    }
+}
+
+/// A live move of pinned nodes on top of their scripted path: the offset
+/// goes linearly from `from` at `start` to `to` at `end` (simulated s) and
+/// stays there, so a pin never jumps (its velocity is the ramp's slope).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct PinShift {
+    /// Offset at `start` and before (m).
+    pub from: [f64; 3],
+    /// Offset at `end` and after (m).
+    pub to: [f64; 3],
+    /// When the move starts (s).
+    pub start: f64,
+    /// When it ends (s, > start unless from = to).
+    pub end: f64,
+}
+
+impl PinShift {
+    /// Offset and velocity at time `t`.
+    pub fn at(&self, t: f64) -> ([f64; 3], [f64; 3]) {
+        if t >= self.end || self.end <= self.start {
+            return (self.to, [0.0; 3]);
+        }
+        if t <= self.start {
+            return (self.from, [0.0; 3]);
+        }
+        let span = self.end - self.start;
+        let s = (t - self.start) / span;
+        (
+            [0, 1, 2].map(|c| self.from[c] + s * (self.to[c] - self.from[c])),
+            [0, 1, 2].map(|c| (self.to[c] - self.from[c]) / span),
+        )
+    }
+
+    /// True when the offset is zero from `t` on.
+    pub fn is_rest_from(&self, t: f64) -> bool {
+        self.to == [0.0; 3] && (t >= self.end || self.from == [0.0; 3])
+    }
+}
+
 /// All external influences on a cloth except gravity and drag.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct Loads {

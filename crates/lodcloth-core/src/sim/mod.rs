@@ -7,6 +7,7 @@
 
 mod forces;
 mod implicit;
+mod live;
 mod loads;
 mod membrane;
 mod paged;
@@ -23,7 +24,8 @@ pub mod vec3;
 use std::sync::Arc;
 
 pub use forces::{SpringKernel, SpringTotals};
-pub use loads::{Loads, NodeLoad, Pin, PinPath, Profile, Tether, Wind};
+pub use live::GrabHeadroom;
+pub use loads::{Grab, Loads, NodeLoad, Pin, PinPath, PinShift, Profile, Tether, Wind};
 pub use membrane::{Membrane, Moduli};
 pub use pair::{Lender, Pair, Serial};
 pub use params::{
@@ -249,6 +251,11 @@ struct Model {
     free: Vec<f64>,
     params: SimParams,
     loads: Loads,
+    /// Live grabs (see [`Simulation::set_grabs`]).
+    grabs: Vec<Grab>,
+    /// Live pin moves, one per entry of `loads.pins` (empty when none was
+    /// ever moved; see [`Simulation::shift_pins`]).
+    pin_shifts: Vec<PinShift>,
 }
 
 impl Model {
@@ -327,6 +334,9 @@ impl Model {
             }
         };
         self.loads.add_forces(topo, t, pos, vel, f, &mut ws.normals);
+        for grab in &self.grabs {
+            grab.add_force(pos, vel, f);
+        }
         let (g, drag) = (self.params.gravity, self.params.drag);
         // Force → acceleration node by node: any split gives the same bits.
         let (inv_mass, free) = (&self.inv_mass[..n], &self.free[..n]);
@@ -583,6 +593,8 @@ impl Simulation {
                 free,
                 params,
                 loads,
+                grabs: Vec::new(),
+                pin_shifts: Vec::new(),
             },
             acc: Paged::new(3 * n, colour(5)),
             state,
@@ -723,6 +735,9 @@ impl Simulation {
         );
         out.fill(0.0);
         m.loads.add_forces(&m.topology, t, pos, vel, out, &mut self.ws.normals);
+        for grab in &m.grabs {
+            grab.add_force(pos, vel, out);
+        }
         let (g, drag) = (m.params.gravity, m.params.drag);
         for c in 0..3 {
             for k in 0..n {
@@ -854,8 +869,16 @@ impl Simulation {
     /// Overwrite pinned nodes with their prescribed position and velocity at the current time.
     fn apply_pins(&mut self) {
         let t = self.state.time;
-        for pin in &self.model.loads.pins {
-            let (p, v) = pin.at(t);
+        let shifts = &self.model.pin_shifts;
+        for (i, pin) in self.model.loads.pins.iter().enumerate() {
+            let (mut p, mut v) = pin.at(t);
+            if let Some(shift) = shifts.get(i) {
+                let (dp, dv) = shift.at(t);
+                for c in 0..3 {
+                    p[c] += dp[c];
+                    v[c] += dv[c];
+                }
+            }
             self.state.set_position(pin.node as usize, p);
             self.state.set_velocity(pin.node as usize, v);
         }

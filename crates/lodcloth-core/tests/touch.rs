@@ -1,0 +1,433 @@
+//! Live input (`touch`): an input given in material coordinates acts on the
+//! same material point with the same total at every level, obeys the
+//! mechanics it claims (momentum, static equilibrium, linear pin moves),
+//! keeps a level stable or is refused, and survives a level switch.
+
+use lodcloth::scene::Scene;
+use lodcloth::sim::{Simulation, StabilityCheck};
+use lodcloth::touch::{Input, Patch, Touch, TouchError};
+
+/// A free cloth in zero gravity (nothing pinned), with drag so it settles.
+const FREE: &str = r#"
+name = "free"
+
+[cloth]
+width = 1.2
+height = 0.8
+nx = 24
+ny = 16
+orientation = "horizontal"
+areal_density = 0.2
+
+[springs]
+structural = { k = 400.0, c = 0.04 }
+shear = { k = 60.0, c = 0.006 }
+bend = { k = 8.0, c = 0.0008 }
+
+[simulation]
+integrator = "symplectic_euler"
+dt = 1e-4
+duration = 10.0
+gravity = [0.0, 0.0, 0.0]
+drag = 2.0
+"#;
+
+fn free() -> Scene {
+    Scene::from_toml(FREE, "<free>").expect("the free scene is valid")
+}
+
+/// `scene` at `nx × ny` and its own dt (every level here is coarser, so
+/// stable at it).
+fn at(scene: &Scene, nx: usize, ny: usize) -> Simulation {
+    scene.build_at(nx, ny).expect("builds")
+}
+
+const LEVELS: [(usize, usize); 3] = [(24, 16), (13, 9), (7, 5)];
+
+fn momentum(sim: &Simulation) -> [f64; 3] {
+    let n = sim.topology().n_nodes;
+    let v = &sim.state().vel;
+    [0, 1, 2].map(|c| (0..n).map(|k| sim.masses()[k] * v[c * n + k]).sum())
+}
+
+#[test]
+fn a_patch_acts_at_its_material_point_with_weights_summing_to_one_at_every_level() {
+    let scene = free();
+    for (nx, ny) in LEVELS {
+        let sim = at(&scene, nx, ny);
+        let shape = sim.topology().grid.expect("a grid");
+        for patch in [
+            Patch {
+                u: 0.3,
+                v: 0.6,
+                radius: 0.1,
+            },
+            Patch {
+                u: 0.77,
+                v: 0.11,
+                radius: 0.0,
+            },
+            Patch {
+                u: 0.5,
+                v: 0.5,
+                radius: 0.02,
+            },
+        ] {
+            let (nodes, weights) = patch.weights(&shape);
+            let total: f64 = weights.iter().sum();
+            assert!(
+                (total - 1.0).abs() < 1e-12,
+                "{nx}x{ny} {patch:?}: weights sum to {total}"
+            );
+            // Horizontal rest shape: x = u·width, z = v·height.
+            let rest = &sim.topology().rest_positions;
+            let centre = [0, 2].map(|c| {
+                nodes
+                    .iter()
+                    .zip(&weights)
+                    .map(|(&k, &w)| w * rest[k as usize][c])
+                    .sum::<f64>()
+            });
+            assert!(
+                (centre[0] - patch.u * scene.width).abs() < 1e-12 && (centre[1] - patch.v * scene.height).abs() < 1e-12,
+                "{nx}x{ny} {patch:?}: acts at {centre:?}"
+            );
+        }
+    }
+}
+
+#[test]
+fn an_impulse_gives_the_cloth_exactly_its_momentum_at_every_level() {
+    let scene = free();
+    let j = [0.01, 0.02, -0.005];
+    for (nx, ny) in LEVELS {
+        let mut sim = at(&scene, nx, ny);
+        let mut touch = Touch::new(&scene);
+        touch
+            .apply(
+                &Input::Impulse {
+                    at: Patch {
+                        u: 0.3,
+                        v: 0.6,
+                        radius: 0.1,
+                    },
+                    impulse: j,
+                },
+                &mut sim,
+            )
+            .expect("a modest impulse is accepted");
+        let p = momentum(&sim);
+        for c in 0..3 {
+            assert!(
+                (p[c] - j[c]).abs() < 1e-12,
+                "{nx}x{ny}: momentum {p:?} after an impulse {j:?}"
+            );
+        }
+    }
+}
+
+#[test]
+fn a_grabbed_cloth_without_gravity_comes_to_rest_with_its_patch_on_the_target() {
+    // The grab is the only external force but drag; at rest the drag is 0,
+    // so the grab's force is 0: the patch sits exactly on its target.
+    let scene = free();
+    let mut sim = at(&scene, 24, 16);
+    let mut touch = Touch::new(&scene);
+    let at = Patch {
+        u: 0.25,
+        v: 0.75,
+        radius: 0.05,
+    };
+    let target = [0.25 * 1.2 + 0.1, 0.2, 0.75 * 0.8 - 0.05];
+    touch
+        .apply(
+            &Input::Grab {
+                id: 7,
+                at,
+                target,
+                stiffness: 5.0,
+                damping: 0.05,
+            },
+            &mut sim,
+        )
+        .expect("a soft grab is stable");
+    for _ in 0..80_000 {
+        assert!(sim.step().finite);
+    }
+    let grab = &sim.grabs()[0];
+    let (x, v) = grab.patch(&sim.state().pos, &sim.state().vel);
+    let off = (0..3).map(|c| (x[c] - target[c]).powi(2)).sum::<f64>().sqrt();
+    assert!(off < 1e-4, "after 8 s the patch is {off} m from its target ({x:?})");
+    let speed = sim.state().vel.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+    assert!(
+        speed < 1e-3 && v.iter().all(|x| x.abs() < 1e-3),
+        "still moving at {speed} m/s"
+    );
+    // It really was pulled: the patch moved 0.23 m from its rest place.
+    let r = &sim.topology().rest_positions;
+    let rest = [0, 1, 2].map(|d| {
+        grab.nodes
+            .iter()
+            .zip(&grab.weights)
+            .map(|(&k, &w)| w * r[k as usize][d])
+            .sum::<f64>()
+    });
+    let moved = (0..3).map(|c| (x[c] - rest[c]).powi(2)).sum::<f64>().sqrt();
+    assert!(moved > 0.2, "the patch moved only {moved} m");
+}
+
+#[test]
+fn a_grab_too_stiff_for_the_levels_dt_is_refused_and_the_bound_is_tight_where_the_grab_dominates() {
+    let scene = free();
+    let mut sim = at(&scene, 24, 16);
+    let mut touch = Touch::new(&scene);
+    let at = Patch {
+        u: 0.5,
+        v: 0.5,
+        radius: 0.0,
+    };
+    let grab = |k: f64| Input::Grab {
+        id: 1,
+        at,
+        target: [0.6, 0.1, 0.4],
+        stiffness: k,
+        damping: 0.0,
+    };
+    let max = match touch.apply(&grab(1e9), &mut sim) {
+        Err(TouchError::Unstable { max, .. }) => max,
+        other => panic!("a 1e9 N/m grab at dt 1e-4 was not refused as unstable: {other:?}"),
+    };
+    assert!(sim.grabs().is_empty(), "a refused grab left a spring behind");
+    let message = touch.apply(&grab(1e9), &mut sim).unwrap_err().to_string();
+    assert!(
+        message.contains("stiffness") && message.contains("stable up to"),
+        "{message}"
+    );
+    // Just below the bound: stable. Well above it (forced past the check):
+    // the grab's own mode k/m outruns dt and the level diverges.
+    let mut below = sim.clone();
+    touch
+        .apply(&grab(0.9 * max), &mut below)
+        .expect("0.9 of the bound is accepted");
+    for _ in 0..5_000 {
+        assert!(below.step().finite, "diverged at 0.9 of the stable bound {max} N/m");
+    }
+    let mut above = sim.clone();
+    let mut forced = below.grabs().to_vec();
+    forced[0].stiffness = 1.5 * max;
+    above.set_grabs(forced).expect("valid values");
+    let diverged = (0..5_000).any(|_| !above.step().finite);
+    assert!(
+        diverged,
+        "1.5 × the bound {max} N/m did not diverge: the bound is not tight"
+    );
+}
+
+#[test]
+fn a_pin_move_takes_its_pins_linearly_to_the_offset_at_every_level() {
+    let mut scene =
+        Scene::from_toml(&format!("{FREE}\n[[pins]]\nnodes = {{ edge = \"top\" }}\n"), "<pinned>").expect("valid");
+    scene.stability = StabilityCheck::Enforce;
+    for (nx, ny) in LEVELS {
+        let mut sim = at(&scene, nx, ny);
+        let mut touch = Touch::new(&scene);
+        for _ in 0..100 {
+            sim.step();
+        }
+        let node = sim.loads().pins[0].node as usize;
+        let before = sim.state().position(node);
+        let offset = [0.0, 0.1, -0.02];
+        touch
+            .apply(
+                &Input::MovePin {
+                    pin: 0,
+                    offset,
+                    seconds: 0.5,
+                },
+                &mut sim,
+            )
+            .expect("pin 0 exists");
+        assert_eq!(sim.state().position(node), before, "{nx}x{ny}: the pin jumped");
+        for _ in 0..2_500 {
+            sim.step();
+        }
+        let half = sim.state().position(node);
+        let v = sim.state().velocity(node);
+        for c in 0..3 {
+            assert!(
+                (half[c] - before[c] - 0.5 * offset[c]).abs() < 1e-9,
+                "{nx}x{ny}: halfway at {half:?}"
+            );
+            assert!((v[c] - offset[c] / 0.5).abs() < 1e-9, "{nx}x{ny}: moving at {v:?}");
+        }
+        for _ in 0..5_000 {
+            sim.step();
+        }
+        let end = sim.state().position(node);
+        for c in 0..3 {
+            assert!(
+                (end[c] - before[c] - offset[c]).abs() < 1e-9,
+                "{nx}x{ny}: ends at {end:?}"
+            );
+        }
+        assert!(
+            touch.active(sim.state().time),
+            "a pin off its script is an active touch"
+        );
+        let err = touch
+            .apply(
+                &Input::MovePin {
+                    pin: 1,
+                    offset,
+                    seconds: 0.5,
+                },
+                &mut sim,
+            )
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("move_pin.pin") && err.contains("1 pin sets"), "{err}");
+    }
+}
+
+#[test]
+fn a_level_switch_puts_the_same_grab_and_wind_on_the_new_level() {
+    let scene = free();
+    let mut fine = at(&scene, 24, 16);
+    let mut touch = Touch::new(&scene);
+    let at = Patch {
+        u: 0.3,
+        v: 0.4,
+        radius: 0.05,
+    };
+    touch
+        .apply(
+            &Input::Grab {
+                id: 3,
+                at,
+                target: [0.5, 0.3, 0.2],
+                stiffness: 4.0,
+                damping: 0.01,
+            },
+            &mut fine,
+        )
+        .expect("stable");
+    touch
+        .apply(
+            &Input::Wind {
+                velocity: [0.0, 0.0, 3.0],
+                gust: 0.3,
+                gust_hz: 0.5,
+            },
+            &mut fine,
+        )
+        .expect("valid wind");
+    let mut coarse = at_level(&scene, 13, 9);
+    touch
+        .resolve(&mut coarse)
+        .expect("the grab is stable on the coarse level too");
+    assert_eq!(coarse.loads().wind, fine.loads().wind);
+    let (f, c) = (&fine.grabs()[0], &coarse.grabs()[0]);
+    assert_eq!((f.target, f.stiffness, f.damping), (c.target, c.stiffness, c.damping));
+    // The same material point: the patch's rest position agrees.
+    let rest = |s: &Simulation, g: &lodcloth::sim::Grab| {
+        let r = &s.topology().rest_positions;
+        [0, 1, 2].map(|d| {
+            g.nodes
+                .iter()
+                .zip(&g.weights)
+                .map(|(&k, &w)| w * r[k as usize][d])
+                .sum::<f64>()
+        })
+    };
+    let (rf, rc) = (rest(&fine, f), rest(&coarse, c));
+    assert!((0..3).all(|d| (rf[d] - rc[d]).abs() < 1e-12), "{rf:?} vs {rc:?}");
+    assert_eq!(touch.grab_ids(), vec![3]);
+}
+
+fn at_level(scene: &Scene, nx: usize, ny: usize) -> Simulation {
+    at(scene, nx, ny)
+}
+
+#[test]
+fn bad_inputs_are_refused_naming_their_field_and_change_nothing() {
+    let scene = free();
+    let mut sim = at(&scene, 13, 9);
+    let mut touch = Touch::new(&scene);
+    let grab = |u: f64, k: f64| Input::Grab {
+        id: 1,
+        at: Patch { u, v: 0.5, radius: 0.0 },
+        target: [0.0; 3],
+        stiffness: k,
+        damping: 0.0,
+    };
+    let cases: Vec<(Input, &str)> = vec![
+        (grab(1.5, 1.0), "grab.at.u"),
+        (grab(f64::NAN, 1.0), "grab.at.u"),
+        (grab(0.5, f64::NAN), "grab.stiffness"),
+        (grab(0.5, -1.0), "grab.stiffness"),
+        (
+            Input::Move {
+                id: 9,
+                target: [0.0; 3],
+            },
+            "move.id",
+        ),
+        (Input::Release { id: 9 }, "release.id"),
+        (
+            Input::Move {
+                id: 1,
+                target: [f64::INFINITY, 0.0, 0.0],
+            },
+            "move.target.x",
+        ),
+        (
+            Input::Wind {
+                velocity: [0.0; 3],
+                gust: 2.0,
+                gust_hz: 1.0,
+            },
+            "wind.gust",
+        ),
+        (
+            Input::Impulse {
+                at: Patch {
+                    u: 0.5,
+                    v: 0.5,
+                    radius: -1.0,
+                },
+                impulse: [0.0; 3],
+            },
+            "impulse.at.radius",
+        ),
+        (
+            Input::Impulse {
+                at: Patch {
+                    u: 0.5,
+                    v: 0.5,
+                    radius: 0.0,
+                },
+                impulse: [0.0, 0.0, 500.0],
+            },
+            "impulse.impulse",
+        ),
+        (
+            Input::MovePin {
+                pin: 0,
+                offset: [0.0; 3],
+                seconds: 1.0,
+            },
+            "move_pin.pin",
+        ),
+    ];
+    let state = sim.state().clone();
+    for (input, field) in cases {
+        let err = touch.apply(&input, &mut sim).expect_err(field).to_string();
+        assert!(err.starts_with(field), "{input:?}: '{err}' does not name {field}");
+        assert_eq!(sim.state(), &state, "{input:?} changed the state");
+        assert!(
+            sim.grabs().is_empty() && sim.loads().wind.is_none(),
+            "{input:?} left a load"
+        );
+    }
+    assert!(!touch.active(0.0));
+}
