@@ -69,6 +69,8 @@ fn trial(n: usize, integrator: Integrator, precision: SpringPrecision, count: us
             looping: false,
             shadow: false,
             hold: false,
+            touch: None,
+            input_idle: 10.0,
         })
         .collect();
     let engine = Engine::start(

@@ -24,6 +24,8 @@ pub mod schema {
     pub const SWITCH_REPLY: &str = "lodcloth.v1.SwitchReply";
     pub const CONTROL_REQUEST: &str = "lodcloth.v1.ControlRequest";
     pub const CONTROL_REPLY: &str = "lodcloth.v1.ControlReply";
+    pub const INPUT_REQUEST: &str = "lodcloth.v1.InputRequest";
+    pub const INPUT_REPLY: &str = "lodcloth.v1.InputReply";
     pub const ERROR: &str = "lodcloth.v1.Error";
 }
 
@@ -105,6 +107,8 @@ pub fn metrics_message(instance: &str, m: &MetricsFrame) -> v1::Metrics {
         divergences: m.divergences,
         rollbacks: m.rollbacks,
         halted: m.halted.as_deref().unwrap_or_default().to_string(),
+        inputs: m.inputs,
+        touched: m.touched,
     }
 }
 

@@ -12,6 +12,7 @@ mod daemon;
 mod fuzz;
 
 mod clients;
+mod input;
 mod operations;
 mod robustness;
 mod security;

@@ -34,6 +34,8 @@ fn a_split_cloth_in_the_engine_steps_exactly_as_on_one_thread() {
                 looping: false,
                 shadow: false,
                 hold: false,
+                touch: None,
+                input_idle: 10.0,
             }],
             EngineSettings {
                 threads,

@@ -221,6 +221,11 @@ operator_certificates = ["operator"]
     within(15, "anonymous switch", assert_switch_denied(&anon, &anon)).await;
     let paused = anon.control(INSTANCE, v1::control_request::Action::Pause).await;
     assert!(paused.is_err(), "an anonymous pause must fail: {paused:?}");
+    let release_all = v1::InputRequest {
+        action: Some(v1::input_request::Action::ReleaseAll(v1::input_request::ReleaseAll {})),
+    };
+    let touched = anon.input(INSTANCE, &release_all).await;
+    assert!(touched.is_err(), "an anonymous input must fail: {touched:?}");
 
     // A certificate from another CA is not admitted on tls/.
     let refused = within(
@@ -270,6 +275,12 @@ operator_certificates = ["operator"]
         states.iter().any(|s| level_of(s) == Level::new(12, 12)),
         "observers see the switch"
     );
+    let release_all = v1::InputRequest {
+        action: Some(v1::input_request::Action::ReleaseAll(v1::input_request::ReleaseAll {})),
+    };
+    within(10, "operator input", operator.input(INSTANCE, &release_all))
+        .await
+        .expect("the operator may touch the cloth");
 
     for c in [anon, viewer, operator] {
         let _ = c.session.close().await;

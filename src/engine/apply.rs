@@ -48,6 +48,9 @@ impl Runner {
                     frame: self.frames,
                 });
             }
+            Command::Input { input, reply } => {
+                let _ = reply.send(self.input(&input));
+            }
             Command::Snapshot { reply } => {
                 let snapshot = (!self.held && self.halted.is_none()).then(|| {
                     Box::new(Snapshot {
@@ -148,6 +151,11 @@ impl Runner {
             (None, None) => self.sim.set_state(saved.state).map_err(|e| e.to_string())?,
             (Some(_), None) => return Err("a restore needs both the prepared level and its simulation".into()),
         }
+        if let Some(touch) = self.touch.as_mut() {
+            // Inputs are not saved: a resumed instance starts untouched.
+            touch.reset(&mut self.sim).map_err(|e| e.to_string())?;
+        }
+        self.touched_episode = false;
         self.level = level;
         self.coefficient_version = saved.coefficient_version;
         self.frames = saved.frame;
@@ -164,6 +172,12 @@ impl Runner {
         if let Err(e) = self.sim.set_state(rest) {
             tracing::error!(instance = %self.name, "reset failed: {e}");
         }
+        if let Some(touch) = self.touch.as_mut() {
+            if let Err(e) = touch.reset(&mut self.sim) {
+                tracing::error!(instance = %self.name, "clearing the inputs failed: {e}");
+            }
+        }
+        self.touched_episode = false;
         self.episode += 1;
         self.live_error = None;
         self.checkpoint.clone_from(self.sim.state());

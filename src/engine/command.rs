@@ -8,6 +8,9 @@ use super::{ControlOutcome, Snapshot, SwitchOutcome};
 use crate::plan::{Level, Prepared};
 use crate::points::cloud::CloudMap;
 use crate::sim::Simulation;
+use crate::touch::{Input, TouchError};
+
+use super::InputOutcome;
 
 /// Commands, applied between steps.
 pub enum Command {
@@ -30,6 +33,12 @@ pub enum Command {
     },
     /// Start the scene over from rest at the current level.
     Reset { reply: oneshot::Sender<ControlOutcome> },
+    /// A client's input, applied between two steps (see [`crate::touch`]);
+    /// refused for a surface or when the input does not fit the cloth.
+    Input {
+        input: Input,
+        reply: oneshot::Sender<Result<InputOutcome, TouchError>>,
+    },
     /// A copy of the instance's state; `None` while it is held or halted
     /// (nothing worth resuming).
     Snapshot {

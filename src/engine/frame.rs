@@ -54,6 +54,10 @@ pub struct MetricsFrame {
     pub coefficient_version: u32,
     pub paused: bool,
     pub dt: f64,
+    /// Inputs applied so far.
+    pub inputs: u64,
+    /// A client's input acts on the cloth now.
+    pub touched: bool,
 }
 
 /// What `info` replies describe: updated at every switch, pause and reset.
@@ -88,6 +92,18 @@ pub struct SwitchOutcome {
     pub dt: f64,
     pub coefficient_version: u32,
     pub frame: u64,
+}
+
+/// State after an input.
+#[derive(Debug, Clone)]
+pub struct InputOutcome {
+    /// The step after which it took effect.
+    pub frame: u64,
+    /// Simulated time of that step (s).
+    pub time: f64,
+    /// Ids of the grabs held now.
+    pub grabs: Vec<u32>,
+    pub level: Level,
 }
 
 /// State after a control command.

@@ -25,6 +25,7 @@ mod apply;
 mod command;
 mod divergence;
 mod frame;
+mod input;
 mod publish;
 mod runner;
 mod shadow;
@@ -42,11 +43,14 @@ use crate::estimate::Method;
 use crate::plan::Level;
 use crate::points::cloud::CloudMap;
 use crate::sim::{Lender, Simulation};
+use crate::touch::Touch;
 use runner::Runner;
 
 pub use command::Command;
 pub use divergence::MAX_CONSECUTIVE_DIVERGENCES;
-pub use frame::{Coefficients, ControlOutcome, MetricsFrame, Snapshot, StateFrame, Status, SwitchOutcome};
+pub use frame::{
+    Coefficients, ControlOutcome, InputOutcome, MetricsFrame, Snapshot, StateFrame, Status, SwitchOutcome,
+};
 
 /// Everything an instance starts with.
 pub struct InstanceSetup {
@@ -65,6 +69,11 @@ pub struct InstanceSetup {
     /// Neither step nor publish until a [`Command::Restore`] (a snapshot is
     /// being prepared to resume from).
     pub hold: bool,
+    /// Live input on a grid cloth (`None` for a surface: inputs refused).
+    pub touch: Option<Touch>,
+    /// Seconds without an input after which the instance lets go of
+    /// everything and returns to its scene's script.
+    pub input_idle: f64,
 }
 
 /// The service's side of one running instance.

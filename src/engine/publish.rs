@@ -27,7 +27,7 @@ impl Runner {
         };
         let s = self.sim.state();
         let mut reference_positions = Vec::new();
-        if let Some(sh) = self.shadow.as_mut() {
+        if let Some(sh) = self.shadow.as_mut().filter(|_| !self.touched_episode) {
             sh.reference_at(s.time, &mut reference_positions);
         }
         StateFrame {
@@ -85,6 +85,8 @@ impl Runner {
                 coefficient_version: self.coefficient_version,
                 paused: self.paused,
                 dt: self.dt(),
+                inputs: self.inputs,
+                touched: self.touched(),
             };
             self.metrics.send_replace(Some(Arc::new(m)));
             self.window_start = now;

@@ -15,6 +15,7 @@ use crate::estimate::Method;
 use crate::plan::Level;
 use crate::points::cloud::CloudMap;
 use crate::sim::{Material, Pair, Simulation, State, StepReport};
+use crate::touch::Touch;
 
 /// One instance on its stepping thread.
 pub(super) struct Runner {
@@ -68,6 +69,17 @@ pub(super) struct Runner {
     pub(super) metrics: watch::Sender<Option<Arc<MetricsFrame>>>,
     pub(super) transitions: tokio::sync::mpsc::UnboundedSender<Arc<StateFrame>>,
     pub(super) status: Arc<Mutex<Status>>,
+    /// Live input (grid cloths only).
+    pub(super) touch: Option<Touch>,
+    /// Inputs applied so far.
+    pub(super) inputs: u64,
+    /// When the last input arrived.
+    pub(super) last_input: Instant,
+    /// See [`InstanceSetup::input_idle`].
+    pub(super) input_idle: Duration,
+    /// An input acted in this episode: the recorded reference no longer
+    /// describes the cloth, so there is no live error until the next one.
+    pub(super) touched_episode: bool,
 }
 
 impl Runner {
@@ -142,6 +154,11 @@ impl Runner {
             metrics: metrics_tx,
             transitions: trans_tx,
             status: status.clone(),
+            touch: setup.touch,
+            inputs: 0,
+            last_input: now,
+            input_idle: Duration::from_secs_f64(setup.input_idle),
+            touched_episode: false,
         };
         let parts = HandleParts {
             name: setup.name,
@@ -205,6 +222,7 @@ impl Runner {
             self.reanchor(now);
             return;
         }
+        self.let_go_if_idle(now);
         let dt = self.dt();
         let elapsed = now.saturating_duration_since(self.origin).as_secs_f64();
         let mut due = ((elapsed / dt) as u64).saturating_sub(self.steps_since_origin);
@@ -251,7 +269,7 @@ impl Runner {
                 self.consecutive_divergences = 0;
             }
         }
-        if let Some(sh) = self.shadow.as_mut() {
+        if let Some(sh) = self.shadow.as_mut().filter(|_| !self.touched_episode) {
             // Once per reference metric frame interval, compare with the
             // reference interpolated linearly to this step's time (frame f
             // of the recording is at time (f + 1)·interval).
@@ -260,7 +278,7 @@ impl Runner {
                 self.live_error = sh.error_at(t, &self.sim.state().pos, self.cloud.as_mut());
             }
         }
-        if self.looping && report.time >= self.duration {
+        if self.looping && report.time >= self.duration && !self.touched() {
             self.restart();
         }
     }

@@ -56,6 +56,7 @@ impl Runner {
         };
         sim.set_state(state).map_err(|e| e.to_string())?;
         self.sim = sim;
+        self.carry_inputs();
         self.checkpoint = self.sim.state().clone();
         self.consecutive_divergences = 0;
         if cloud.is_some() {

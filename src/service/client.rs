@@ -266,4 +266,15 @@ impl Client {
         )
         .await
     }
+
+    /// Send an input (grab, move, release, pin move, wind, impulse); the
+    /// reply says the step after which it took effect.
+    pub async fn input(&self, instance: &str, request: &v1::InputRequest) -> Result<v1::InputReply, ClientError> {
+        self.request(
+            &keys::input(&self.prefix, instance),
+            Some((request.encode_to_vec(), schema::INPUT_REQUEST)),
+            self.timeout,
+        )
+        .await
+    }
 }

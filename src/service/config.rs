@@ -47,12 +47,64 @@ pub struct RawConfig {
     #[serde(default)]
     pub estimation: RawEstimation,
     #[serde(default)]
+    pub input: RawInput,
+    #[serde(default)]
     pub instances: Vec<RawInstance>,
     /// Instance snapshots, so a restart resumes every cloth where it was
     /// (absent: no snapshots).
     pub snapshots: Option<RawSnapshots>,
     /// The operations endpoint (absent: none).
     pub http: Option<RawHttp>,
+}
+
+/// `[input]`: clients' live input (`<prefix>/<instance>/input`).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RawInput {
+    /// Seconds without an input after which an instance lets go of
+    /// everything and returns to its scene's script (default 10).
+    #[serde(default = "default_input_idle")]
+    pub idle: f64,
+    /// Inputs per second an instance accepts on average (default 2000);
+    /// more are refused with BUSY, so a flood never slows stepping.
+    #[serde(default = "default_input_rate")]
+    pub rate: f64,
+    /// Inputs an instance accepts at once above the rate (default 200).
+    #[serde(default = "default_input_burst")]
+    pub burst: u32,
+}
+
+impl Default for RawInput {
+    fn default() -> Self {
+        RawInput {
+            idle: default_input_idle(),
+            rate: default_input_rate(),
+            burst: default_input_burst(),
+        }
+    }
+}
+
+fn default_input_idle() -> f64 {
+    10.0
+}
+
+fn default_input_rate() -> f64 {
+    2000.0
+}
+
+fn default_input_burst() -> u32 {
+    200
+}
+
+/// `[input]`, validated.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct InputSettings {
+    /// See [`RawInput::idle`] (s).
+    pub idle: f64,
+    /// See [`RawInput::rate`] (per second).
+    pub rate: f64,
+    /// See [`RawInput::burst`].
+    pub burst: u32,
 }
 
 /// `[http]`: `/metrics` (OpenMetrics) and `/healthz` for operators.
@@ -299,6 +351,7 @@ pub struct ServiceConfig {
     pub zenoh: ZenohSettings,
     pub engine: EngineSettings,
     pub estimation: EstimationPlan,
+    pub input: InputSettings,
     pub instances: Vec<InstancePlan>,
     pub snapshots: Option<Snapshots>,
     /// Where `/metrics` and `/healthz` are served (`None`: not at all).
@@ -440,6 +493,9 @@ impl ServiceConfig {
         p.extend(zenoh_problems(&raw.zenoh));
         check_engine(&mut p, &raw.engine);
         check_estimation(&mut p, &raw.estimation);
+        p.in_open_closed("input.idle", raw.input.idle, 0.0, 86_400.0, "seconds");
+        p.in_open_closed("input.rate", raw.input.rate, 0.0, 1e6, "inputs per second");
+        p.at_least("input.burst", raw.input.burst, 1);
         if raw.instances.is_empty() {
             p.push("instances: at least one instance is needed".into());
         }
@@ -495,6 +551,11 @@ impl ServiceConfig {
                 fit_frames: s.fit_frames,
                 fit_iterations: s.fit_iterations,
                 precompute: s.precompute,
+            },
+            input: InputSettings {
+                idle: raw.input.idle,
+                rate: raw.input.rate,
+                burst: raw.input.burst,
             },
             instances,
         })

@@ -26,6 +26,11 @@ pub fn control(prefix: &str, instance: &str) -> String {
     format!("{prefix}/{instance}/control")
 }
 
+/// `<prefix>/<instance>/input`
+pub fn input(prefix: &str, instance: &str) -> String {
+    format!("{prefix}/{instance}/input")
+}
+
 /// `<prefix>/instances`
 pub fn instances(prefix: &str) -> String {
     format!("{prefix}/instances")

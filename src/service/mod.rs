@@ -84,6 +84,16 @@ struct Instance {
     switching: tokio::sync::Mutex<()>,
     /// Switches in progress or queued (at most [`MAX_PENDING_SWITCHES`]).
     pending_switches: AtomicUsize,
+    /// The instance's input rate limit (`[input] rate`, `burst`).
+    input_rate: std::sync::Mutex<request::TokenBucket>,
+}
+
+impl Instance {
+    /// Take one input from the rate limit; false when the instance has had
+    /// its share.
+    fn input_allowed(&self, now: std::time::Instant) -> bool {
+        self.input_rate.lock().unwrap_or_else(|e| e.into_inner()).take(now)
+    }
 }
 
 /// Switch requests per instance in progress or queued; more are refused
@@ -107,6 +117,8 @@ struct Context {
     telemetry: telemetry::Telemetry,
     /// Metrics messages per second per instance.
     metrics_hz: f64,
+    /// Inputs' rate limit and idle time.
+    input: config::InputSettings,
 }
 
 /// Open the zenoh session from `config` and serve until `shutdown` completes.
@@ -141,6 +153,7 @@ pub async fn serve(
         instances,
         closing: closing.clone(),
         metrics_hz: config.engine.metrics_hz,
+        input: config.input,
     });
     let mut tasks = tokio::task::JoinSet::new();
     if let Some(listener) = listener {
@@ -204,6 +217,19 @@ async fn answer(
                     handlers::busy(ctx, query).await;
                 } else {
                     requests.spawn(handlers::answer_switch(ctx.clone(), query));
+                }
+            }
+            Ok(query) = q.input.recv_async() => {
+                // Queued here, in arrival order; only the wait is a task.
+                if requests.len() >= MAX_REQUESTS_IN_FLIGHT {
+                    handlers::busy(ctx, query).await;
+                } else {
+                    match handlers::submit_input(ctx, &query) {
+                        Ok(submitted) => {
+                            requests.spawn(handlers::finish_input(ctx.clone(), query, submitted));
+                        }
+                        Err(r) => handlers::refuse(ctx, &query, r).await,
+                    }
                 }
             }
             Ok(query) = q.control.recv_async() => {

@@ -12,6 +12,7 @@ use crate::names;
 use crate::plan::InstancePlan;
 use crate::plan::Level;
 use crate::proto::{v1, WireLevel};
+use crate::touch::{Input, Patch};
 use v1::error::Code;
 
 /// Largest request payload accepted (bytes). A `SwitchRequest` or
@@ -163,5 +164,158 @@ pub fn control_action(req: &v1::ControlRequest) -> Result<v1::control_request::A
             "action {} is not one of PAUSE, RESUME, RESET",
             req.action
         ))),
+    }
+}
+
+/// Turn an input request into an [`Input`] whose fields are all in range
+/// ([`Input::check`]); a missing part is refused naming it. Whether the
+/// input fits the instance (its grab ids, pin sets, stability at its dt)
+/// is the engine's to check, between two steps.
+pub fn input(req: &v1::InputRequest) -> Result<Input, Refusal> {
+    use v1::input_request::Action;
+    let vec = |v: &Option<v1::Vec3>, name: &str| -> Result<[f64; 3], Refusal> {
+        v.as_ref()
+            .map(|v| [v.x, v.y, v.z])
+            .ok_or_else(|| Refusal::bad(format!("{name}: missing")))
+    };
+    let patch = |p: &Option<v1::Patch>, name: &str| -> Result<Patch, Refusal> {
+        p.as_ref()
+            .map(|p| Patch {
+                u: p.u,
+                v: p.v,
+                radius: p.radius,
+            })
+            .ok_or_else(|| Refusal::bad(format!("{name}: missing")))
+    };
+    let input = match &req.action {
+        None => {
+            return Err(Refusal::bad(
+                "no action: set one of grab, move, release, release_all, move_pin, wind, scene_wind, impulse",
+            ))
+        }
+        Some(Action::Grab(g)) => Input::Grab {
+            id: g.id,
+            at: patch(&g.at, "grab.at")?,
+            target: vec(&g.target, "grab.target")?,
+            stiffness: g.stiffness,
+            damping: g.damping,
+        },
+        Some(Action::Move(m)) => Input::Move {
+            id: m.id,
+            target: vec(&m.target, "move.target")?,
+        },
+        Some(Action::Release(r)) => Input::Release { id: r.id },
+        Some(Action::ReleaseAll(_)) => Input::ReleaseAll,
+        Some(Action::MovePin(m)) => Input::MovePin {
+            pin: m.pin,
+            offset: vec(&m.offset, "move_pin.offset")?,
+            seconds: m.seconds,
+        },
+        Some(Action::Wind(w)) => Input::Wind {
+            velocity: vec(&w.velocity, "wind.velocity")?,
+            gust: w.gust,
+            gust_hz: w.gust_hz,
+        },
+        Some(Action::SceneWind(_)) => Input::SceneWind,
+        Some(Action::Impulse(i)) => Input::Impulse {
+            at: patch(&i.at, "impulse.at")?,
+            impulse: vec(&i.impulse, "impulse.impulse")?,
+        },
+    };
+    input.check().map_err(|e| Refusal::bad(e.to_string()))?;
+    Ok(input)
+}
+
+/// A token bucket: `rate` tokens a second up to `burst`; each accepted
+/// input takes one. Pure (the caller passes the time) so it can be tested
+/// without a clock.
+#[derive(Debug, Clone)]
+pub struct TokenBucket {
+    rate: f64,
+    burst: f64,
+    tokens: f64,
+    last: std::time::Instant,
+}
+
+impl TokenBucket {
+    /// A full bucket at `now`.
+    pub fn new(rate: f64, burst: u32, now: std::time::Instant) -> TokenBucket {
+        TokenBucket {
+            rate,
+            burst: f64::from(burst),
+            tokens: f64::from(burst),
+            last: now,
+        }
+    }
+
+    /// Take a token at `now`; false when none is left.
+    pub fn take(&mut self, now: std::time::Instant) -> bool {
+        let elapsed = now.saturating_duration_since(self.last).as_secs_f64();
+        self.last = self.last.max(now);
+        self.tokens = (self.tokens + elapsed * self.rate).min(self.burst);
+        if self.tokens >= 1.0 {
+            self.tokens -= 1.0;
+            true
+        } else {
+            false
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::time::{Duration, Instant};
+
+    #[test]
+    fn a_token_bucket_passes_its_burst_then_its_rate() {
+        let t0 = Instant::now();
+        let mut b = TokenBucket::new(100.0, 10, t0);
+        assert_eq!((0..20).filter(|_| b.take(t0)).count(), 10, "the burst at once");
+        // One second later: 100 more (capped at the burst of 10 at a time).
+        let mut passed = 0;
+        for ms in 1..=1000 {
+            if b.take(t0 + Duration::from_millis(ms)) {
+                passed += 1;
+            }
+        }
+        assert!((99..=101).contains(&passed), "{passed} in a second at 100/s");
+        // A long pause refills only to the burst.
+        let later = t0 + Duration::from_secs(60);
+        assert_eq!((0..50).filter(|_| b.take(later)).count(), 10);
+    }
+
+    #[test]
+    fn input_requests_become_checked_inputs_or_refusals_naming_the_field() {
+        let grab = |u: f64| v1::InputRequest {
+            action: Some(v1::input_request::Action::Grab(v1::input_request::Grab {
+                id: 2,
+                at: Some(v1::Patch { u, v: 0.5, radius: 0.0 }),
+                target: Some(v1::Vec3 { x: 0.0, y: 1.0, z: 0.0 }),
+                stiffness: 3.0,
+                damping: 0.1,
+            })),
+        };
+        match input(&grab(0.25)) {
+            Ok(Input::Grab { id: 2, at, target, .. }) => {
+                assert_eq!((at.u, at.v, target), (0.25, 0.5, [0.0, 1.0, 0.0]));
+            }
+            other => panic!("{other:?}"),
+        }
+        let r = input(&grab(1.25)).unwrap_err();
+        assert_eq!(r.code, Code::BadRequest);
+        assert!(r.message.starts_with("grab.at.u = 1.25"), "{}", r.message);
+        let r = input(&v1::InputRequest { action: None }).unwrap_err();
+        assert!(r.message.contains("no action"), "{}", r.message);
+        let no_target = v1::InputRequest {
+            action: Some(v1::input_request::Action::Move(v1::input_request::Move {
+                id: 1,
+                target: None,
+            })),
+        };
+        assert!(input(&no_target)
+            .unwrap_err()
+            .message
+            .starts_with("move.target: missing"));
     }
 }

@@ -8,7 +8,8 @@
 //!   under the prefix, and query `info` and `instances`;
 //! - only sessions matching `operator_usernames` (user/password
 //!   authentication) or `operator_certificates` (the common name of a client
-//!   certificate checked by mTLS) may query `switch` and `control`; to the
+//!   certificate checked by mTLS) may query `switch`, `control` and `input`
+//!   (touch the cloth); to the
 //!   others those queryables are not even declared, so their requests find
 //!   no daemon;
 //! - everything else on this session is denied.
@@ -236,7 +237,7 @@ pub fn access_control(prefix: &str, access: &RawAccess) -> serde_json::Value {
                 "permission": "allow",
                 "flows": ["ingress", "egress"],
                 "messages": ["query", "reply", "declare_queryable"],
-                "key_exprs": [keys::switch(prefix, "*"), keys::control(prefix, "*")],
+                "key_exprs": [keys::switch(prefix, "*"), keys::control(prefix, "*"), keys::input(prefix, "*")],
             },
         ],
         "subjects": subjects,

@@ -20,8 +20,9 @@ use super::{encoding, keys, snapshot, zerr, Context, Instance, ServiceError};
 use crate::cache::CoefficientCache;
 use crate::engine::{Engine, InstanceSetup, Snapshot};
 use crate::estimate::Method;
-use crate::plan::Preparer;
+use crate::plan::{InstanceKind, Preparer};
 use crate::proto::schema;
+use crate::touch::Touch;
 
 /// The engine stepping every configured instance, the service's side of
 /// each, and the snapshots the held ones resume from.
@@ -93,6 +94,11 @@ pub(super) fn start_engine(config: &ServiceConfig) -> Result<Started, ServiceErr
             looping: ic.looping,
             shadow: ic.shadow_reference,
             hold: resumes.contains_key(&ic.name),
+            touch: match &ic.kind {
+                InstanceKind::Cloth(scene) => Some(Touch::new(scene)),
+                InstanceKind::Surface(_) => None,
+            },
+            input_idle: config.input.idle,
         });
         preparers.push(preparer);
     }
@@ -107,6 +113,11 @@ pub(super) fn start_engine(config: &ServiceConfig) -> Result<Started, ServiceErr
                 preparer: preparer.clone(),
                 switching: tokio::sync::Mutex::new(()),
                 pending_switches: AtomicUsize::new(0),
+                input_rate: std::sync::Mutex::new(super::request::TokenBucket::new(
+                    config.input.rate,
+                    config.input.burst,
+                    std::time::Instant::now(),
+                )),
             }),
         );
     }
@@ -161,11 +172,12 @@ pub(super) async fn declare_outputs(
     Ok(tokens)
 }
 
-/// The daemon's four queryables, for every instance at once (`*`).
+/// The daemon's five queryables, for every instance at once (`*`).
 pub(super) struct Queryables {
     pub(super) info: Queryable<FifoChannelHandler<Query>>,
     pub(super) switch: Queryable<FifoChannelHandler<Query>>,
     pub(super) control: Queryable<FifoChannelHandler<Query>>,
+    pub(super) input: Queryable<FifoChannelHandler<Query>>,
     pub(super) list: Queryable<FifoChannelHandler<Query>>,
 }
 
@@ -180,11 +192,16 @@ impl Queryables {
             .declare_queryable(keys::control(prefix, "*"))
             .await
             .map_err(zerr)?;
+        let input = session
+            .declare_queryable(keys::input(prefix, "*"))
+            .await
+            .map_err(zerr)?;
         let list = session.declare_queryable(keys::instances(prefix)).await.map_err(zerr)?;
         Ok(Queryables {
             info,
             switch,
             control,
+            input,
             list,
         })
     }

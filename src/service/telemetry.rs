@@ -414,6 +414,20 @@ impl Collector for DaemonCollector {
             None,
             &counter(&|m| m.rollbacks),
         )?;
+        family(
+            &mut enc,
+            "lodcloth_inputs",
+            "Clients' inputs applied (grabs, moves, releases, pin moves, wind, impulses)",
+            None,
+            &counter(&|m| m.inputs),
+        )?;
+        family(
+            &mut enc,
+            "lodcloth_touched",
+            "1 while a client's input acts on the cloth",
+            None,
+            &gauge(&|m| Some(flag(m.touched))),
+        )?;
 
         // The service's own per-instance counters.
         let own = |f: &dyn Fn(&InstanceCounters) -> u64| -> Vec<(&str, Option<ConstCounter<u64>>)> {
@@ -539,6 +553,8 @@ mod tests {
             coefficient_version: 1,
             paused: false,
             dt: 1e-3,
+            inputs: 0,
+            touched: false,
         }
     }
 

@@ -197,7 +197,7 @@ impl Input {
             Input::Release { .. } | Input::ReleaseAll | Input::SceneWind => {}
             Input::MovePin { offset, seconds, .. } => {
                 check_point(["move_pin.offset.x", "move_pin.offset.y", "move_pin.offset.z"], offset)?;
-                if !(seconds >= 0.0 && seconds <= 3600.0) {
+                if !(0.0..=3600.0).contains(&seconds) {
                     return Err(field("move_pin.seconds", seconds, "must be within [0, 3600] s"));
                 }
             }
@@ -217,7 +217,7 @@ impl Input {
                 if !(0.0..=1.0).contains(&gust) {
                     return Err(field("wind.gust", gust, "a fraction of the velocity within [0, 1]"));
                 }
-                if !(gust_hz >= 0.0 && gust_hz <= 100.0) {
+                if !(0.0..=100.0).contains(&gust_hz) {
                     return Err(field("wind.gust_hz", gust_hz, "must be within [0, 100] Hz"));
                 }
             }
@@ -481,6 +481,21 @@ impl Touch {
             }
         }
         refused.map_or(Ok(()), Err)
+    }
+
+    /// Forget every input and take their loads off `sim` at once (the
+    /// scene starts over): no grab, the scene's wind, pins on their scripts.
+    pub fn reset(&mut self, sim: &mut Simulation) -> Result<(), TouchError> {
+        sim.set_grabs(Vec::new())?;
+        sim.set_wind(self.scene_wind)?;
+        let all: Vec<usize> = (0..sim.loads().pins.len()).collect();
+        if !sim.pin_shifts().is_empty() {
+            sim.shift_pins(&all, PinShift::default())?;
+        }
+        self.grabs.clear();
+        self.wind = None;
+        self.pin_shifts.clear();
+        Ok(())
     }
 
     /// Let go of everything at simulated time `t`: grabs released, the

@@ -3,6 +3,7 @@
 
 mod control;
 mod info;
+mod input;
 mod switch;
 
 use std::sync::Arc;
@@ -17,6 +18,7 @@ use crate::proto::{self, schema};
 
 pub(super) use control::answer_control;
 pub(super) use info::{answer_info, answer_list};
+pub(super) use input::{finish_input, submit_input};
 pub(super) use switch::answer_switch;
 
 pub(super) async fn reply_error(ctx: &Context, q: &Query, code: Code, message: impl Into<String>) {

@@ -70,7 +70,7 @@ class State(_message.Message):
     def __init__(self, instance: _Optional[str] = ..., frame: _Optional[int] = ..., time: _Optional[float] = ..., level: _Optional[_Union[Level, _Mapping]] = ..., coefficient_version: _Optional[int] = ..., positions: _Optional[bytes] = ..., episode: _Optional[int] = ..., stepped_unix_nanos: _Optional[int] = ..., transition: bool = ..., simulation_positions: _Optional[bytes] = ..., normals: _Optional[bytes] = ..., reference_positions: _Optional[bytes] = ...) -> None: ...
 
 class Metrics(_message.Message):
-    __slots__ = ("instance", "frame", "time", "level", "method", "predicted_error", "live_error", "step_cost_us", "real_time_factor", "overruns", "kinetic_energy", "potential_energy", "max_strain", "coefficient_version", "paused", "dt", "steps", "lag_resets", "divergences", "rollbacks", "halted")
+    __slots__ = ("instance", "frame", "time", "level", "method", "predicted_error", "live_error", "step_cost_us", "real_time_factor", "overruns", "kinetic_energy", "potential_energy", "max_strain", "coefficient_version", "paused", "dt", "steps", "lag_resets", "divergences", "rollbacks", "halted", "inputs", "touched")
     INSTANCE_FIELD_NUMBER: _ClassVar[int]
     FRAME_FIELD_NUMBER: _ClassVar[int]
     TIME_FIELD_NUMBER: _ClassVar[int]
@@ -92,6 +92,8 @@ class Metrics(_message.Message):
     DIVERGENCES_FIELD_NUMBER: _ClassVar[int]
     ROLLBACKS_FIELD_NUMBER: _ClassVar[int]
     HALTED_FIELD_NUMBER: _ClassVar[int]
+    INPUTS_FIELD_NUMBER: _ClassVar[int]
+    TOUCHED_FIELD_NUMBER: _ClassVar[int]
     instance: str
     frame: int
     time: float
@@ -113,7 +115,9 @@ class Metrics(_message.Message):
     divergences: int
     rollbacks: int
     halted: str
-    def __init__(self, instance: _Optional[str] = ..., frame: _Optional[int] = ..., time: _Optional[float] = ..., level: _Optional[_Union[Level, _Mapping]] = ..., method: _Optional[str] = ..., predicted_error: _Optional[float] = ..., live_error: _Optional[float] = ..., step_cost_us: _Optional[float] = ..., real_time_factor: _Optional[float] = ..., overruns: _Optional[int] = ..., kinetic_energy: _Optional[float] = ..., potential_energy: _Optional[float] = ..., max_strain: _Optional[float] = ..., coefficient_version: _Optional[int] = ..., paused: bool = ..., dt: _Optional[float] = ..., steps: _Optional[int] = ..., lag_resets: _Optional[int] = ..., divergences: _Optional[int] = ..., rollbacks: _Optional[int] = ..., halted: _Optional[str] = ...) -> None: ...
+    inputs: int
+    touched: bool
+    def __init__(self, instance: _Optional[str] = ..., frame: _Optional[int] = ..., time: _Optional[float] = ..., level: _Optional[_Union[Level, _Mapping]] = ..., method: _Optional[str] = ..., predicted_error: _Optional[float] = ..., live_error: _Optional[float] = ..., step_cost_us: _Optional[float] = ..., real_time_factor: _Optional[float] = ..., overruns: _Optional[int] = ..., kinetic_energy: _Optional[float] = ..., potential_energy: _Optional[float] = ..., max_strain: _Optional[float] = ..., coefficient_version: _Optional[int] = ..., paused: bool = ..., dt: _Optional[float] = ..., steps: _Optional[int] = ..., lag_resets: _Optional[int] = ..., divergences: _Optional[int] = ..., rollbacks: _Optional[int] = ..., halted: _Optional[str] = ..., inputs: _Optional[int] = ..., touched: bool = ...) -> None: ...
 
 class LevelInfo(_message.Message):
     __slots__ = ("level", "predicted_error", "dt", "ready")
@@ -290,3 +294,113 @@ class Error(_message.Message):
     code: Error.Code
     message: str
     def __init__(self, code: _Optional[_Union[Error.Code, str]] = ..., message: _Optional[str] = ...) -> None: ...
+
+class Vec3(_message.Message):
+    __slots__ = ("x", "y", "z")
+    X_FIELD_NUMBER: _ClassVar[int]
+    Y_FIELD_NUMBER: _ClassVar[int]
+    Z_FIELD_NUMBER: _ClassVar[int]
+    x: float
+    y: float
+    z: float
+    def __init__(self, x: _Optional[float] = ..., y: _Optional[float] = ..., z: _Optional[float] = ...) -> None: ...
+
+class Patch(_message.Message):
+    __slots__ = ("u", "v", "radius")
+    U_FIELD_NUMBER: _ClassVar[int]
+    V_FIELD_NUMBER: _ClassVar[int]
+    RADIUS_FIELD_NUMBER: _ClassVar[int]
+    u: float
+    v: float
+    radius: float
+    def __init__(self, u: _Optional[float] = ..., v: _Optional[float] = ..., radius: _Optional[float] = ...) -> None: ...
+
+class InputRequest(_message.Message):
+    __slots__ = ("grab", "move", "release", "release_all", "move_pin", "wind", "scene_wind", "impulse")
+    class Grab(_message.Message):
+        __slots__ = ("id", "at", "target", "stiffness", "damping")
+        ID_FIELD_NUMBER: _ClassVar[int]
+        AT_FIELD_NUMBER: _ClassVar[int]
+        TARGET_FIELD_NUMBER: _ClassVar[int]
+        STIFFNESS_FIELD_NUMBER: _ClassVar[int]
+        DAMPING_FIELD_NUMBER: _ClassVar[int]
+        id: int
+        at: Patch
+        target: Vec3
+        stiffness: float
+        damping: float
+        def __init__(self, id: _Optional[int] = ..., at: _Optional[_Union[Patch, _Mapping]] = ..., target: _Optional[_Union[Vec3, _Mapping]] = ..., stiffness: _Optional[float] = ..., damping: _Optional[float] = ...) -> None: ...
+    class Move(_message.Message):
+        __slots__ = ("id", "target")
+        ID_FIELD_NUMBER: _ClassVar[int]
+        TARGET_FIELD_NUMBER: _ClassVar[int]
+        id: int
+        target: Vec3
+        def __init__(self, id: _Optional[int] = ..., target: _Optional[_Union[Vec3, _Mapping]] = ...) -> None: ...
+    class Release(_message.Message):
+        __slots__ = ("id",)
+        ID_FIELD_NUMBER: _ClassVar[int]
+        id: int
+        def __init__(self, id: _Optional[int] = ...) -> None: ...
+    class ReleaseAll(_message.Message):
+        __slots__ = ()
+        def __init__(self) -> None: ...
+    class MovePin(_message.Message):
+        __slots__ = ("pin", "offset", "seconds")
+        PIN_FIELD_NUMBER: _ClassVar[int]
+        OFFSET_FIELD_NUMBER: _ClassVar[int]
+        SECONDS_FIELD_NUMBER: _ClassVar[int]
+        pin: int
+        offset: Vec3
+        seconds: float
+        def __init__(self, pin: _Optional[int] = ..., offset: _Optional[_Union[Vec3, _Mapping]] = ..., seconds: _Optional[float] = ...) -> None: ...
+    class Wind(_message.Message):
+        __slots__ = ("velocity", "gust", "gust_hz")
+        VELOCITY_FIELD_NUMBER: _ClassVar[int]
+        GUST_FIELD_NUMBER: _ClassVar[int]
+        GUST_HZ_FIELD_NUMBER: _ClassVar[int]
+        velocity: Vec3
+        gust: float
+        gust_hz: float
+        def __init__(self, velocity: _Optional[_Union[Vec3, _Mapping]] = ..., gust: _Optional[float] = ..., gust_hz: _Optional[float] = ...) -> None: ...
+    class SceneWind(_message.Message):
+        __slots__ = ()
+        def __init__(self) -> None: ...
+    class Impulse(_message.Message):
+        __slots__ = ("at", "impulse")
+        AT_FIELD_NUMBER: _ClassVar[int]
+        IMPULSE_FIELD_NUMBER: _ClassVar[int]
+        at: Patch
+        impulse: Vec3
+        def __init__(self, at: _Optional[_Union[Patch, _Mapping]] = ..., impulse: _Optional[_Union[Vec3, _Mapping]] = ...) -> None: ...
+    GRAB_FIELD_NUMBER: _ClassVar[int]
+    MOVE_FIELD_NUMBER: _ClassVar[int]
+    RELEASE_FIELD_NUMBER: _ClassVar[int]
+    RELEASE_ALL_FIELD_NUMBER: _ClassVar[int]
+    MOVE_PIN_FIELD_NUMBER: _ClassVar[int]
+    WIND_FIELD_NUMBER: _ClassVar[int]
+    SCENE_WIND_FIELD_NUMBER: _ClassVar[int]
+    IMPULSE_FIELD_NUMBER: _ClassVar[int]
+    grab: InputRequest.Grab
+    move: InputRequest.Move
+    release: InputRequest.Release
+    release_all: InputRequest.ReleaseAll
+    move_pin: InputRequest.MovePin
+    wind: InputRequest.Wind
+    scene_wind: InputRequest.SceneWind
+    impulse: InputRequest.Impulse
+    def __init__(self, grab: _Optional[_Union[InputRequest.Grab, _Mapping]] = ..., move: _Optional[_Union[InputRequest.Move, _Mapping]] = ..., release: _Optional[_Union[InputRequest.Release, _Mapping]] = ..., release_all: _Optional[_Union[InputRequest.ReleaseAll, _Mapping]] = ..., move_pin: _Optional[_Union[InputRequest.MovePin, _Mapping]] = ..., wind: _Optional[_Union[InputRequest.Wind, _Mapping]] = ..., scene_wind: _Optional[_Union[InputRequest.SceneWind, _Mapping]] = ..., impulse: _Optional[_Union[InputRequest.Impulse, _Mapping]] = ...) -> None: ...
+
+class InputReply(_message.Message):
+    __slots__ = ("instance", "frame", "time", "grabs", "level")
+    INSTANCE_FIELD_NUMBER: _ClassVar[int]
+    FRAME_FIELD_NUMBER: _ClassVar[int]
+    TIME_FIELD_NUMBER: _ClassVar[int]
+    GRABS_FIELD_NUMBER: _ClassVar[int]
+    LEVEL_FIELD_NUMBER: _ClassVar[int]
+    instance: str
+    frame: int
+    time: float
+    grabs: _containers.RepeatedScalarFieldContainer[int]
+    level: Level
+    def __init__(self, instance: _Optional[str] = ..., frame: _Optional[int] = ..., time: _Optional[float] = ..., grabs: _Optional[_Iterable[int]] = ..., level: _Optional[_Union[Level, _Mapping]] = ...) -> None: ...

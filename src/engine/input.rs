@@ -1,0 +1,79 @@
+//! Clients' inputs: applied between steps, kept across level switches,
+//! let go of when no client has touched the cloth for a while.
+
+use std::time::Instant;
+
+use super::runner::Runner;
+use super::InputOutcome;
+use crate::touch::{Input, TouchError};
+
+/// Seconds of simulated time over which moved pins return to their
+/// scripts when an instance lets go after being left idle.
+const PIN_RETURN_SECONDS: f64 = 1.0;
+
+impl Runner {
+    /// Apply `input` now, between two steps.
+    pub(super) fn input(&mut self, input: &Input) -> Result<InputOutcome, TouchError> {
+        let Some(touch) = self.touch.as_mut() else {
+            return Err(TouchError::Field {
+                field: "instance",
+                value: f64::NAN,
+                reason: "live input acts on grid cloths; this instance is a point-sampled surface".into(),
+            });
+        };
+        if self.halted.is_some() {
+            return Err(TouchError::Field {
+                field: "instance",
+                value: f64::NAN,
+                reason: "the instance is halted (it kept diverging); resume or reset it first".into(),
+            });
+        }
+        touch.apply(input, &mut self.sim)?;
+        self.inputs += 1;
+        self.last_input = Instant::now();
+        self.touched_episode = true;
+        self.live_error = None;
+        Ok(InputOutcome {
+            frame: self.frames,
+            time: self.sim.state().time,
+            grabs: touch.grab_ids(),
+            level: self.level,
+        })
+    }
+
+    /// True while a client's input acts on the cloth.
+    pub(super) fn touched(&self) -> bool {
+        let t = self.sim.state().time;
+        self.touch.as_ref().is_some_and(|touch| touch.active(t))
+    }
+
+    /// Let go of everything when no input came for the idle time.
+    pub(super) fn let_go_if_idle(&mut self, now: Instant) {
+        if now.saturating_duration_since(self.last_input) < self.input_idle || !self.touched() {
+            return;
+        }
+        let Some(touch) = self.touch.as_mut() else {
+            return;
+        };
+        // Once: from here the touch is inactive (or only pins returning).
+        self.last_input = now;
+        match touch.release(&mut self.sim, PIN_RETURN_SECONDS) {
+            Ok(()) => tracing::info!(
+                instance = %self.name,
+                idle_s = self.input_idle.as_secs_f64(),
+                "no input for the idle time: grabs released, back to the scene's script"
+            ),
+            Err(e) => tracing::error!(instance = %self.name, "letting go failed: {e}"),
+        }
+    }
+
+    /// Put the inputs in force on the simulation of a new level.
+    pub(super) fn carry_inputs(&mut self) {
+        let Some(touch) = self.touch.as_mut() else {
+            return;
+        };
+        if let Err(e) = touch.resolve(&mut self.sim) {
+            tracing::warn!(instance = %self.name, "an input did not carry over to the new level: {e}");
+        }
+    }
+}
