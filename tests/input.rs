@@ -335,5 +335,43 @@ async fn bad_inputs_are_refused_naming_the_field_and_a_flood_is_cut_to_the_rate(
         m.real_time_factor
     );
     assert!(!latest(&c, "poke").await.positions.is_empty());
+
+    // The command line grabs and lets go the same way, and says why not.
+    let cli = |args: &[&str]| {
+        let endpoint = d.endpoint();
+        let mut all: Vec<String> = vec!["input".into(), "poke".into()];
+        all.extend(["--connect".into(), endpoint, "--prefix".into(), PREFIX.into()]);
+        all.extend(args.iter().map(|a| a.to_string()));
+        std::process::Command::new(env!("CARGO_BIN_EXE_lodcloth"))
+            .args(&all)
+            .output()
+            .expect("the lodcloth binary runs")
+    };
+    let out = tokio::task::block_in_place(|| {
+        cli(&[
+            "grab",
+            "--id",
+            "4",
+            "--u",
+            "0.5",
+            "--v",
+            "1",
+            "--target",
+            "0.5,-0.9,0.2",
+        ])
+    });
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success() && text.contains("grabs held: [4]"),
+        "{text}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(metrics(&c, "poke").await.touched);
+    let out = tokio::task::block_in_place(|| cli(&["grab", "--u", "2", "--v", "1", "--target", "0,0,0"]));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && err.contains("grab.at.u = 2"), "{err}");
+    let out = tokio::task::block_in_place(|| cli(&["release", "--all"]));
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success() && text.contains("grabs held: []"), "{text}");
     d.shutdown().await.expect("clean exit");
 }

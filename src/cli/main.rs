@@ -57,6 +57,14 @@ enum Command {
         #[command(flatten)]
         connect: serve::Connect,
     },
+    /// Touch a running cloth: grab, move, release, move a pin, set the
+    /// wind, strike it (operators only on a secured daemon).
+    Input {
+        #[command(flatten)]
+        args: input::InputArgs,
+        #[command(flatten)]
+        connect: serve::Connect,
+    },
     /// Record an instance's published states to a trajectory file (.lct), or
     /// its Foxglove channels (coloured mesh, metrics) to an MCAP file.
     Record {
@@ -195,6 +203,7 @@ enum Command {
 }
 
 mod experiment;
+mod input;
 mod points;
 mod serve;
 mod simulate;
@@ -224,6 +233,7 @@ fn main() -> Result<()> {
             connect,
         } => serve::watch(connect, instance, count),
         Command::Switch { args, connect } => serve::switch(connect, args),
+        Command::Input { args, connect } => input::run(connect, args),
         Command::Record {
             instance,
             seconds,

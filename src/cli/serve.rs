@@ -152,7 +152,7 @@ pub fn router(args: RouterArgs) -> Result<()> {
     })
 }
 
-fn runtime() -> Result<tokio::runtime::Runtime> {
+pub(crate) fn runtime() -> Result<tokio::runtime::Runtime> {
     tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .thread_name("lodcloth-io")
@@ -249,7 +249,7 @@ fn print_check(path: &std::path::Path, config: &ServiceConfig) {
     }
 }
 
-async fn connect(c: &Connect) -> Result<Client> {
+pub(crate) async fn connect(c: &Connect) -> Result<Client> {
     Client::open(&c.options(), &c.prefix)
         .await
         .with_context(|| format!("connecting to {}", c.connect.join(", ")))
