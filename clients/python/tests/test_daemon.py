@@ -143,6 +143,21 @@ class LiveDaemon(unittest.TestCase):
             r = self.client.resume("hanging")
         self.assertFalse(r.paused)
 
+    def test_grab_and_release(self):
+        # Pull the bottom centre of `hanging` towards the viewer, then let go.
+        try:
+            r = self.client.grab("hanging", 0.5, 1.0, (0.5, -0.8, 0.3), id=9)
+            self.assertEqual(r.instance, "hanging")
+            self.assertIn(9, list(r.grabs))
+            self.assertGreater(r.frame, 0)
+            with self.assertRaises(lc.RefusedError) as ctx:
+                self.client.grab("hanging", 1.5, 1.0, (0, 0, 0))
+            self.assertEqual(ctx.exception.code, v1.Error.CODE_BAD_REQUEST)
+            self.assertIn("grab.at.u", ctx.exception.message)
+        finally:
+            r = self.client.release("hanging")
+        self.assertEqual(list(r.grabs), [])
+
     def test_switch_to_the_current_level(self):
         # It runs at that level, so the level is prepared; right after the
         # daemon starts, the reply may still wait for the background

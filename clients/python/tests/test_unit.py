@@ -223,6 +223,25 @@ class Requests(unittest.TestCase):
             lc.control_request(0)
         self.assertEqual(sorted(ACTIONS), ["pause", "reset", "resume"])
 
+    def test_inputs(self):
+        g = lc.grab_request(0.5, 1.0, (0.1, -0.2, 0.3), id=4, stiffness=30.0, radius=0.05)
+        self.assertEqual(g.WhichOneof("action"), "grab")
+        self.assertEqual((g.grab.id, g.grab.at.u, g.grab.at.v, g.grab.at.radius), (4, 0.5, 1.0, 0.05))
+        self.assertEqual((g.grab.target.x, g.grab.target.y, g.grab.target.z), (0.1, -0.2, 0.3))
+        self.assertEqual((g.grab.stiffness, g.grab.damping), (30.0, 0.2))
+        self.assertEqual(lc.move_request([1, 2, 3], id=4).move.target.z, 3.0)
+        self.assertEqual(lc.release_request(4).WhichOneof("action"), "release")
+        self.assertEqual(lc.release_request().WhichOneof("action"), "release_all")
+        self.assertEqual(lc.wind_request(None).WhichOneof("action"), "scene_wind")
+        w = lc.wind_request((0, 0, 3), gust=0.3, gust_hz=0.5)
+        self.assertEqual((w.wind.velocity.z, w.wind.gust, w.wind.gust_hz), (3.0, 0.3, 0.5))
+        self.assertEqual(lc.impulse_request(0.2, 0.3, (0, 0, 0.01)).impulse.at.radius, 0.05)
+        self.assertEqual(lc.move_pin_request(0, (0, 0.1, 0), seconds=2).move_pin.seconds, 2.0)
+        # It crosses the wire whole.
+        self.assertEqual(v1.InputRequest.FromString(g.SerializeToString()), g)
+        with self.assertRaises(ValueError):
+            lc.grab_request(0.5, 0.5, (1, 2))
+
     def test_optional_fields(self):
         m = v1.Metrics()
         self.assertIsNone(lc.optional(m, "predicted_error"))
@@ -245,6 +264,7 @@ class Keys(unittest.TestCase):
         self.assertEqual(keys.info("p", "a"), "p/a/info")
         self.assertEqual(keys.switch("p", "a"), "p/a/switch")
         self.assertEqual(keys.control("p", "a"), "p/a/control")
+        self.assertEqual(keys.input("p", "a"), "p/a/input")
         self.assertEqual(keys.instances("p"), "p/instances")
         self.assertEqual(keys.alive("p", "*"), "p/alive/*")
 

@@ -22,13 +22,23 @@ import dataclasses
 import logging
 import queue
 import threading
-from typing import Callable, Iterator, List, Optional, Tuple, Type, TypeVar, Union, cast
+from typing import Callable, Iterator, List, Optional, Sequence, Tuple, Type, TypeVar, Union, cast
 
 import zenoh
 from google.protobuf.message import Message
 
 from . import keys, v1
-from .codec import LevelLike, control_request, decode, encoding_of, refusal, switch_request
+from .codec import (
+    LevelLike,
+    control_request,
+    decode,
+    encoding_of,
+    grab_request,
+    move_request,
+    refusal,
+    release_request,
+    switch_request,
+)
 from .errors import ConnectError, LodclothError, NoDataError, NoReplyError, ZenohError
 from .options import ConnectOptions
 
@@ -204,6 +214,46 @@ class Client:
             self.timeout if timeout is None else timeout,
             control_request(action),
         )
+
+    def input(self, instance: str, request: "v1.InputRequest", timeout: Optional[float] = None) -> "v1.InputReply":
+        """Send one ``InputRequest`` (see :func:`grab_request` and its
+        siblings); the reply names the step after which it took effect and
+        the grabs held. Raises :class:`RefusedError` naming the field
+        (``CODE_BAD_REQUEST``), ``CODE_UNSTABLE`` for a grab too stiff for
+        the level's dt, or ``CODE_BUSY`` above the daemon's input rate."""
+        return self._request(
+            v1.InputReply,
+            keys.input(self.prefix, instance),
+            self.timeout if timeout is None else timeout,
+            request,
+        )
+
+    def grab(
+        self,
+        instance: str,
+        u: float,
+        v: float,
+        target: Sequence[float],
+        *,
+        id: int = 1,
+        stiffness: float = 20.0,
+        damping: float = 0.2,
+        radius: float = 0.02,
+    ) -> "v1.InputReply":
+        """Grab the cloth at material point (``u``, ``v``) and pull it to
+        ``target`` (see :func:`grab_request`); :meth:`move` drags it,
+        :meth:`release` lets go."""
+        return self.input(
+            instance, grab_request(u, v, target, id=id, stiffness=stiffness, damping=damping, radius=radius)
+        )
+
+    def move(self, instance: str, target: Sequence[float], *, id: int = 1) -> "v1.InputReply":
+        """Move grab ``id``'s target."""
+        return self.input(instance, move_request(target, id=id))
+
+    def release(self, instance: str, id: Optional[int] = None) -> "v1.InputReply":
+        """Let go of grab ``id`` (every grab when None)."""
+        return self.input(instance, release_request(id))
 
     def pause(self, instance: str) -> "v1.ControlReply":
         """Stop stepping ``instance`` (see :meth:`control`)."""

@@ -27,6 +27,12 @@ from . import v1
 from .errors import DecodeError, RefusedError
 
 __all__ = [
+    "grab_request",
+    "move_request",
+    "release_request",
+    "wind_request",
+    "impulse_request",
+    "move_pin_request",
     "MEDIA_TYPE",
     "LevelLike",
     "encoding_of",
@@ -278,3 +284,87 @@ def control_request(action: Union[str, int]) -> "v1.ControlRequest":
     if name not in ACTIONS:
         raise ValueError(f"action '{action}' is not one of {', '.join(ACTIONS)}")
     return v1.ControlRequest(action=ACTIONS[name])
+
+
+Vec3Like = Sequence[float]
+
+
+def _vec3(name: str, p: Vec3Like) -> "v1.Vec3":
+    values = [float(x) for x in p]
+    if len(values) != 3:
+        raise ValueError(f"{name} must be three numbers x, y, z, not {p!r}")
+    return v1.Vec3(x=values[0], y=values[1], z=values[2])
+
+
+def grab_request(
+    u: float,
+    v: float,
+    target: Vec3Like,
+    *,
+    id: int = 1,
+    stiffness: float = 20.0,
+    damping: float = 0.2,
+    radius: float = 0.02,
+) -> "v1.InputRequest":
+    """An ``InputRequest`` grabbing the square patch of half-side ``radius``
+    metres about material point (``u``, ``v``) (0..1 across the width from
+    the left, down the height from the top) with a spring of ``stiffness``
+    N/m and ``damping`` N·s/m to ``target`` (x, y, z in metres). The
+    daemon checks the ranges and the level's stability."""
+    req = v1.InputRequest()
+    req.grab.id = id
+    req.grab.at.CopyFrom(v1.Patch(u=u, v=v, radius=radius))
+    req.grab.target.CopyFrom(_vec3("target", target))
+    req.grab.stiffness = stiffness
+    req.grab.damping = damping
+    return req
+
+
+def move_request(target: Vec3Like, *, id: int = 1) -> "v1.InputRequest":
+    """Move grab ``id``'s target (x, y, z in metres)."""
+    req = v1.InputRequest()
+    req.move.id = id
+    req.move.target.CopyFrom(_vec3("target", target))
+    return req
+
+
+def release_request(id: Optional[int] = None) -> "v1.InputRequest":
+    """Let go of grab ``id``, or of every grab when ``id`` is None."""
+    req = v1.InputRequest()
+    if id is None:
+        req.release_all.SetInParent()
+    else:
+        req.release.id = id
+    return req
+
+
+def wind_request(velocity: Optional[Vec3Like], *, gust: float = 0.0, gust_hz: float = 0.0) -> "v1.InputRequest":
+    """Replace the scene's wind with ``velocity`` (m/s) scaled by
+    1 + gust·sin(2π·gust_hz·t); ``velocity=None`` returns to the scene's
+    own wind."""
+    req = v1.InputRequest()
+    if velocity is None:
+        req.scene_wind.SetInParent()
+    else:
+        req.wind.velocity.CopyFrom(_vec3("velocity", velocity))
+        req.wind.gust = gust
+        req.wind.gust_hz = gust_hz
+    return req
+
+
+def impulse_request(u: float, v: float, impulse: Vec3Like, *, radius: float = 0.05) -> "v1.InputRequest":
+    """Strike the patch about (``u``, ``v``) with ``impulse`` (N·s)."""
+    req = v1.InputRequest()
+    req.impulse.at.CopyFrom(v1.Patch(u=u, v=v, radius=radius))
+    req.impulse.impulse.CopyFrom(_vec3("impulse", impulse))
+    return req
+
+
+def move_pin_request(pin: int, offset: Vec3Like, *, seconds: float = 1.0) -> "v1.InputRequest":
+    """Move the scene's pin set ``pin`` to ``offset`` (m) from its script
+    over ``seconds`` of simulated time."""
+    req = v1.InputRequest()
+    req.move_pin.pin = pin
+    req.move_pin.offset.CopyFrom(_vec3("offset", offset))
+    req.move_pin.seconds = seconds
+    return req

@@ -14,6 +14,7 @@ __all__ = [
     "info",
     "switch",
     "control",
+    "input",
     "instances",
     "alive",
     "instance_of",
@@ -46,6 +47,11 @@ def switch(prefix: str, instance: str) -> str:
 def control(prefix: str, instance: str) -> str:
     """``<prefix>/<instance>/control``: ``ControlRequest`` -> ``ControlReply``."""
     return f"{prefix}/{instance}/control"
+
+
+def input(prefix: str, instance: str) -> str:
+    """``<prefix>/<instance>/input``: ``InputRequest`` -> ``InputReply``."""
+    return f"{prefix}/{instance}/input"
 
 
 def instances(prefix: str) -> str:
