@@ -64,9 +64,10 @@ pub enum InputAction {
         id: u32,
         #[command(flatten)]
         at: PatchArgs,
-        /// Target point x,y,z (m).
+        /// Target point x,y,z (m); without it, where the patch is now (then
+        /// `move` drags it).
         #[arg(long, value_parser = vec3, allow_hyphen_values = true)]
-        target: [f64; 3],
+        target: Option<[f64; 3]>,
         /// Spring constant (N/m).
         #[arg(long, default_value_t = 20.0)]
         stiffness: f64,
@@ -145,7 +146,7 @@ pub fn request(action: &InputAction) -> v1::InputRequest {
         } => Action::Grab(ir::Grab {
             id,
             at: at.wire(),
-            target: wire3(target),
+            target: target.and_then(wire3),
             stiffness,
             damping,
         }),

@@ -3,6 +3,7 @@
 //! the generalisation suite. These measure wall-clock time, which the pure
 //! modules never do.
 
+pub mod drag;
 pub mod generalise;
 pub mod lod;
 mod stability;

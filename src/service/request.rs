@@ -196,7 +196,7 @@ pub fn input(req: &v1::InputRequest) -> Result<Input, Refusal> {
         Some(Action::Grab(g)) => Input::Grab {
             id: g.id,
             at: patch(&g.at, "grab.at")?,
-            target: vec(&g.target, "grab.target")?,
+            target: g.target.as_ref().map(|v| [v.x, v.y, v.z]),
             stiffness: g.stiffness,
             damping: g.damping,
         },
@@ -298,7 +298,7 @@ mod tests {
         };
         match input(&grab(0.25)) {
             Ok(Input::Grab { id: 2, at, target, .. }) => {
-                assert_eq!((at.u, at.v, target), (0.25, 0.5, [0.0, 1.0, 0.0]));
+                assert_eq!((at.u, at.v, target), (0.25, 0.5, Some([0.0, 1.0, 0.0])));
             }
             other => panic!("{other:?}"),
         }

@@ -229,6 +229,7 @@ class Requests(unittest.TestCase):
         self.assertEqual((g.grab.id, g.grab.at.u, g.grab.at.v, g.grab.at.radius), (4, 0.5, 1.0, 0.05))
         self.assertEqual((g.grab.target.x, g.grab.target.y, g.grab.target.z), (0.1, -0.2, 0.3))
         self.assertEqual((g.grab.stiffness, g.grab.damping), (30.0, 0.2))
+        self.assertFalse(lc.grab_request(0.5, 0.5).grab.HasField("target"))
         self.assertEqual(lc.move_request([1, 2, 3], id=4).move.target.z, 3.0)
         self.assertEqual(lc.release_request(4).WhichOneof("action"), "release")
         self.assertEqual(lc.release_request().WhichOneof("action"), "release_all")

@@ -39,8 +39,10 @@ pub enum Input {
         id: u32,
         /// The part of the cloth held.
         at: Patch,
-        /// World point the patch is pulled to (m).
-        target: [f64; 3],
+        /// World point the patch is pulled to (m); `None`: where the patch
+        /// is now, so the grab starts without a jerk (a hand closing on
+        /// the cloth) and later moves drag it.
+        target: Option<[f64; 3]>,
         /// Spring constant (N/m, > 0).
         stiffness: f64,
         /// Damping against the patch's velocity (N·s/m, ≥ 0).
@@ -185,7 +187,9 @@ impl Input {
                 ..
             } => {
                 at.check(["grab.at.u", "grab.at.v", "grab.at.radius"])?;
-                check_point(["grab.target.x", "grab.target.y", "grab.target.z"], target)?;
+                if let Some(target) = target {
+                    check_point(["grab.target.x", "grab.target.y", "grab.target.z"], target)?;
+                }
                 if !(stiffness > 0.0 && stiffness.is_finite()) {
                     return Err(field("grab.stiffness", stiffness, "must be positive and finite (N/m)"));
                 }
@@ -297,6 +301,20 @@ impl Touch {
                 stiffness,
                 damping,
             } => {
+                let target = match target {
+                    Some(t) => t,
+                    None => {
+                        let (nodes, weights) = at.weights(&shape);
+                        let here = Grab {
+                            nodes,
+                            weights,
+                            target: [0.0; 3],
+                            stiffness: 0.0,
+                            damping: 0.0,
+                        };
+                        here.patch(&sim.state().pos, &sim.state().vel).0
+                    }
+                };
                 let spec = GrabSpec {
                     id,
                     at,
@@ -551,4 +569,46 @@ fn pins_of(set: &Selector, shape: &GridShape, sim: &Simulation) -> Vec<usize> {
         .filter(|(_, p)| nodes.binary_search(&p.node).is_ok())
         .map(|(i, _)| i)
         .collect()
+}
+
+/// Inputs at simulated times: a session to replay on any level (the
+/// reference and each coarse level get the same touches at the same
+/// moments, to the nearest step).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Script {
+    events: Vec<(f64, Input)>,
+}
+
+impl Script {
+    /// A script of `events` (time in s, input), each checked; ordered by
+    /// time, events at the same time in the order given.
+    pub fn new(mut events: Vec<(f64, Input)>) -> Result<Script, TouchError> {
+        for (t, input) in &events {
+            if !(t.is_finite() && *t >= 0.0) {
+                return Err(field("script.time", *t, "must be finite and ≥ 0 (s)"));
+            }
+            input.check()?;
+        }
+        events.sort_by(|a, b| a.0.total_cmp(&b.0));
+        Ok(Script { events })
+    }
+
+    /// The events, in time order.
+    pub fn events(&self) -> &[(f64, Input)] {
+        &self.events
+    }
+
+    /// Apply to `sim` every event from `*next` on that is due at its
+    /// current time (within half a step), advancing `*next` past them.
+    pub fn apply_due(&self, next: &mut usize, touch: &mut Touch, sim: &mut Simulation) -> Result<(), TouchError> {
+        let due = sim.state().time + 0.5 * sim.params().dt;
+        while let Some((t, input)) = self.events.get(*next) {
+            if *t > due {
+                break;
+            }
+            touch.apply(input, sim)?;
+            *next += 1;
+        }
+        Ok(())
+    }
 }

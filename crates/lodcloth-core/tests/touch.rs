@@ -144,7 +144,7 @@ fn a_grabbed_cloth_without_gravity_comes_to_rest_with_its_patch_on_the_target() 
             &Input::Grab {
                 id: 7,
                 at,
-                target,
+                target: Some(target),
                 stiffness: 5.0,
                 damping: 0.05,
             },
@@ -189,7 +189,7 @@ fn a_grab_too_stiff_for_the_levels_dt_is_refused_and_the_bound_is_tight_where_th
     let grab = |k: f64| Input::Grab {
         id: 1,
         at,
-        target: [0.6, 0.1, 0.4],
+        target: Some([0.6, 0.1, 0.4]),
         stiffness: k,
         damping: 0.0,
     };
@@ -304,7 +304,7 @@ fn a_level_switch_puts_the_same_grab_and_wind_on_the_new_level() {
             &Input::Grab {
                 id: 3,
                 at,
-                target: [0.5, 0.3, 0.2],
+                target: Some([0.5, 0.3, 0.2]),
                 stiffness: 4.0,
                 damping: 0.01,
             },
@@ -356,7 +356,7 @@ fn bad_inputs_are_refused_naming_their_field_and_change_nothing() {
     let grab = |u: f64, k: f64| Input::Grab {
         id: 1,
         at: Patch { u, v: 0.5, radius: 0.0 },
-        target: [0.0; 3],
+        target: Some([0.0; 3]),
         stiffness: k,
         damping: 0.0,
     };

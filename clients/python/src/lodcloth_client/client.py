@@ -233,7 +233,7 @@ class Client:
         instance: str,
         u: float,
         v: float,
-        target: Sequence[float],
+        target: Optional[Sequence[float]] = None,
         *,
         id: int = 1,
         stiffness: float = 20.0,

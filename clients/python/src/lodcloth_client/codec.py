@@ -299,7 +299,7 @@ def _vec3(name: str, p: Vec3Like) -> "v1.Vec3":
 def grab_request(
     u: float,
     v: float,
-    target: Vec3Like,
+    target: Optional[Vec3Like] = None,
     *,
     id: int = 1,
     stiffness: float = 20.0,
@@ -309,12 +309,15 @@ def grab_request(
     """An ``InputRequest`` grabbing the square patch of half-side ``radius``
     metres about material point (``u``, ``v``) (0..1 across the width from
     the left, down the height from the top) with a spring of ``stiffness``
-    N/m and ``damping`` N·s/m to ``target`` (x, y, z in metres). The
-    daemon checks the ranges and the level's stability."""
+    N/m and ``damping`` N·s/m to ``target`` (x, y, z in metres; None:
+    where the patch is now, so the grab starts without a jerk and
+    :func:`move_request` drags it). The daemon checks the ranges and the
+    level's stability."""
     req = v1.InputRequest()
     req.grab.id = id
     req.grab.at.CopyFrom(v1.Patch(u=u, v=v, radius=radius))
-    req.grab.target.CopyFrom(_vec3("target", target))
+    if target is not None:
+        req.grab.target.CopyFrom(_vec3("target", target))
     req.grab.stiffness = stiffness
     req.grab.damping = damping
     return req

@@ -1,0 +1,133 @@
+//! Coherence under input (issue 22): one scripted session of touches
+//! replayed on the reference and on each level, and each level's eq. 9
+//! error under it set against the error it was calibrated to predict on the
+//! scene's own script. A level is coherent under input when a user's touch
+//! moves it the way it moves the reference, so the prediction a client
+//! reads in `Metrics` still holds while it interacts.
+
+use std::sync::Arc;
+
+use crate::estimate::{ErrorAccumulator, Method};
+use crate::plan::{Basis, Level, Preparer};
+use crate::sim::Simulation;
+use crate::touch::{Script, Touch};
+
+/// One level under the script.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DragCoherence {
+    pub level: Level,
+    pub method: Method,
+    /// Calibrated eq. 9 error without input (what `Metrics` predicts).
+    pub predicted: f64,
+    /// Eq. 9 error under the script, against the reference under the same
+    /// script, normalised by that reference's own largest displacement.
+    pub dragged: f64,
+    /// The level left alone (no input) against the touched reference: how
+    /// far the touches take the cloth from its script, in the same units.
+    pub untouched: f64,
+}
+
+/// A reference run under `script`: metric frames (SoA) at the recording's
+/// frame steps, and its largest displacement from rest.
+struct Touched {
+    frames: Vec<Vec<f32>>,
+    o_max: f64,
+}
+
+fn record(mut sim: Simulation, mut touch: Touch, script: &Script, steps: u64, stride: u64) -> Result<Touched, String> {
+    let n = sim.topology().n_nodes;
+    let rest = sim.state().pos.clone();
+    let mut next = 0;
+    let mut frames = Vec::with_capacity((steps / stride) as usize);
+    let mut o_max2: f64 = 0.0;
+    for step in 1..=steps {
+        script
+            .apply_due(&mut next, &mut touch, &mut sim)
+            .map_err(|e| e.to_string())?;
+        if !sim.step().finite {
+            return Err(format!("the touched reference diverged at step {step}"));
+        }
+        let pos = &sim.state().pos;
+        for k in 0..n {
+            o_max2 = o_max2.max((0..3).map(|c| (pos[c * n + k] - rest[c * n + k]).powi(2)).sum::<f64>());
+        }
+        if step % stride == 0 {
+            frames.push(pos.iter().map(|&x| x as f32).collect());
+        }
+    }
+    Ok(Touched {
+        frames,
+        o_max: o_max2.sqrt(),
+    })
+}
+
+/// Run each of `levels` (prepared with `method`) and the reference under
+/// `script` over the reference's recorded span, and score them.
+pub fn drag_coherence(
+    preparer: &Preparer,
+    levels: &[Level],
+    method: Method,
+    script: &Script,
+) -> Result<Vec<DragCoherence>, String> {
+    let mut reference: Option<(Arc<crate::estimate::Reference>, Touched)> = None;
+    let mut out = Vec::new();
+    for &level in levels {
+        let prepared = preparer.prepare(level, method).map_err(|e| e.to_string())?;
+        let Basis::Cloth(problem) = &prepared.basis else {
+            return Err(format!("{level}: drags are for cloth levels"));
+        };
+        if reference
+            .as_ref()
+            .is_none_or(|(r, _)| !Arc::ptr_eq(r, &problem.reference))
+        {
+            let r = problem.reference.clone();
+            let sim = problem.scene.build().map_err(|e| e.to_string())?;
+            let touched = record(
+                sim,
+                Touch::new(&problem.scene),
+                script,
+                r.spec.frames,
+                r.spec.metric_stride,
+            )?;
+            reference = Some((r, touched));
+        }
+        let (r, touched) = reference.as_ref().expect("recorded above");
+        let interval = r.dt * r.spec.metric_stride as f64;
+        let steps_per_frame = (interval / prepared.dt).round() as u64;
+        let n = problem.topology().n_nodes;
+        let mut mapped = vec![0.0; 3 * n];
+        let mut score = |with_script: bool| -> Result<f64, String> {
+            let mut sim = prepared.simulation().map_err(|e| e.to_string())?;
+            let mut touch = Touch::new(&problem.scene);
+            let empty = Script::default();
+            let script = if with_script { script } else { &empty };
+            let mut next = 0;
+            let mut acc = ErrorAccumulator::new(touched.o_max, n, touched.frames.len());
+            for (f, frame) in touched.frames.iter().enumerate() {
+                for _ in 0..steps_per_frame {
+                    script
+                        .apply_due(&mut next, &mut touch, &mut sim)
+                        .map_err(|e| e.to_string())?;
+                    sim.step();
+                }
+                if sim.diverged() {
+                    acc.mark_diverged();
+                    break;
+                }
+                problem.correlation().map(frame, &mut mapped);
+                acc.push(r.frame_times[f], &mapped, &sim.state().pos);
+            }
+            Ok(acc.report().mean)
+        };
+        let dragged = score(true)?;
+        let untouched = score(false)?;
+        out.push(DragCoherence {
+            level,
+            method,
+            predicted: prepared.predicted_error,
+            dragged,
+            untouched,
+        });
+    }
+    Ok(out)
+}

@@ -1,0 +1,153 @@
+//! Issue 22, coherence under input: a user's drag replayed on the
+//! reference and on each level (`experiments::drag`). Every level follows
+//! the drag (its error is a fraction of how far the drag takes the cloth
+//! from its script), and the scene's own material converges under it.
+//! The issue's target, each level within 1.5× of its predicted error, is
+//! printed, not asserted: it holds for BCD (0.64–1.09×) and not for the
+//! scene's own material (3.7–5.9×), whose prediction is calibrated on the
+//! scripted motion alone (docs/results.md, "Coherence under input").
+
+use std::sync::Arc;
+
+use lodcloth::estimate::Method;
+use lodcloth::experiments::drag::drag_coherence;
+use lodcloth::plan::{Level, Preparer};
+use lodcloth::service::config::ServiceConfig;
+use lodcloth::touch::{Input, Patch, Script};
+
+/// Paper scene 1 (top edge pinned, pulled down 1.0–2.5 s) with a 24×24
+/// reference over its first 3 s, as the daemon tests run it.
+fn preparer() -> Preparer {
+    let scene = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/scenes/paper-1-top-edge.toml");
+    let text = format!(
+        r#"
+[estimation]
+reference_steps = 15000
+metric_stride = 25
+estimate_stride = 25
+precompute = false
+[[instances]]
+name = "drag"
+scene = "{}"
+reference = "24x24"
+levels = ["8x8", "12x12", "16x16"]
+start = "8x8"
+method = "same"
+"#,
+        scene.display()
+    );
+    let config = ServiceConfig::from_toml(&text, "drag test").expect("valid config");
+    Preparer::new(Arc::new(config.instances[0].clone()), config.estimation, None)
+}
+
+/// Where the patch `at` of the reference is at `t0` (no input before).
+fn reference_patch_at(preparer: &Preparer, at: Patch, t0: f64) -> [f64; 3] {
+    let lodcloth::plan::InstanceKind::Cloth(scene) = &preparer.plan().kind else {
+        panic!("a cloth")
+    };
+    let mut sim = scene.build().expect("builds");
+    while sim.state().time < t0 - 0.5 * sim.params().dt {
+        sim.step();
+    }
+    let shape = sim.topology().grid.expect("grid");
+    let (nodes, weights) = at.weights(&shape);
+    let g = lodcloth::sim::Grab {
+        nodes,
+        weights,
+        target: [0.0; 3],
+        stiffness: 0.0,
+        damping: 0.0,
+    };
+    g.patch(&sim.state().pos, &sim.state().vel).0
+}
+
+/// A hand closes on the patch where it is at `t0` and carries it along a
+/// smooth path (cosine-eased legs, 60 target updates a second), then lets
+/// go.
+fn smooth_drag(start: [f64; 3], at: Patch, t0: f64, stiffness: f64, legs: &[[f64; 3]]) -> Script {
+    let mut events = vec![(
+        t0,
+        Input::Grab {
+            id: 1,
+            at,
+            target: None,
+            stiffness,
+            damping: 0.1,
+        },
+    )];
+    let (leg, hold, hz) = (0.6, 0.3, 60.0);
+    let mut t = t0;
+    let mut from = start;
+    for d in legs {
+        let to = [from[0] + d[0], from[1] + d[1], from[2] + d[2]];
+        let n = (leg * hz) as usize;
+        for i in 1..=n {
+            let s = 0.5 - 0.5 * (std::f64::consts::PI * i as f64 / n as f64).cos();
+            let target = [0, 1, 2].map(|c| from[c] + s * (to[c] - from[c]));
+            events.push((t + leg * i as f64 / n as f64, Input::Move { id: 1, target }));
+        }
+        t += leg + hold;
+        from = to;
+    }
+    events.push((t, Input::Release { id: 1 }));
+    Script::new(events).expect("valid")
+}
+
+#[test]
+fn a_drag_replayed_on_every_level_is_followed_and_the_replay_of_no_input_is_the_calibration() {
+    let preparer = preparer();
+    let levels = [Level::new(8, 8), Level::new(12, 12), Level::new(16, 16)];
+    // The harness itself: replaying an empty script reproduces each
+    // level's calibrated error exactly (same frames, same normaliser).
+    for r in drag_coherence(&preparer, &levels, Method::Same, &Script::default()).expect("runs") {
+        assert!(
+            (r.dragged - r.predicted).abs() <= 1e-12 * r.predicted,
+            "{}: replayed {} against calibrated {}",
+            r.level,
+            r.dragged,
+            r.predicted
+        );
+    }
+    // A hand closes on a bottom corner as the cloth falls, carries it up
+    // and out, then across, and lets go.
+    let at = Patch {
+        u: 0.75,
+        v: 1.0,
+        radius: 0.05,
+    };
+    let t0 = 0.4;
+    let start = reference_patch_at(&preparer, at, t0);
+    let script = smooth_drag(start, at, t0, 4.0, &[[-0.1, 0.25, 0.35], [0.3, 0.0, -0.2]]);
+    for method in [Method::Same, Method::Bcd] {
+        let rows = drag_coherence(&preparer, &levels, method, &script).expect("runs");
+        for r in &rows {
+            eprintln!(
+                "{} {}: predicted {:.3} %, under the drag {:.3} % ({:.2}x the prediction), left alone {:.3} %",
+                r.level,
+                r.method,
+                100.0 * r.predicted,
+                100.0 * r.dragged,
+                r.dragged / r.predicted,
+                100.0 * r.untouched
+            );
+            // Every level follows the drag: its error is a fraction of how
+            // far the drag takes the cloth from its script (a level that
+            // ignored the input would be at 1).
+            assert!(
+                r.dragged < 0.5 * r.untouched,
+                "{} {}: {:.3} % under the drag, {:.3} % if it ignored it",
+                r.level,
+                r.method,
+                100.0 * r.dragged,
+                100.0 * r.untouched
+            );
+        }
+        if method == Method::Same {
+            // The scene's own material converges under interaction too.
+            assert!(
+                rows.windows(2).all(|w| w[1].dragged < w[0].dragged),
+                "same: the error under the drag does not fall with resolution"
+            );
+        }
+    }
+}
