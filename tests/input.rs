@@ -375,3 +375,65 @@ async fn bad_inputs_are_refused_naming_the_field_and_a_flood_is_cut_to_the_rate(
     assert!(out.status.success() && text.contains("grabs held: []"), "{text}");
     d.shutdown().await.expect("clean exit");
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_instance_left_untouched_for_the_idle_time_lets_go_and_returns_to_its_script() {
+    let _serial = daemon::serial().await;
+    let dir = tempfile::tempdir().expect("temp dir");
+    let port = free_port();
+    let text = config_text(port, dir.path(), ("idle", "idle-fixed")) + "\n[input]\nidle = 1.0\n";
+    let d = Daemon::run(port, &text, dir);
+    let c = client(&[d.endpoint()]).await;
+    wait_info(&c, "idle").await;
+    let scene = Scene::load(&scene_path("paper-1-top-edge.toml")).expect("scene");
+    let at = Patch { u: 0.5, v: 1.0, radius: 0.05 };
+    // Grab where it is and hold it there; no further input.
+    let r = within(5, "grab", c.input("idle", &grab_here(2, at))).await.expect("grab");
+    assert_eq!(r.grabs, vec![2]);
+    let held = Instant::now();
+    assert!(metrics(&c, "idle").await.touched);
+    // Still held just before the idle time runs out...
+    tokio::time::sleep(Duration::from_millis(500)).await;
+    assert!(metrics(&c, "idle").await.touched, "let go before the idle time");
+    // ... and let go after it: the grab is gone (a move of it is refused).
+    let released = within(5, "letting go", async {
+        loop {
+            if !metrics(&c, "idle").await.touched {
+                return held.elapsed();
+            }
+        }
+    })
+    .await;
+    eprintln!("let go {:.2} s after the last input (idle = 1 s)", released.as_secs_f64());
+    assert!(released >= Duration::from_millis(900), "let go after only {released:?}");
+    let mv = v1::InputRequest {
+        action: Some(Action::Move(v1::input_request::Move {
+            id: 2,
+            target: vec3([0.0, 0.0, 0.0]),
+        })),
+    };
+    match c.input("idle", &mv).await {
+        Err(ClientError::Refused { message, .. }) => assert!(message.contains("move.id"), "{message}"),
+        other => panic!("the released grab still moves: {other:?}"),
+    }
+    // The cloth goes on stepping and publishing.
+    let s = latest(&c, "idle").await;
+    assert!(patch_position(&scene, &s, at).iter().all(|x| x.is_finite()));
+    d.shutdown().await.expect("clean exit");
+}
+
+fn grab_here(id: u32, at: Patch) -> v1::InputRequest {
+    v1::InputRequest {
+        action: Some(Action::Grab(v1::input_request::Grab {
+            id,
+            at: Some(v1::Patch {
+                u: at.u,
+                v: at.v,
+                radius: at.radius,
+            }),
+            target: None,
+            stiffness: 20.0,
+            damping: 0.2,
+        })),
+    }
+}
