@@ -386,9 +386,15 @@ async fn an_instance_left_untouched_for_the_idle_time_lets_go_and_returns_to_its
     let c = client(&[d.endpoint()]).await;
     wait_info(&c, "idle").await;
     let scene = Scene::load(&scene_path("paper-1-top-edge.toml")).expect("scene");
-    let at = Patch { u: 0.5, v: 1.0, radius: 0.05 };
+    let at = Patch {
+        u: 0.5,
+        v: 1.0,
+        radius: 0.05,
+    };
     // Grab where it is and hold it there; no further input.
-    let r = within(5, "grab", c.input("idle", &grab_here(2, at))).await.expect("grab");
+    let r = within(5, "grab", c.input("idle", &grab_here(2, at)))
+        .await
+        .expect("grab");
     assert_eq!(r.grabs, vec![2]);
     let held = Instant::now();
     assert!(metrics(&c, "idle").await.touched);
@@ -404,7 +410,10 @@ async fn an_instance_left_untouched_for_the_idle_time_lets_go_and_returns_to_its
         }
     })
     .await;
-    eprintln!("let go {:.2} s after the last input (idle = 1 s)", released.as_secs_f64());
+    eprintln!(
+        "let go {:.2} s after the last input (idle = 1 s)",
+        released.as_secs_f64()
+    );
     assert!(released >= Duration::from_millis(900), "let go after only {released:?}");
     let mv = v1::InputRequest {
         action: Some(Action::Move(v1::input_request::Move {
