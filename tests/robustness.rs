@@ -32,6 +32,7 @@ use v1::error::Code;
 enum Accepted {
     Switch(request::SwitchPlan),
     Control(v1::control_request::Action),
+    Input(lodcloth::touch::Input),
     Info,
 }
 
@@ -55,12 +56,22 @@ fn check(r: &fuzz::Request, instances: &BTreeMap<String, InstancePlan>) -> Resul
             let req: v1::ControlRequest = request::decode("lodcloth.v1.ControlRequest", enc, payload)?;
             request::control_action(&req).map(Accepted::Control)
         }
+        Leaf::Input => {
+            let req: v1::InputRequest = request::decode("lodcloth.v1.InputRequest", enc, payload)?;
+            request::input(&req).map(Accepted::Input)
+        }
         Leaf::Info => Ok(Accepted::Info),
     }
 }
 
 /// Words of which a refusal must name at least one: what was wrong.
-const SUBJECTS: [&str; 10] = [
+const SUBJECTS: [&str; 16] = [
+    "grab",
+    "move",
+    "release",
+    "wind",
+    "impulse",
+    "no action",
     "key",
     "instance",
     "payload",
@@ -132,6 +143,13 @@ fn a_million_generated_requests_are_each_accepted_correctly_or_refused_by_name()
                 "switch accepted".into()
             }
             Ok(Accepted::Control(a)) => format!("control {} accepted", a.as_str_name()),
+            Ok(Accepted::Input(input)) => {
+                // Independently: every number of an accepted input is
+                // finite, and material coordinates lie on the cloth.
+                assert_input_in_range(&input);
+                let name = format!("{input:?}");
+                format!("input {} accepted", name.split([' ', '{']).next().unwrap_or_default())
+            }
             Ok(Accepted::Info) => "info accepted".into(),
         };
         *outcomes.entry(class).or_default() += 1;
@@ -151,6 +169,8 @@ fn a_million_generated_requests_are_each_accepted_correctly_or_refused_by_name()
         "refused CODE_LEVEL_NOT_ALLOWED",
         "switch accepted",
         "control ACTION_PAUSE accepted",
+        "input Grab accepted",
+        "input Impulse accepted",
     ] {
         assert!(
             outcomes.get(class).copied().unwrap_or(0) > 0,
@@ -186,7 +206,10 @@ fn rate_between(arrivals: &Mutex<Vec<Instant>>, from: Instant, to: Instant) -> f
 
 /// Every reply to one raw query: (ok payloads, (code, message) of errors).
 async fn ask(c: &Client, r: &fuzz::Request) -> (usize, Vec<(i32, String)>) {
-    let mut get = c.session.get(r.key(PREFIX)).timeout(Duration::from_secs(10));
+    // A switch may wait for a level's `fit` (for a max_error target, every
+    // level's): tens of seconds on 2 busy cores. Everything else is quick.
+    let timeout = if r.leaf == Leaf::Switch { 120 } else { 10 };
+    let mut get = c.session.get(r.key(PREFIX)).timeout(Duration::from_secs(timeout));
     if let Some(p) = &r.payload {
         get = get.payload(p.clone());
     }
@@ -199,7 +222,14 @@ async fn ask(c: &Client, r: &fuzz::Request) -> (usize, Vec<(i32, String)>) {
         match reply.result() {
             Ok(_) => ok += 1,
             Err(e) => {
-                let err = v1::Error::decode(e.payload().to_bytes().as_ref()).expect("an Error reply");
+                let bytes = e.payload().to_bytes();
+                let err = v1::Error::decode(bytes.as_ref()).unwrap_or_else(|_| {
+                    panic!(
+                        "an error reply that is not an Error ('{}') to {}",
+                        String::from_utf8_lossy(&bytes),
+                        describe(r)
+                    )
+                });
                 errors.push((err.code, err.message));
             }
         }
@@ -717,4 +747,37 @@ interval = 0.2
     }
     counter.abort();
     d.shutdown().await.expect("clean shutdown");
+}
+
+/// What an accepted input must be, checked apart from `Input::check`.
+fn assert_input_in_range(input: &lodcloth::touch::Input) {
+    use lodcloth::touch::{Input, Patch};
+    let on_cloth =
+        |p: &Patch| (0.0..=1.0).contains(&p.u) && (0.0..=1.0).contains(&p.v) && p.radius >= 0.0 && p.radius.is_finite();
+    let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
+    let ok = match input {
+        Input::Grab {
+            at,
+            target,
+            stiffness,
+            damping,
+            ..
+        } => {
+            on_cloth(at)
+                && target.is_none_or(|t| finite(&t))
+                && *stiffness > 0.0
+                && finite(&[*stiffness, *damping])
+                && *damping >= 0.0
+        }
+        Input::Move { target, .. } => finite(target),
+        Input::MovePin { offset, seconds, .. } => finite(offset) && *seconds >= 0.0 && seconds.is_finite(),
+        Input::Wind {
+            velocity,
+            gust,
+            gust_hz,
+        } => finite(velocity) && (0.0..=1.0).contains(gust) && gust_hz.is_finite() && *gust_hz >= 0.0,
+        Input::Impulse { at, impulse } => on_cloth(at) && finite(impulse),
+        Input::Release { .. } | Input::ReleaseAll | Input::SceneWind => true,
+    };
+    assert!(ok, "accepted out of range: {input:?}");
 }

@@ -15,6 +15,7 @@ use lodcloth::proto::v1;
 pub enum Leaf {
     Switch,
     Control,
+    Input,
     Info,
 }
 
@@ -23,6 +24,7 @@ impl Leaf {
         match self {
             Leaf::Switch => "switch",
             Leaf::Control => "control",
+            Leaf::Input => "input",
             Leaf::Info => "info",
         }
     }
@@ -102,6 +104,68 @@ pub fn switch_request(rng: &mut Rng) -> v1::SwitchRequest {
     }
 }
 
+/// A float that is anything its type allows, often a special value.
+fn real(rng: &mut Rng) -> f64 {
+    match rng.below(4) {
+        0 => f64::from_bits(rng.next_u64()),
+        1 => *rng.pick(&ERRORS),
+        _ => (rng.below(2001) as f64 - 1000.0) / 500.0,
+    }
+}
+
+fn vec3(rng: &mut Rng) -> Option<v1::Vec3> {
+    (!rng.chance(8)).then(|| v1::Vec3 {
+        x: real(rng),
+        y: real(rng),
+        z: real(rng),
+    })
+}
+
+fn patch(rng: &mut Rng) -> Option<v1::Patch> {
+    (!rng.chance(8)).then(|| v1::Patch {
+        u: real(rng),
+        v: real(rng),
+        radius: real(rng),
+    })
+}
+
+/// An `InputRequest` whose fields are anything their types allow.
+pub fn input_request(rng: &mut Rng) -> v1::InputRequest {
+    use v1::input_request::{self as ir, Action};
+    let action = match rng.below(9) {
+        0 => None,
+        1 => Some(Action::Grab(ir::Grab {
+            id: number(rng),
+            at: patch(rng),
+            target: vec3(rng),
+            stiffness: real(rng),
+            damping: real(rng),
+        })),
+        2 => Some(Action::Move(ir::Move {
+            id: number(rng),
+            target: vec3(rng),
+        })),
+        3 => Some(Action::Release(ir::Release { id: number(rng) })),
+        4 => Some(Action::ReleaseAll(ir::ReleaseAll {})),
+        5 => Some(Action::MovePin(ir::MovePin {
+            pin: number(rng),
+            offset: vec3(rng),
+            seconds: real(rng),
+        })),
+        6 => Some(Action::Wind(ir::Wind {
+            velocity: vec3(rng),
+            gust: real(rng),
+            gust_hz: real(rng),
+        })),
+        7 => Some(Action::SceneWind(ir::SceneWind {})),
+        _ => Some(Action::Impulse(ir::Impulse {
+            at: patch(rng),
+            impulse: vec3(rng),
+        })),
+    };
+    v1::InputRequest { action }
+}
+
 /// Damage an encoding: truncate, flip bits, splice in random bytes.
 fn mutate(rng: &mut Rng, mut bytes: Vec<u8>) -> Vec<u8> {
     for _ in 0..1 + rng.below(3) {
@@ -138,6 +202,7 @@ fn payload(rng: &mut Rng, leaf: Leaf) -> Option<Vec<u8>> {
                 }
                 .encode_to_vec()
             },
+            Leaf::Input => |rng| input_request(rng).encode_to_vec(),
             Leaf::Info => |rng| rng.bytes(0, 4),
         }
     };
@@ -170,9 +235,10 @@ fn encoding(rng: &mut Rng) -> Option<String> {
 /// One request for a daemon running `instances` (several of which it
 /// knows); the key is always a valid key expression.
 pub fn request(rng: &mut Rng, instances: &[&str]) -> Request {
-    let leaf = match rng.below(10) {
+    let leaf = match rng.below(13) {
         0..=6 => Leaf::Switch,
         7..=8 => Leaf::Control,
+        9..=11 => Leaf::Input,
         _ => Leaf::Info,
     };
     let instance = match rng.below(10) {
