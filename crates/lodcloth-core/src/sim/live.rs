@@ -7,7 +7,7 @@
 use super::loads::{Grab, PinShift, Wind};
 use super::params::Integrator;
 use super::stability::dt_limit;
-use super::{invalid, SimError, Simulation};
+use super::{check_node_shares, invalid, SimError, Simulation};
 
 /// Whether a set of grabs keeps a cloth stable at its dt.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -37,20 +37,7 @@ impl Simulation {
     pub fn set_grabs(&mut self, grabs: Vec<Grab>) -> Result<(), SimError> {
         let n = self.model.topology.n_nodes;
         for (i, g) in grabs.iter().enumerate() {
-            if g.nodes.len() != g.weights.len() {
-                return Err(SimError::SizeMismatch {
-                    what: "grab weights",
-                    got: g.weights.len(),
-                    expected: g.nodes.len(),
-                });
-            }
-            if let Some(&k) = g.nodes.iter().find(|&&k| k as usize >= n) {
-                return Err(SimError::NodeOutOfRange {
-                    what: "grab",
-                    node: k,
-                    n_nodes: n,
-                });
-            }
+            check_node_shares(&g.nodes, &g.weights, n, "grab", "grab weights")?;
             let values = g.weights.iter().chain(&g.target).chain([&g.stiffness, &g.damping]);
             if let Some(&x) = values.clone().find(|x| !x.is_finite()) {
                 return Err(invalid(
@@ -210,20 +197,7 @@ impl Simulation {
     /// by wᵢ·J/mᵢ. Shares on pinned nodes go into their supports.
     pub fn add_impulse(&mut self, nodes: &[u32], weights: &[f64], impulse: [f64; 3]) -> Result<(), SimError> {
         let n = self.model.topology.n_nodes;
-        if nodes.len() != weights.len() {
-            return Err(SimError::SizeMismatch {
-                what: "impulse weights",
-                got: weights.len(),
-                expected: nodes.len(),
-            });
-        }
-        if let Some(&k) = nodes.iter().find(|&&k| k as usize >= n) {
-            return Err(SimError::NodeOutOfRange {
-                what: "impulse",
-                node: k,
-                n_nodes: n,
-            });
-        }
+        check_node_shares(nodes, weights, n, "impulse", "impulse weights")?;
         if let Some(&x) = weights.iter().chain(&impulse).find(|x| !x.is_finite()) {
             return Err(invalid("impulse", x, "impulse and weights must be finite"));
         }

@@ -1176,22 +1176,35 @@ fn validate_params(p: &SimParams) -> Result<(), SimError> {
     Ok(())
 }
 
+/// A node set with one share each (`shares` names the shares, `what` the
+/// set in errors), every node in a cloth of `n` nodes.
+fn check_node_shares(
+    nodes: &[u32],
+    shares: &[f64],
+    n: usize,
+    what: &'static str,
+    shares_what: &'static str,
+) -> Result<(), SimError> {
+    if nodes.len() != shares.len() {
+        return Err(SimError::SizeMismatch {
+            what: shares_what,
+            got: shares.len(),
+            expected: nodes.len(),
+        });
+    }
+    if let Some(&k) = nodes.iter().find(|&&k| k as usize >= n) {
+        return Err(SimError::NodeOutOfRange {
+            what,
+            node: k,
+            n_nodes: n,
+        });
+    }
+    Ok(())
+}
+
 fn validate_loads(loads: &Loads, n: usize) -> Result<(), SimError> {
     for (i, load) in loads.forces.iter().enumerate() {
-        if load.nodes.len() != load.shares.len() {
-            return Err(SimError::SizeMismatch {
-                what: "load shares",
-                got: load.shares.len(),
-                expected: load.nodes.len(),
-            });
-        }
-        if let Some(&k) = load.nodes.iter().find(|&&k| k as usize >= n) {
-            return Err(SimError::NodeOutOfRange {
-                what: "force",
-                node: k,
-                n_nodes: n,
-            });
-        }
+        check_node_shares(&load.nodes, &load.shares, n, "force", "load shares")?;
         if let Some(&f) = load.force.iter().chain(&load.shares).find(|f| !f.is_finite()) {
             return Err(invalid(
                 format!("forces[{i}]"),
