@@ -8,7 +8,10 @@
 //!   against the shadow reference (or by strain without one), and, with a
 //!   shadow reference, a second translucent entity `<instance>/reference`;
 //! - `/lodcloth/<instance>/metrics`: `lodcloth.v1.Metrics` as published,
-//!   schema = the wire contract's file descriptor set.
+//!   schema = the wire contract's file descriptor set;
+//! - `/lodcloth/<instance>/inputs`: `lodcloth.v1.InputEvent`, every input
+//!   that took effect (an MCAP recording replays with
+//!   `lodcloth simulate --inputs`).
 //!
 //! Meshes are built only while a sink (a subscribed Foxglove client, an
 //! MCAP file) wants them, and at most `max_hz` times a second per instance.
@@ -39,6 +42,11 @@ pub fn mesh_topic(instance: &str) -> String {
 /// Topic of an instance's metrics.
 pub fn metrics_topic(instance: &str) -> String {
     format!("/lodcloth/{instance}/metrics")
+}
+
+/// Topic of an instance's inputs.
+pub fn inputs_topic(instance: &str) -> String {
+    format!("/lodcloth/{instance}/inputs")
 }
 
 /// What the vertex colours show.
@@ -225,6 +233,7 @@ pub fn scene_update(state: &v1::State, info: &v1::InstanceInfo) -> Result<(Scene
 struct InstanceChannels {
     mesh: Channel<SceneUpdate>,
     metrics: Arc<RawChannel>,
+    inputs: Arc<RawChannel>,
     info: Option<v1::InstanceInfo>,
     last_mesh: Option<Instant>,
 }
@@ -260,7 +269,14 @@ fn open_instance(ctx: &Arc<Context>, name: &str) -> anyhow::Result<InstanceChann
         .schema(Schema::new(schema::METRICS, "protobuf", DESCRIPTORS))
         .build_raw()
         .map_err(|e| anyhow::anyhow!("metrics channel of {name}: {e}"))?;
+    let inputs = ChannelBuilder::new(inputs_topic(name))
+        .context(ctx)
+        .message_encoding("protobuf")
+        .schema(Schema::new(schema::INPUT_EVENT, "protobuf", DESCRIPTORS))
+        .build_raw()
+        .map_err(|e| anyhow::anyhow!("inputs channel of {name}: {e}"))?;
     Ok(InstanceChannels {
+        inputs,
         mesh: ChannelBuilder::new(mesh_topic(name))
             .context(ctx)
             .build::<SceneUpdate>(),
@@ -276,6 +292,8 @@ pub struct RelayCounts {
     pub states: u64,
     pub meshes: u64,
     pub metrics: u64,
+    /// Inputs that took effect.
+    pub inputs: u64,
     /// States that could not be turned into a mesh (each also logged).
     pub rejected: u64,
 }
@@ -289,7 +307,7 @@ pub struct RelayOptions {
     pub max_hz: f64,
 }
 
-/// Relay the daemon's states and metrics into `ctx`'s channels (`opened`
+/// Relay the daemon's states, metrics and inputs into `ctx`'s channels (`opened`
 /// ahead, the others as their instances appear) until `until` completes;
 /// `progress` sees the counts after every state.
 pub async fn relay(
@@ -303,6 +321,12 @@ pub async fn relay(
     let which = options.instance.as_deref().unwrap_or("*");
     let prefix = client.prefix.clone();
     let zerr = |e: zenoh::Error| anyhow::anyhow!("subscribing: {e}");
+    // Inputs first: once states arrive, no input that acts on them is missed.
+    let inputs = client
+        .session
+        .declare_subscriber(format!("{prefix}/{which}/inputs"))
+        .await
+        .map_err(zerr)?;
     let states = client
         .session
         .declare_subscriber(format!("{prefix}/{which}/state"))
@@ -331,6 +355,18 @@ pub async fn relay(
                 let bytes = sample.payload().to_bytes();
                 channels[name].metrics.log(&bytes);
                 counts.metrics += 1;
+            }
+            sample = inputs.recv_async() => {
+                let Ok(sample) = sample else { break };
+                let Some(name) = crate::service::keys::instance_of(&prefix, "inputs", sample.key_expr().as_str()) else {
+                    continue;
+                };
+                if !channels.contains_key(name) {
+                    channels.insert(name.to_string(), open_instance(ctx, name)?);
+                }
+                let bytes = sample.payload().to_bytes();
+                channels[name].inputs.log(&bytes);
+                counts.inputs += 1;
             }
             sample = states.recv_async() => {
                 let Ok(sample) = sample else { break };

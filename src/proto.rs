@@ -10,9 +10,10 @@ pub mod v1 {
 
 use std::time::UNIX_EPOCH;
 
-use crate::engine::{MetricsFrame, StateFrame};
+use crate::engine::{AppliedInput, MetricsFrame, StateFrame};
 use crate::plan::Level;
 use crate::sim::{Material, SpringCoeffs};
+use crate::touch::{Input, Patch};
 
 /// Schema names sent with every put and reply (`application/protobuf;<schema>`).
 pub mod schema {
@@ -26,6 +27,7 @@ pub mod schema {
     pub const CONTROL_REPLY: &str = "lodcloth.v1.ControlReply";
     pub const INPUT_REQUEST: &str = "lodcloth.v1.InputRequest";
     pub const INPUT_REPLY: &str = "lodcloth.v1.InputReply";
+    pub const INPUT_EVENT: &str = "lodcloth.v1.InputEvent";
     pub const ERROR: &str = "lodcloth.v1.Error";
 }
 
@@ -62,6 +64,80 @@ impl WireLevel for Level {
                 "level sets both a grid ({nx}x{ny}) and a point count ({n}); set one"
             )),
         }
+    }
+}
+
+/// An [`Input`] as a client sends it (`service::request::input` is the
+/// inverse, with the checks).
+pub fn input_request(input: &Input) -> v1::InputRequest {
+    use v1::input_request::{self as ir, Action};
+    let vec = |v: [f64; 3]| {
+        Some(v1::Vec3 {
+            x: v[0],
+            y: v[1],
+            z: v[2],
+        })
+    };
+    let patch = |p: Patch| {
+        Some(v1::Patch {
+            u: p.u,
+            v: p.v,
+            radius: p.radius,
+        })
+    };
+    let action = match *input {
+        Input::Grab {
+            id,
+            at,
+            target,
+            stiffness,
+            damping,
+        } => Action::Grab(ir::Grab {
+            id,
+            at: patch(at),
+            target: target.and_then(vec),
+            stiffness,
+            damping,
+        }),
+        Input::Move { id, target } => Action::Move(ir::Move {
+            id,
+            target: vec(target),
+        }),
+        Input::Release { id } => Action::Release(ir::Release { id }),
+        Input::ReleaseAll => Action::ReleaseAll(ir::ReleaseAll {}),
+        Input::MovePin { pin, offset, seconds } => Action::MovePin(ir::MovePin {
+            pin,
+            offset: vec(offset),
+            seconds,
+        }),
+        Input::Wind {
+            velocity,
+            gust,
+            gust_hz,
+        } => Action::Wind(ir::Wind {
+            velocity: vec(velocity),
+            gust,
+            gust_hz,
+        }),
+        Input::SceneWind => Action::SceneWind(ir::SceneWind {}),
+        Input::Impulse { at, impulse } => Action::Impulse(ir::Impulse {
+            at: patch(at),
+            impulse: vec(impulse),
+        }),
+    };
+    v1::InputRequest { action: Some(action) }
+}
+
+/// `InputEvent` on the wire.
+pub fn input_event(instance: &str, a: &AppliedInput) -> v1::InputEvent {
+    v1::InputEvent {
+        instance: instance.to_string(),
+        frame: a.frame,
+        time: a.time,
+        episode: a.episode,
+        level: Some(a.level.to_wire()),
+        input: Some(input_request(&a.input)),
+        idle: a.idle,
     }
 }
 
@@ -191,6 +267,58 @@ pub fn error(code: v1::error::Code, message: impl Into<String>) -> v1::Error {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn every_input_crosses_the_wire_and_comes_back_the_same() {
+        let at = Patch {
+            u: 0.25,
+            v: 0.75,
+            radius: 0.05,
+        };
+        let inputs = [
+            Input::Grab {
+                id: 3,
+                at,
+                target: Some([0.1, -0.2, 0.3]),
+                stiffness: 40.0,
+                damping: 0.5,
+            },
+            Input::Grab {
+                id: 4,
+                at,
+                target: None,
+                stiffness: 1.0,
+                damping: 0.0,
+            },
+            Input::Move {
+                id: 3,
+                target: [1.0, 2.0, 3.0],
+            },
+            Input::Release { id: 3 },
+            Input::ReleaseAll,
+            Input::MovePin {
+                pin: 1,
+                offset: [0.0, 0.1, 0.0],
+                seconds: 0.5,
+            },
+            Input::Wind {
+                velocity: [2.0, 0.0, 1.0],
+                gust: 0.3,
+                gust_hz: 0.7,
+            },
+            Input::SceneWind,
+            Input::Impulse {
+                at,
+                impulse: [0.0, 0.0, 0.02],
+            },
+        ];
+        for input in inputs {
+            let wire = input_request(&input);
+            let bytes = prost::Message::encode_to_vec(&wire);
+            let back: v1::InputRequest = prost::Message::decode(bytes.as_slice()).unwrap();
+            assert_eq!(crate::service::request::input(&back).unwrap(), input);
+        }
+    }
 
     #[test]
     fn levels_cross_the_wire_and_mixed_levels_are_refused() {

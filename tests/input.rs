@@ -446,3 +446,263 @@ fn grab_here(id: u32, at: Patch) -> v1::InputRequest {
         })),
     }
 }
+
+/// Start `lodcloth record <instance> <args…>` and return once it says it is
+/// recording (its subscriptions are declared: nothing published from then
+/// on is missed).
+fn start_recorder(d: &Daemon, instance: &str, args: &[&str]) -> std::process::Child {
+    use std::io::BufRead;
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_lodcloth"))
+        .args(["record", instance, "--connect", &d.endpoint(), "--prefix", PREFIX])
+        .args(args)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("the lodcloth binary runs");
+    let mut lines = std::io::BufReader::new(child.stderr.take().expect("stderr")).lines();
+    loop {
+        match lines.next() {
+            Some(Ok(l)) if l.starts_with("recording ") => break,
+            Some(Ok(_)) => {}
+            other => panic!("the recorder stopped before recording: {other:?}"),
+        }
+    }
+    // Keep draining stderr so the recorder never blocks on a full pipe.
+    std::thread::spawn(move || for _ in lines {});
+    child
+}
+
+/// A session recorded with `lodcloth record` (.lct and MCAP) replays
+/// offline: the scene at the instance's level, with the recorded inputs at
+/// their simulated times, reproduces every recorded state bit for bit (as
+/// f32, the wire's precision); without the inputs it misses them by
+/// centimetres. The idle rule's
+/// letting go is in the log and replays too, and `simulate --inputs` runs
+/// the same replay.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_recorded_session_replays_offline_to_the_recorded_states() {
+    let _serial = daemon::serial().await;
+    let dir = tempfile::tempdir().expect("temp dir");
+    let out = tempfile::tempdir().expect("temp dir");
+    let port = free_port();
+    let text = config_text(port, dir.path(), ("rec", "rec-b")) + "\n[input]\nidle = 1.0\n";
+    let d = Daemon::run(port, &text, dir);
+    let c = client(&[d.endpoint()]).await;
+    wait_info(&c, "rec").await;
+    let lct = out.path().join("rec.lct");
+    let mcap = out.path().join("rec.mcap");
+    let seconds = "4.5";
+    let (lct_rec, mcap_rec) = tokio::task::block_in_place(|| {
+        (
+            start_recorder(&d, "rec", &["--seconds", seconds, "--out", lct.to_str().unwrap()]),
+            start_recorder(&d, "rec", &["--seconds", seconds, "--mcap", mcap.to_str().unwrap()]),
+        )
+    });
+
+    // A hand closes on the bottom edge, drags it out and up, the wind
+    // rises and a finger flicks the cloth; then nobody touches it.
+    let scene = Scene::load(&scene_path("paper-1-top-edge.toml")).expect("scene");
+    let at = Patch {
+        u: 0.5,
+        v: 1.0,
+        radius: 0.05,
+    };
+    let mut sent = vec![grab_here(1, at)];
+    let mut replies = vec![within(5, "grab", c.input("rec", &sent[0])).await.expect("grab")];
+    let p0 = patch_position(&scene, &latest(&c, "rec").await, at);
+    for k in 1..=12 {
+        tokio::time::sleep(Duration::from_millis(50)).await;
+        let s = k as f64 / 12.0;
+        let mv = v1::InputRequest {
+            action: Some(Action::Move(v1::input_request::Move {
+                id: 1,
+                target: vec3([p0[0], p0[1] + 0.15 * s, p0[2] + 0.3 * s]),
+            })),
+        };
+        replies.push(within(5, "move", c.input("rec", &mv)).await.expect("move"));
+        sent.push(mv);
+    }
+    for request in [
+        v1::InputRequest {
+            action: Some(Action::Wind(v1::input_request::Wind {
+                velocity: vec3([0.0, 0.0, 3.0]),
+                gust: 0.2,
+                gust_hz: 1.0,
+            })),
+        },
+        v1::InputRequest {
+            action: Some(Action::Impulse(v1::input_request::Impulse {
+                at: Some(v1::Patch {
+                    u: 0.25,
+                    v: 0.75,
+                    radius: 0.05,
+                }),
+                impulse: vec3([0.0, 0.0, 0.01]),
+            })),
+        },
+    ] {
+        replies.push(within(5, "input", c.input("rec", &request)).await.expect("input"));
+        sent.push(request);
+    }
+    let (lct_done, mcap_done) = tokio::task::block_in_place(|| {
+        (
+            lct_rec.wait_with_output().expect("recorder"),
+            mcap_rec.wait_with_output().expect("recorder"),
+        )
+    });
+    assert!(lct_done.status.success() && mcap_done.status.success());
+    eprintln!(
+        "{}{}",
+        String::from_utf8_lossy(&lct_done.stdout),
+        String::from_utf8_lossy(&mcap_done.stdout)
+    );
+
+    // Every input is in the log, in order, as sent and at the step it took
+    // effect; then the idle rule's letting go (grab released, scene wind).
+    let logged = lodcloth::output::recorded_inputs(&lct).expect("the input log");
+    assert_eq!(
+        lodcloth::output::recorded_inputs(&mcap).expect("the MCAP inputs"),
+        logged
+    );
+    assert_eq!(logged.len(), sent.len() + 2, "{logged:#?}");
+    for ((e, request), reply) in logged.iter().zip(&sent).zip(&replies) {
+        assert_eq!(e.input.as_ref(), Some(request));
+        assert_eq!((e.frame, e.time, e.idle), (reply.frame, reply.time, false));
+    }
+    let idle: Vec<_> = logged[sent.len()..].iter().map(|e| (e.idle, e.input.clone())).collect();
+    assert_eq!(
+        idle,
+        vec![
+            (
+                true,
+                Some(lodcloth::proto::input_request(&lodcloth::touch::Input::ReleaseAll))
+            ),
+            (
+                true,
+                Some(lodcloth::proto::input_request(&lodcloth::touch::Input::SceneWind))
+            ),
+        ]
+    );
+
+    // Replay offline from the episode's start, with and without the inputs.
+    let replay = lodcloth::output::Replay::of(&logged, None, &lct).expect("a replay");
+    assert_eq!(replay.level, Some(Level::new(16, 16)));
+    let mut reader = lodcloth::output::TrajectoryReader::open(&lct).expect("the trajectory");
+    let mut frames = Vec::new();
+    while let Some(f) = reader.next_frame().expect("a frame") {
+        frames.push(f);
+    }
+    let first = logged[0].time;
+    // The instance's level steps at its own dt (a coarse level may take a
+    // longer step than the scene's); its coefficients are the scene's
+    // (method `same` at 16², checked here).
+    let info = c.info("rec").await.expect("info");
+    let mut scene = scene;
+    scene.params.dt = info.dt;
+    assert_eq!(
+        info.coefficients,
+        Some(lodcloth::proto::coefficients(&scene.material_at(16, 16)))
+    );
+    let run = |with_inputs: bool, until: f64| {
+        let mut sim = scene.build_at(16, 16).expect("the level");
+        let mut touch = lodcloth::touch::Touch::new(&scene);
+        let mut next = 0;
+        let dt = sim.params().dt;
+        let mut worst = 0.0f64;
+        let mut mismatches = 0;
+        let mut compared = 0;
+        let mut last_time = f64::NEG_INFINITY;
+        for f in &frames {
+            // From the first input on, until the episode ends (a loop).
+            if f.time < last_time {
+                break;
+            }
+            last_time = f.time;
+            let before = f.time < first;
+            while sim.state().time < f.time - 0.5 * dt {
+                if with_inputs {
+                    replay
+                        .script
+                        .apply_due(&mut next, &mut touch, &mut sim)
+                        .expect("replays");
+                }
+                sim.step();
+            }
+            let n = sim.topology().n_nodes;
+            let pos = &sim.state().pos;
+            for (k, p) in f.positions.iter().enumerate() {
+                let x = [pos[k], pos[n + k], pos[2 * n + k]];
+                // The recording holds f32: the replay rounded the same way.
+                let same = (0..3).all(|c| p[c] as f32 == x[c] as f32);
+                if !before {
+                    worst = worst.max(dist(*p, x));
+                    mismatches += usize::from(!same);
+                }
+            }
+            if before {
+                continue;
+            }
+            compared += 1;
+        }
+        while sim.state().time < until - 0.5 * dt {
+            if with_inputs {
+                replay
+                    .script
+                    .apply_due(&mut next, &mut touch, &mut sim)
+                    .expect("replays");
+            }
+            sim.step();
+        }
+        (worst, mismatches, compared, sim)
+    };
+    let (with, mismatches, compared, replayed) = run(true, 6.0);
+    let (without, _, _, _) = run(false, 0.0);
+    eprintln!(
+        "replayed {} inputs over {compared} recorded states: {mismatches} f32 positions differ \
+         (largest difference {with:.2e} m; {without:.3} m without the inputs)",
+        logged.len()
+    );
+    assert!(compared >= 100, "only {compared} states to compare");
+    assert_eq!(mismatches, 0, "the replay is up to {with} m from the recording");
+    assert!(without > 0.02, "the inputs moved the cloth only {without} m");
+
+    // `simulate --inputs` runs the same replay (to 6 s, the scene's end).
+    let sim_out = out.path().join("replay");
+    let cli = tokio::task::block_in_place(|| {
+        std::process::Command::new(env!("CARGO_BIN_EXE_lodcloth"))
+            .args([
+                "simulate",
+                "--scene",
+                scene_path("paper-1-top-edge.toml").to_str().unwrap(),
+            ])
+            .args(["--nx", "16", "--ny", "16", "--dt", &info.dt.to_string(), "--fps", "50"])
+            .args(["--inputs", lct.to_str().unwrap()])
+            .args(["--out", sim_out.to_str().unwrap()])
+            .output()
+            .expect("the lodcloth binary runs")
+    });
+    let text = String::from_utf8_lossy(&cli.stdout);
+    assert!(
+        cli.status.success() && text.contains(&format!("replaying {} inputs of 'rec'", logged.len())),
+        "{text}{}",
+        String::from_utf8_lossy(&cli.stderr)
+    );
+    let mut reader = lodcloth::output::TrajectoryReader::open(&sim_out.join("trajectory.lct")).expect("its trajectory");
+    let mut last = None;
+    while let Some(f) = reader.next_frame().expect("a frame") {
+        last = Some(f);
+    }
+    let last = last.expect("frames");
+    assert!(
+        (last.time - replayed.state().time).abs() < 1e-9,
+        "{} vs {}",
+        last.time,
+        replayed.state().time
+    );
+    let n = replayed.topology().n_nodes;
+    let pos = &replayed.state().pos;
+    for (k, p) in last.positions.iter().enumerate() {
+        assert!(dist(*p, [pos[k], pos[n + k], pos[2 * n + k]]) < 1e-5);
+    }
+    d.shutdown().await.expect("clean exit");
+}

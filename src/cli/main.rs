@@ -151,6 +151,16 @@ enum Command {
         /// Run even when dt is beyond the integrator's predicted stability limit.
         #[arg(long)]
         force_unstable: bool,
+        /// Replay the inputs of a recording (`lodcloth record`, .lct or
+        /// .mcap): grabs, moves, pin moves, wind and impulses at the
+        /// simulated times they took effect, at this run's level. Without
+        /// --duration the run lasts until 1 s after the last input (at
+        /// least the scene's duration).
+        #[arg(long)]
+        inputs: Option<PathBuf>,
+        /// The recording's episode to replay (default: the first with inputs).
+        #[arg(long, requires = "inputs")]
+        episode: Option<u64>,
     },
     /// Measure each integrator's stability threshold by bisection over dt and
     /// stiffness/mass ratios; write CSV and an SVG chart of predicted vs measured.
@@ -266,6 +276,8 @@ fn main() -> Result<()> {
             f64,
             velocities,
             force_unstable,
+            inputs,
+            episode,
         } => simulate::simulate(simulate::SimulateArgs {
             scene,
             nx,
@@ -278,6 +290,8 @@ fn main() -> Result<()> {
             precision: if f64 { Precision::F64 } else { Precision::F32 },
             velocities,
             force_unstable,
+            inputs,
+            episode,
         }),
         Command::Stability {
             scene,

@@ -467,21 +467,34 @@ pub fn record(c: Connect, instance: String, seconds: f64, out: PathBuf) -> Resul
     runtime()?.block_on(async {
         let client = connect(&c).await?;
         let info = client.info(&instance).await?;
+        // Inputs first: none that acts on a recorded state is missed.
+        let inputs_sub = client
+            .session
+            .declare_subscriber(keys::inputs(&c.prefix, &instance))
+            .await
+            .map_err(|e| anyhow::anyhow!("subscribing: {e}"))?;
         let sub = client
             .session
             .declare_subscriber(keys::state(&c.prefix, &instance))
             .await
             .map_err(|e| anyhow::anyhow!("subscribing: {e}"))?;
-        let deadline = Instant::now() + Duration::from_secs_f64(seconds);
+        let deadline = tokio::time::Instant::now() + Duration::from_secs_f64(seconds);
         let mut writer: Option<(TrajectoryWriter, Level)> = None;
         let mut frames = 0u64;
+        let mut inputs: Vec<v1::InputEvent> = Vec::new();
         loop {
-            let left = deadline.saturating_duration_since(Instant::now());
-            if left.is_zero() {
-                break;
-            }
-            let Ok(Ok(sample)) = tokio::time::timeout(left, sub.recv_async()).await else {
-                break;
+            let sample = tokio::select! {
+                () = tokio::time::sleep_until(deadline) => break,
+                sample = inputs_sub.recv_async() => {
+                    let Ok(sample) = sample else { break };
+                    let e = v1::InputEvent::decode(sample.payload().to_bytes().as_ref()).context("undecodable input")?;
+                    inputs.push(e);
+                    continue;
+                }
+                sample = sub.recv_async() => match sample {
+                    Ok(s) => s,
+                    Err(_) => break,
+                },
             };
             let s = v1::State::decode(sample.payload().to_bytes().as_ref()).context("undecodable state")?;
             let lv = match s.level.as_ref().map(Level::from_wire) {
@@ -511,6 +524,9 @@ pub fn record(c: Connect, instance: String, seconds: f64, out: PathBuf) -> Resul
                 }
             }
             if writer.is_none() {
+                // States arrive: the inputs subscription, declared before
+                // the states', reaches the daemon too.
+                eprintln!("recording {instance} to {}", out.display());
                 let dt = 1.0 / info.publish_hz.max(1e-9);
                 let w = TrajectoryWriter::create(&out, nodes, lv.grid(), dt, 1, Precision::F32, false)?;
                 writer = Some((w, lv));
@@ -530,8 +546,18 @@ pub fn record(c: Connect, instance: String, seconds: f64, out: PathBuf) -> Resul
         let Some((w, l)) = writer else {
             bail!("no state of '{instance}' arrived within {seconds} s");
         };
-        w.finish()?;
-        println!("{}: {frames} frames of {instance} at {l}", out.display());
+        // Inputs that came while the last state was on its way.
+        while let Ok(Some(sample)) = inputs_sub.try_recv() {
+            if let Ok(e) = v1::InputEvent::decode(sample.payload().to_bytes().as_ref()) {
+                inputs.push(e);
+            }
+        }
+        w.finish_with_inputs(Some(&inputs))?;
+        println!(
+            "{}: {frames} frames and {} inputs of {instance} at {l}",
+            out.display(),
+            inputs.len()
+        );
         let _ = client.session.close().await;
         Ok(())
     })
@@ -596,7 +622,14 @@ pub fn record_mcap(c: Connect, instance: String, seconds: f64, path: PathBuf) ->
             &options,
             opened,
             tokio::time::sleep(Duration::from_secs_f64(seconds)),
-            |_| bar.set_position((started.elapsed().as_secs_f64() * 10.0) as u64),
+            |counts| {
+                if counts.meshes == 1 {
+                    // States arrive: the inputs subscription, declared
+                    // before the states', reaches the daemon too.
+                    eprintln!("recording {instance} to {}", path.display());
+                }
+                bar.set_position((started.elapsed().as_secs_f64() * 10.0) as u64)
+            },
         )
         .await?;
         bar.finish_and_clear();
@@ -611,10 +644,11 @@ pub fn record_mcap(c: Connect, instance: String, seconds: f64, path: PathBuf) ->
             );
         }
         println!(
-            "{}: {} meshes and {} metrics of {instance} ({} states rejected)",
+            "{}: {} meshes, {} metrics and {} inputs of {instance} ({} states rejected)",
             path.display(),
             counts.meshes,
             counts.metrics,
+            counts.inputs,
             counts.rejected
         );
         Ok(())

@@ -11,11 +11,12 @@ use tracing::info;
 use crate::progress_bar;
 use lodcloth::experiments::{stability_sweep, StabilityRow, StabilitySweep};
 use lodcloth::output::{
-    line_chart_svg, render_png, report_csv_row, CsvTable, Precision, Series, TrajectoryReader, TrajectoryWriter,
-    PALETTE, REPORT_CSV_HEADER,
+    line_chart_svg, recorded_inputs, render_png, report_csv_row, CsvTable, Precision, Replay, Series, TrajectoryReader,
+    TrajectoryWriter, PALETTE, REPORT_CSV_HEADER,
 };
 use lodcloth::scene::Scene;
 use lodcloth::sim::{Integrator, Simulation, StabilityCheck, StepReport};
+use lodcloth::touch::Touch;
 
 /// `simulate`'s arguments, as parsed.
 pub(crate) struct SimulateArgs {
@@ -30,14 +31,43 @@ pub(crate) struct SimulateArgs {
     pub(crate) precision: Precision,
     pub(crate) velocities: bool,
     pub(crate) force_unstable: bool,
+    /// A recording whose inputs are replayed.
+    pub(crate) inputs: Option<PathBuf>,
+    pub(crate) episode: Option<u64>,
 }
 
 /// `simulate`: run a scene (with the command line's overrides) and write
 /// its trajectory, per-frame report, energy chart and final render.
 pub(crate) fn simulate(a: SimulateArgs) -> Result<()> {
-    let scene = with_overrides(&a)?;
+    let mut scene = with_overrides(&a)?;
+    let replay = match &a.inputs {
+        Some(path) => Some(Replay::of(&recorded_inputs(path)?, a.episode, path)?),
+        None => None,
+    };
+    if let Some(r) = &replay {
+        let last = r.script.events().last().map_or(0.0, |e| e.0);
+        if a.duration.is_none() {
+            scene.duration = scene.duration.max(last + 1.0);
+        } else if last > scene.duration {
+            tracing::warn!(
+                "--duration {} s ends before the last input ({last:.3} s): later inputs are not replayed",
+                scene.duration
+            );
+        }
+        println!(
+            "replaying {} inputs of '{}' (episode {} of {:?}; {} by the idle rule), recorded at {}",
+            r.script.events().len(),
+            r.instance,
+            r.episode,
+            r.episodes,
+            r.idle,
+            r.level.map_or("an unknown level".to_string(), |l| l.to_string())
+        );
+    }
     let (nx, ny) = (a.nx.unwrap_or(scene.nx), a.ny.unwrap_or(scene.ny));
     let mut sim = scene.build_at(nx, ny)?;
+    let mut touch = Touch::new(&scene);
+    let mut next_input = 0usize;
     let dt = sim.params().dt;
     let steps = scene.steps();
     let frame_every = ((1.0 / a.fps / dt).round() as u64).max(1);
@@ -73,6 +103,12 @@ pub(crate) fn simulate(a: SimulateArgs) -> Result<()> {
     let mut last = None;
     let mut first_total = None;
     for s in 1..=steps {
+        if let Some(r) = &replay {
+            let at = next_input;
+            r.script
+                .apply_due(&mut next_input, &mut touch, &mut sim)
+                .with_context(|| format!("replaying input {at} at t = {:.4} s", sim.state().time))?;
+        }
         let r = sim.step();
         last = Some(r);
         if !r.finite {
@@ -370,5 +406,14 @@ pub(crate) fn inspect(file: &Path) -> Result<()> {
         first.time, last.time, first.step, last.step
     );
     println!("largest displacement first → last frame: {max_disp:.4} m");
+    if h.inputs {
+        let inputs = reader.inputs()?;
+        let idle = inputs.iter().filter(|e| e.idle).count();
+        let span = match (inputs.first(), inputs.last()) {
+            (Some(a), Some(b)) => format!(", t {:.3} s … {:.3} s (replay: simulate --inputs)", a.time, b.time),
+            _ => String::new(),
+        };
+        println!("inputs      {} ({idle} by the idle rule){span}", inputs.len());
+    }
     Ok(())
 }

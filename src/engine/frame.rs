@@ -7,6 +7,7 @@ use std::time::SystemTime;
 use crate::estimate::Method;
 use crate::plan::Level;
 use crate::sim::{Material, State, Topology};
+use crate::touch::Input;
 
 /// A snapshot of an instance's cloth, as the engine hands it to the bus.
 #[derive(Debug, Clone)]
@@ -104,6 +105,21 @@ pub struct InputOutcome {
     /// Ids of the grabs held now.
     pub grabs: Vec<u32>,
     pub level: Level,
+}
+
+/// An input that took effect, in the order inputs did (the service
+/// publishes each on `<prefix>/<instance>/inputs`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AppliedInput {
+    /// The step after which it took effect.
+    pub frame: u64,
+    /// Simulated time of that step (s).
+    pub time: f64,
+    pub episode: u64,
+    pub level: Level,
+    pub input: Input,
+    /// Applied by the idle rule, not a client.
+    pub idle: bool,
 }
 
 /// State after a control command.

@@ -4,7 +4,7 @@
 use std::time::Instant;
 
 use super::runner::Runner;
-use super::InputOutcome;
+use super::{AppliedInput, InputOutcome};
 use crate::touch::{Input, TouchError};
 
 /// Seconds of simulated time over which moved pins return to their
@@ -29,6 +29,8 @@ impl Runner {
             });
         }
         touch.apply(input, &mut self.sim)?;
+        let grabs = touch.grab_ids();
+        self.log_input(*input, false);
         self.inputs += 1;
         self.last_input = Instant::now();
         self.touched_episode = true;
@@ -36,7 +38,7 @@ impl Runner {
         Ok(InputOutcome {
             frame: self.frames,
             time: self.sim.state().time,
-            grabs: touch.grab_ids(),
+            grabs,
             level: self.level,
         })
     }
@@ -57,14 +59,33 @@ impl Runner {
         };
         // Once: from here the touch is inactive (or only pins returning).
         self.last_input = now;
-        match touch.release(&mut self.sim, PIN_RETURN_SECONDS) {
-            Ok(()) => tracing::info!(
-                instance = %self.name,
-                idle_s = self.input_idle.as_secs_f64(),
-                "no input for the idle time: grabs released, back to the scene's script"
-            ),
-            Err(e) => tracing::error!(instance = %self.name, "letting go failed: {e}"),
+        let letting_go = touch.letting_go(self.sim.state().time, PIN_RETURN_SECONDS);
+        for input in letting_go {
+            let Some(touch) = self.touch.as_mut() else { return };
+            if let Err(e) = touch.apply(&input, &mut self.sim) {
+                tracing::error!(instance = %self.name, "letting go failed: {e}");
+                return;
+            }
+            self.log_input(input, true);
         }
+        tracing::info!(
+            instance = %self.name,
+            idle_s = self.input_idle.as_secs_f64(),
+            "no input for the idle time: grabs released, back to the scene's script"
+        );
+    }
+
+    /// Hand an input that took effect to the service (which publishes it).
+    fn log_input(&self, input: Input, idle: bool) {
+        // A closed receiver (no service, or it is stopping) wants none.
+        let _ = self.applied.send(AppliedInput {
+            frame: self.frames,
+            time: self.sim.state().time,
+            episode: self.episode,
+            level: self.level,
+            input,
+            idle,
+        });
     }
 
     /// Put the inputs in force on the simulation of a new level.

@@ -49,7 +49,7 @@ use runner::Runner;
 pub use command::Command;
 pub use divergence::MAX_CONSECUTIVE_DIVERGENCES;
 pub use frame::{
-    Coefficients, ControlOutcome, InputOutcome, MetricsFrame, Snapshot, StateFrame, Status, SwitchOutcome,
+    AppliedInput, Coefficients, ControlOutcome, InputOutcome, MetricsFrame, Snapshot, StateFrame, Status, SwitchOutcome,
 };
 
 /// Everything an instance starts with.
@@ -85,6 +85,9 @@ pub struct InstanceHandle {
     pub states: watch::Receiver<Option<Arc<StateFrame>>>,
     pub metrics: watch::Receiver<Option<Arc<MetricsFrame>>>,
     pub transitions: Arc<tokio::sync::Mutex<tokio::sync::mpsc::UnboundedReceiver<Arc<StateFrame>>>>,
+    /// Every input that took effect, in order (none is dropped; the
+    /// service's rate limit bounds how fast they come).
+    pub applied: Arc<tokio::sync::Mutex<tokio::sync::mpsc::UnboundedReceiver<AppliedInput>>>,
     status: Arc<Mutex<Status>>,
 }
 
@@ -198,6 +201,7 @@ impl Engine {
                         states: parts.states,
                         metrics: parts.metrics,
                         transitions: Arc::new(tokio::sync::Mutex::new(parts.transitions)),
+                        applied: Arc::new(tokio::sync::Mutex::new(parts.applied)),
                         status: parts.status,
                     },
                 )
@@ -243,6 +247,7 @@ struct HandleParts {
     states: watch::Receiver<Option<Arc<StateFrame>>>,
     metrics: watch::Receiver<Option<Arc<MetricsFrame>>>,
     transitions: tokio::sync::mpsc::UnboundedReceiver<Arc<StateFrame>>,
+    applied: tokio::sync::mpsc::UnboundedReceiver<AppliedInput>,
     status: Arc<Mutex<Status>>,
 }
 

@@ -10,7 +10,9 @@ use tokio::sync::watch;
 
 use super::divergence::{CHECKPOINT_INTERVAL, CLEAN_INTERVAL, DIVERGED_STRAIN};
 use super::shadow::Shadow;
-use super::{lock, Command, EngineSettings, HandleParts, InstanceSetup, MetricsFrame, StateFrame, Status};
+use super::{
+    lock, AppliedInput, Command, EngineSettings, HandleParts, InstanceSetup, MetricsFrame, StateFrame, Status,
+};
 use crate::estimate::Method;
 use crate::plan::Level;
 use crate::points::cloud::CloudMap;
@@ -68,6 +70,8 @@ pub(super) struct Runner {
     pub(super) states: watch::Sender<Option<Arc<StateFrame>>>,
     pub(super) metrics: watch::Sender<Option<Arc<MetricsFrame>>>,
     pub(super) transitions: tokio::sync::mpsc::UnboundedSender<Arc<StateFrame>>,
+    /// Every input that took effect, for the service to publish.
+    pub(super) applied: tokio::sync::mpsc::UnboundedSender<AppliedInput>,
     pub(super) status: Arc<Mutex<Status>>,
     /// Live input (grid cloths only).
     pub(super) touch: Option<Touch>,
@@ -92,6 +96,7 @@ impl Runner {
         let (states_tx, states_rx) = watch::channel(None);
         let (metrics_tx, metrics_rx) = watch::channel(None);
         let (trans_tx, trans_rx) = tokio::sync::mpsc::unbounded_channel();
+        let (applied_tx, applied_rx) = tokio::sync::mpsc::unbounded_channel();
         let material = setup.sim.params().material;
         let status = Arc::new(Mutex::new(Status {
             level: setup.level,
@@ -153,6 +158,7 @@ impl Runner {
             states: states_tx,
             metrics: metrics_tx,
             transitions: trans_tx,
+            applied: applied_tx,
             status: status.clone(),
             touch: setup.touch,
             inputs: 0,
@@ -165,6 +171,7 @@ impl Runner {
             states: states_rx,
             metrics: metrics_rx,
             transitions: trans_rx,
+            applied: applied_rx,
             status,
         };
         (runner, parts)

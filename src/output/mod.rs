@@ -1,5 +1,5 @@
 //! Files a run leaves behind: the binary trajectory (written and read back),
-//! CSV tables (and the per-step report), PNG renders of a cloth or a cloud, SVG charts
+//! the inputs a recording holds (to replay), CSV tables (and the per-step report), PNG renders of a cloth or a cloud, SVG charts
 //! and error maps. One file per format; they share the camera.
 
 mod camera;
@@ -7,6 +7,7 @@ mod chart;
 mod csv_table;
 mod error_map;
 mod render;
+mod replay;
 mod report;
 mod trajectory;
 
@@ -16,6 +17,7 @@ pub use chart::{line_chart_svg, Series, PALETTE};
 pub use csv_table::CsvTable;
 pub use error_map::{error_map_svg, heat_color, ClothPanel};
 pub use render::{render_png, render_points_png};
+pub use replay::{recorded_inputs, Replay};
 pub use report::{report_csv_row, REPORT_CSV_HEADER};
 pub use trajectory::{Frame, Precision, TrajectoryHeader, TrajectoryReader, TrajectoryWriter, TRAJECTORY_MAGIC};
 
@@ -26,6 +28,8 @@ pub enum OutputError {
     Io { path: String, source: std::io::Error },
     #[error("{path}: not a trajectory file ({reason})")]
     Format { path: String, reason: String },
+    #[error("{path}: no inputs to replay ({reason})")]
+    Inputs { path: String, reason: String },
     #[error("{path}: cannot draw: {reason}")]
     Draw { path: String, reason: String },
 }

@@ -7,7 +7,7 @@
 //! |---|---|---|
 //! | 0 | 8 | magic `LCTRAJ01` |
 //! | 8 | 4 | u32 version = 1 |
-//! | 12 | 4 | u32 flags: bit 0 = values are f64 (else f32); bit 1 = velocities stored |
+//! | 12 | 4 | u32 flags: bit 0 = values are f64 (else f32); bit 1 = velocities stored; bit 2 = an input log follows the frames |
 //! | 16 | 4 | u32 nx (0 when the cloth is not a grid) |
 //! | 20 | 4 | u32 ny |
 //! | 24 | 8 | u64 number of nodes n |
@@ -19,17 +19,30 @@
 //! Then frames of `8 + 8 + 3n·s (+ 3n·s)` bytes: u64 step, f64 time, the
 //! positions node by node (x, y, z), and with bit 1 the velocities likewise;
 //! `s` is 4 or 8 bytes per value.
+//!
+//! With flag bit 2 (set, with the frame count, when the writer finished),
+//! the inputs that acted on the cloth while it was recorded follow the
+//! last frame: magic `LCINPUT1`, u64 count, then per input a u32 length
+//! and a `lodcloth.v1.InputEvent` (protobuf, as published on
+//! `<prefix>/<instance>/inputs`). `lodcloth simulate --inputs` replays them.
 
 use std::fs::File;
 use std::io::{BufReader, BufWriter, Read, Seek, SeekFrom, Write};
 use std::path::Path;
 
+use prost::Message;
+
 use super::{io_err, OutputError};
+use crate::proto::v1;
 use crate::sim::State;
 
 /// File magic of trajectory files.
 pub const TRAJECTORY_MAGIC: &[u8; 8] = b"LCTRAJ01";
 const HEADER_LEN: u64 = 56;
+/// Magic of the input log after the frames.
+pub const INPUT_LOG_MAGIC: &[u8; 8] = b"LCINPUT1";
+/// Flag bit: an input log follows the frames.
+const FLAG_INPUTS: u32 = 4;
 
 /// Value precision in a trajectory file.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -50,6 +63,8 @@ pub struct TrajectoryHeader {
     pub frame_every: u32,
     /// Frames in the file (counted from its size when the writer stopped early).
     pub n_frames: u64,
+    /// An input log follows the frames.
+    pub inputs: bool,
 }
 
 impl TrajectoryHeader {
@@ -97,6 +112,7 @@ impl TrajectoryWriter {
             dt,
             frame_every,
             n_frames: 0,
+            inputs: false,
         };
         let mut w = TrajectoryWriter {
             out: BufWriter::new(file),
@@ -154,18 +170,43 @@ impl TrajectoryWriter {
     }
 
     /// Flush and record the frame count in the header.
-    pub fn finish(mut self) -> Result<TrajectoryHeader, OutputError> {
+    pub fn finish(self) -> Result<TrajectoryHeader, OutputError> {
+        self.finish_with_inputs(None)
+    }
+
+    /// Append the inputs that acted on the cloth as the input log, then
+    /// finish: a replayable recording (`lodcloth simulate --inputs`).
+    pub fn finish_with_inputs(self, inputs: Option<&[v1::InputEvent]>) -> Result<TrajectoryHeader, OutputError> {
+        let mut header = self.header;
         let path = self.path.clone();
         let e = |source| OutputError::Io {
             path: path.clone(),
             source,
         };
-        self.out.flush().map_err(e)?;
-        let mut file = self.out.into_inner().map_err(|e2| e(e2.into_error()))?;
+        let mut out = self.out;
+        if let Some(inputs) = inputs {
+            out.write_all(INPUT_LOG_MAGIC).map_err(e)?;
+            out.write_all(&(inputs.len() as u64).to_le_bytes()).map_err(e)?;
+            for event in inputs {
+                let bytes = event.encode_to_vec();
+                out.write_all(&(bytes.len() as u32).to_le_bytes()).map_err(e)?;
+                out.write_all(&bytes).map_err(e)?;
+            }
+            header.inputs = true;
+        }
+        out.flush().map_err(e)?;
+        let mut file = out.into_inner().map_err(|e2| e(e2.into_error()))?;
+        // The flag and the count last: a file cut short before here reads
+        // as frames only.
+        let flags = u32::from(header.precision == Precision::F64)
+            | (u32::from(header.velocities) << 1)
+            | if header.inputs { FLAG_INPUTS } else { 0 };
+        file.seek(SeekFrom::Start(12)).map_err(e)?;
+        file.write_all(&flags.to_le_bytes()).map_err(e)?;
         file.seek(SeekFrom::Start(48)).map_err(e)?;
-        file.write_all(&self.header.n_frames.to_le_bytes()).map_err(e)?;
+        file.write_all(&header.n_frames.to_le_bytes()).map_err(e)?;
         file.sync_all().map_err(e)?;
-        Ok(self.header)
+        Ok(header)
     }
 }
 
@@ -184,6 +225,7 @@ pub struct TrajectoryReader {
     header: TrajectoryHeader,
     next: u64,
     path: String,
+    size: u64,
 }
 
 impl TrajectoryReader {
@@ -213,7 +255,7 @@ impl TrajectoryReader {
             return Err(bad(format!("version {version} is not supported (expected 1)")));
         }
         let flags = u32_at(12);
-        if flags & !3 != 0 {
+        if flags & !7 != 0 {
             return Err(bad(format!("unknown flags {flags:#x}")));
         }
         let mut header = TrajectoryHeader {
@@ -225,6 +267,7 @@ impl TrajectoryReader {
             dt: f64::from_le_bytes(h[32..40].try_into().expect("8 bytes")),
             frame_every: u32_at(40),
             n_frames: u64_at(48),
+            inputs: flags & FLAG_INPUTS != 0,
         };
         if header.n_nodes == 0 || header.n_nodes > 1 << 32 {
             return Err(bad(format!("implausible node count {}", header.n_nodes)));
@@ -236,6 +279,9 @@ impl TrajectoryReader {
             )));
         }
         let whole = (size - HEADER_LEN) / header.frame_len();
+        if header.inputs && header.n_frames == 0 {
+            return Err(bad("an input log is flagged but the frame count is 0".into()));
+        }
         if header.n_frames == 0 {
             header.n_frames = whole; // the writer stopped early: keep every complete frame
         } else if header.n_frames > whole {
@@ -249,7 +295,63 @@ impl TrajectoryReader {
             header,
             next: 0,
             path: path.display().to_string(),
+            size,
         })
+    }
+
+    /// The input log (empty when the file has none); the frame reading
+    /// starts over afterwards.
+    pub fn inputs(&mut self) -> Result<Vec<v1::InputEvent>, OutputError> {
+        if !self.header.inputs {
+            return Ok(Vec::new());
+        }
+        let path = self.path.clone();
+        let io = |source| OutputError::Io {
+            path: path.clone(),
+            source,
+        };
+        let bad = |reason: String| OutputError::Inputs {
+            path: path.clone(),
+            reason,
+        };
+        let start = HEADER_LEN + self.header.n_frames * self.header.frame_len();
+        self.input.seek(SeekFrom::Start(start)).map_err(io)?;
+        let mut left = self.size.saturating_sub(start);
+        let mut head = [0u8; 16];
+        if left < 16 {
+            return Err(bad(format!("the input log at byte {start} is cut short")));
+        }
+        self.input.read_exact(&mut head).map_err(io)?;
+        left -= 16;
+        if &head[0..8] != INPUT_LOG_MAGIC {
+            return Err(bad(format!("no input log at byte {start} (wrong magic)")));
+        }
+        let count = u64::from_le_bytes(head[8..16].try_into().expect("8 bytes"));
+        if count > left / 4 {
+            return Err(bad(format!("the input log claims {count} inputs in {left} bytes")));
+        }
+        let mut events = Vec::with_capacity(count as usize);
+        for i in 0..count {
+            let mut len = [0u8; 4];
+            if left < 4 {
+                return Err(bad(format!("input {i} of {count} is cut short")));
+            }
+            self.input.read_exact(&mut len).map_err(io)?;
+            let len = u64::from(u32::from_le_bytes(len));
+            left -= 4;
+            if len > left {
+                return Err(bad(format!("input {i} of {count} claims {len} bytes, {left} are left")));
+            }
+            let mut buf = vec![0u8; len as usize];
+            self.input.read_exact(&mut buf).map_err(io)?;
+            left -= len;
+            let event = v1::InputEvent::decode(buf.as_slice())
+                .map_err(|e| bad(format!("input {i} of {count} is not an InputEvent: {e}")))?;
+            events.push(event);
+        }
+        self.input.seek(SeekFrom::Start(HEADER_LEN)).map_err(io)?;
+        self.next = 0;
+        Ok(events)
     }
 
     /// The header.
@@ -288,5 +390,112 @@ impl TrajectoryReader {
             positions: block(16),
             velocities: self.header.velocities.then(|| block(16 + 3 * n * s)),
         }))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::touch::{Input, Patch};
+
+    fn state(step: u64, n: usize) -> State {
+        let pos: Vec<f64> = (0..3 * n).map(|i| i as f64 * 0.25 + step as f64).collect();
+        State {
+            vel: pos.iter().map(|x| -x).collect(),
+            pos,
+            time: step as f64 * 0.01,
+            step,
+        }
+    }
+
+    fn event(frame: u64, input: Input) -> v1::InputEvent {
+        v1::InputEvent {
+            instance: "a".into(),
+            frame,
+            time: frame as f64 * 0.01,
+            episode: 2,
+            level: Some(v1::Level {
+                nx: 2,
+                ny: 2,
+                points: 0,
+            }),
+            input: Some(crate::proto::input_request(&input)),
+            idle: frame == 9,
+        }
+    }
+
+    fn write(path: &Path, inputs: Option<&[v1::InputEvent]>) {
+        let mut w = TrajectoryWriter::create(path, 4, Some((2, 2)), 0.01, 1, Precision::F64, true).unwrap();
+        for step in 0..5 {
+            w.write(&state(step, 4)).unwrap();
+        }
+        w.finish_with_inputs(inputs).unwrap();
+    }
+
+    #[test]
+    fn frames_and_the_input_log_read_back_as_written() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("a.lct");
+        let inputs = vec![
+            event(
+                3,
+                Input::Grab {
+                    id: 1,
+                    at: Patch {
+                        u: 0.5,
+                        v: 0.5,
+                        radius: 0.0,
+                    },
+                    target: None,
+                    stiffness: 5.0,
+                    damping: 0.1,
+                },
+            ),
+            event(9, Input::ReleaseAll),
+        ];
+        write(&path, Some(&inputs));
+        let mut r = TrajectoryReader::open(&path).unwrap();
+        assert!(r.header().inputs);
+        assert_eq!(r.header().n_frames, 5);
+        assert_eq!(r.inputs().unwrap(), inputs);
+        // Frames read from the start after the log, every value exact (f64).
+        for step in 0..5 {
+            let f = r.next_frame().unwrap().unwrap();
+            let s = state(step, 4);
+            assert_eq!(f.step, step);
+            assert_eq!(f.positions[3], [s.pos[3], s.pos[7], s.pos[11]]);
+            assert_eq!(f.velocities.unwrap()[1], [s.vel[1], s.vel[5], s.vel[9]]);
+        }
+        assert!(r.next_frame().unwrap().is_none());
+
+        // Without inputs: no flag, an empty log.
+        write(&path, None);
+        let mut r = TrajectoryReader::open(&path).unwrap();
+        assert!(!r.header().inputs);
+        assert!(r.inputs().unwrap().is_empty());
+    }
+
+    #[test]
+    fn a_damaged_input_log_is_refused_by_what_is_wrong() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("a.lct");
+        let inputs = vec![event(3, Input::ReleaseAll); 3];
+        write(&path, Some(&inputs));
+        let whole = std::fs::read(&path).unwrap();
+        let frames_end = (HEADER_LEN + 5 * TrajectoryReader::open(&path).unwrap().header().frame_len()) as usize;
+        let check = |bytes: &[u8], expect: &str| {
+            std::fs::write(&path, bytes).unwrap();
+            let e = TrajectoryReader::open(&path).and_then(|mut r| r.inputs()).unwrap_err();
+            assert!(e.to_string().contains(expect), "{e}");
+        };
+        // Cut inside the last input, inside the count, and a wrong magic.
+        check(&whole[..whole.len() - 2], "input 2 of 3 claims");
+        check(&whole[..frames_end + 10], "cut short");
+        let mut wrong = whole.clone();
+        wrong[frames_end] = b'X';
+        check(&wrong, "wrong magic");
+        let mut huge = whole.clone();
+        huge[frames_end + 8..frames_end + 16].copy_from_slice(&u64::MAX.to_le_bytes());
+        check(&huge, "claims 18446744073709551615 inputs");
     }
 }

@@ -31,6 +31,11 @@ pub fn input(prefix: &str, instance: &str) -> String {
     format!("{prefix}/{instance}/input")
 }
 
+/// `<prefix>/<instance>/inputs`: every input that took effect.
+pub fn inputs(prefix: &str, instance: &str) -> String {
+    format!("{prefix}/{instance}/inputs")
+}
+
 /// `<prefix>/instances`
 pub fn instances(prefix: &str) -> String {
     format!("{prefix}/instances")

@@ -88,3 +88,28 @@ pub(super) async fn publish_metrics(
         }
     }
 }
+
+/// Put every input that took effect on `<prefix>/<instance>/inputs`, in
+/// order.
+pub(super) async fn publish_inputs(
+    handle: InstanceHandle,
+    publisher: zenoh::pubsub::Publisher<'static>,
+    closing: watch::Receiver<bool>,
+) {
+    let mut applied = handle.applied.lock().await;
+    let mut closing = closing;
+    loop {
+        let a = tokio::select! {
+            biased;
+            _ = closing.changed() => break,
+            a = applied.recv() => match a {
+                Some(a) => a,
+                None => break,
+            },
+        };
+        let bytes = proto::input_event(&handle.name, &a).encode_to_vec();
+        if let Err(e) = publisher.put(bytes).await {
+            tracing::warn!(instance = %handle.name, "publishing an input: {e}");
+        }
+    }
+}

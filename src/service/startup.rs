@@ -15,7 +15,7 @@ use zenoh::Session;
 
 use super::config::ServiceConfig;
 use super::persist::resumable;
-use super::publish::{publish_metrics, publish_states};
+use super::publish::{publish_inputs, publish_metrics, publish_states};
 use super::{encoding, keys, snapshot, zerr, Context, Instance, ServiceError};
 use crate::cache::CoefficientCache;
 use crate::engine::{Engine, InstanceSetup, Snapshot};
@@ -161,6 +161,15 @@ pub(super) async fn declare_outputs(
             metrics,
             closing.clone(),
         ));
+        // Every input, none dropped: a recording replays only when it has
+        // them all (a slow subscriber holds this task back, never stepping).
+        let inputs = session
+            .declare_publisher(keys::inputs(&ctx.prefix, name))
+            .encoding(encoding(schema::INPUT_EVENT))
+            .congestion_control(CongestionControl::Block)
+            .await
+            .map_err(zerr)?;
+        tasks.spawn(publish_inputs(inst.handle.clone(), inputs, closing.clone()));
         tokens.push(
             session
                 .liveliness()

@@ -12,6 +12,7 @@ an unprepared level is left to the command-line smoke test
 from __future__ import annotations
 
 import os
+import queue
 import subprocess
 import sys
 import threading
@@ -144,9 +145,16 @@ class LiveDaemon(unittest.TestCase):
         self.assertFalse(r.paused)
 
     def test_grab_and_release(self):
-        # Pull the bottom centre of `hanging` towards the viewer, then let go.
+        # Pull the bottom centre of `hanging` towards the viewer, then let go;
+        # every input that took effect comes back on the inputs key.
+        seen: "queue.Queue[v1.InputEvent]" = queue.Queue()
+        sub = self.client.on_input("hanging", seen.put)
         try:
             r = self.client.grab("hanging", 0.5, 1.0, (0.5, -0.8, 0.3), id=9)
+            grab = seen.get(timeout=5)
+            self.assertEqual((grab.frame, grab.instance, grab.idle), (r.frame, "hanging", False))
+            self.assertEqual(grab.input.grab.id, 9)
+            self.assertEqual(grab.input.grab.target.z, 0.3)
             self.assertEqual(r.instance, "hanging")
             self.assertIn(9, list(r.grabs))
             self.assertGreater(r.frame, 0)
@@ -156,7 +164,9 @@ class LiveDaemon(unittest.TestCase):
             self.assertIn("grab.at.u", ctx.exception.message)
         finally:
             r = self.client.release("hanging")
+            sub.close()
         self.assertEqual(list(r.grabs), [])
+        self.assertEqual(seen.get(timeout=5).input.WhichOneof("action"), "release_all")
 
     def test_switch_to_the_current_level(self):
         # It runs at that level, so the level is prepared; right after the

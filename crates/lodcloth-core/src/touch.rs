@@ -516,25 +516,34 @@ impl Touch {
         Ok(())
     }
 
-    /// Let go of everything at simulated time `t`: grabs released, the
-    /// scene's wind back, moved pins back on their scripts over `seconds`.
-    pub fn release(&mut self, sim: &mut Simulation, seconds: f64) -> Result<(), TouchError> {
-        self.apply(&Input::ReleaseAll, sim)?;
-        if self.wind.is_some() {
-            self.apply(&Input::SceneWind, sim)?;
+    /// The inputs that let go of everything at simulated time `t`: release
+    /// every grab, the scene's wind back, moved pins back on their scripts
+    /// over `seconds` (empty when nothing is in force). Applied in order,
+    /// they are what [`Touch::release`] does, so a log of them replays it.
+    pub fn letting_go(&self, t: f64, seconds: f64) -> Vec<Input> {
+        let mut out = Vec::new();
+        if !self.grabs.is_empty() {
+            out.push(Input::ReleaseAll);
         }
-        let t = sim.state().time;
-        for pin in 0..self.pin_shifts.len() {
-            if !self.pin_shifts[pin].is_rest_from(t) {
-                self.apply(
-                    &Input::MovePin {
-                        pin: pin as u32,
-                        offset: [0.0; 3],
-                        seconds,
-                    },
-                    sim,
-                )?;
+        if self.wind.is_some() {
+            out.push(Input::SceneWind);
+        }
+        for (pin, shift) in self.pin_shifts.iter().enumerate() {
+            if !shift.is_rest_from(t) {
+                out.push(Input::MovePin {
+                    pin: pin as u32,
+                    offset: [0.0; 3],
+                    seconds,
+                });
             }
+        }
+        out
+    }
+
+    /// Let go of everything now: the inputs of [`Touch::letting_go`].
+    pub fn release(&mut self, sim: &mut Simulation, seconds: f64) -> Result<(), TouchError> {
+        for input in self.letting_go(sim.state().time, seconds) {
+            self.apply(&input, sim)?;
         }
         Ok(())
     }

@@ -335,6 +335,17 @@ class Client:
         (see :meth:`on_state`)."""
         return Subscription(self, keys.metrics(self.prefix, instance), v1.Metrics, callback, on_error)
 
+    def on_input(
+        self,
+        instance: str,
+        callback: Callable[["v1.InputEvent"], object],
+        on_error: Optional[Callable[[LodclothError], object]] = None,
+    ) -> "Subscription":
+        """Call ``callback`` with every ``InputEvent`` of ``instance``: each
+        input that took effect, from any client or the daemon's idle rule, in
+        order (see :meth:`on_state`)."""
+        return Subscription(self, keys.inputs(self.prefix, instance), v1.InputEvent, callback, on_error)
+
 
 def _take(watch: "Watch", count: Optional[int]) -> Iterator[Message]:
     if count is not None and count < 1:

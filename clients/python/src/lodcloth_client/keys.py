@@ -15,6 +15,7 @@ __all__ = [
     "switch",
     "control",
     "input",
+    "inputs",
     "instances",
     "alive",
     "instance_of",
@@ -52,6 +53,11 @@ def control(prefix: str, instance: str) -> str:
 def input(prefix: str, instance: str) -> str:
     """``<prefix>/<instance>/input``: ``InputRequest`` -> ``InputReply``."""
     return f"{prefix}/{instance}/input"
+
+
+def inputs(prefix: str, instance: str) -> str:
+    """``<prefix>/<instance>/inputs``: ``InputEvent`` for every input that took effect."""
+    return f"{prefix}/{instance}/inputs"
 
 
 def instances(prefix: str) -> str:

@@ -607,7 +607,7 @@ impl Simulation {
             split: None,
         };
         sim.split = node_split(&sim.model.topology);
-        sim.epoch = (sim.state.time, sim.state.step);
+        sim.epoch = sim.epoch_of(&sim.state);
         sim.apply_pins();
         Ok(sim)
     }
@@ -639,6 +639,22 @@ impl Simulation {
         &self.state
     }
 
+    /// The epoch later step times count from for a cloth now at `state`:
+    /// this one when it already gives `state`'s time at its step (a state
+    /// of this run, or of a cloth rebuilt with the same dt), else the
+    /// state itself. A cloth rebuilt in the middle of a run (new
+    /// coefficients, a rollback) thus keeps the same step times, so a
+    /// replay of the run is exact to the bit.
+    fn epoch_of(&self, state: &State) -> (f64, u64) {
+        let (t0, s0) = self.epoch;
+        let same = state.step >= s0 && t0 + (state.step - s0) as f64 * self.model.params.dt == state.time;
+        if same {
+            self.epoch
+        } else {
+            (state.time, state.step)
+        }
+    }
+
     /// Replace the state (same node count), e.g. after a level switch or a
     /// rollback. Clears a divergence.
     pub fn set_state(&mut self, state: State) -> Result<(), SimError> {
@@ -650,10 +666,10 @@ impl Simulation {
                 expected: n,
             });
         }
+        self.epoch = self.epoch_of(&state);
         self.state = state;
         self.cached = false;
         self.last = None;
-        self.epoch = (self.state.time, self.state.step);
         self.apply_pins();
         Ok(())
     }

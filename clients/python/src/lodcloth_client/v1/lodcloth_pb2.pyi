@@ -404,3 +404,21 @@ class InputReply(_message.Message):
     grabs: _containers.RepeatedScalarFieldContainer[int]
     level: Level
     def __init__(self, instance: _Optional[str] = ..., frame: _Optional[int] = ..., time: _Optional[float] = ..., grabs: _Optional[_Iterable[int]] = ..., level: _Optional[_Union[Level, _Mapping]] = ...) -> None: ...
+
+class InputEvent(_message.Message):
+    __slots__ = ("instance", "frame", "time", "episode", "level", "input", "idle")
+    INSTANCE_FIELD_NUMBER: _ClassVar[int]
+    FRAME_FIELD_NUMBER: _ClassVar[int]
+    TIME_FIELD_NUMBER: _ClassVar[int]
+    EPISODE_FIELD_NUMBER: _ClassVar[int]
+    LEVEL_FIELD_NUMBER: _ClassVar[int]
+    INPUT_FIELD_NUMBER: _ClassVar[int]
+    IDLE_FIELD_NUMBER: _ClassVar[int]
+    instance: str
+    frame: int
+    time: float
+    episode: int
+    level: Level
+    input: InputRequest
+    idle: bool
+    def __init__(self, instance: _Optional[str] = ..., frame: _Optional[int] = ..., time: _Optional[float] = ..., episode: _Optional[int] = ..., level: _Optional[_Union[Level, _Mapping]] = ..., input: _Optional[_Union[InputRequest, _Mapping]] = ..., idle: bool = ...) -> None: ...
