@@ -704,5 +704,76 @@ async fn a_recorded_session_replays_offline_to_the_recorded_states() {
     for (k, p) in last.positions.iter().enumerate() {
         assert!(dist(*p, [pos[k], pos[n + k], pos[2 * n + k]]) < 1e-5);
     }
+
+    // The touched session scored against a reference replaying its inputs
+    // (the live error the daemon withholds while a cloth is touched): the
+    // level itself as the reference scores zero to the wire's rounding;
+    // the 24² reference (the instance's, at the scene's dt) scores the
+    // level's real error under the touch.
+    let recorded: Vec<(f64, Vec<f64>)> = frames
+        .iter()
+        .take_while({
+            let mut last = f64::NEG_INFINITY;
+            move |f| {
+                let rising = f.time >= last;
+                last = f.time;
+                rising
+            }
+        })
+        .map(|f| {
+            let n = f.positions.len();
+            let mut soa = vec![0.0; 3 * n];
+            for (k, p) in f.positions.iter().enumerate() {
+                for c in 0..3 {
+                    soa[c * n + k] = p[c];
+                }
+            }
+            (f.time, soa)
+        })
+        .collect();
+    let score = |scene: &Scene, reference| {
+        lodcloth::experiments::drag::replayed_error(scene, reference, (16, 16), &recorded, &replay.script, &mut |_| {})
+            .expect("scored")
+    };
+    let itself = score(&scene, (16, 16));
+    let fine_scene = Scene::load(&scene_path("paper-1-top-edge.toml")).expect("scene");
+    let fine = score(&fine_scene, (24, 24));
+    eprintln!(
+        "touched 16x16 against itself replayed: {:.2e} %; against the 24x24 reference replayed: mean {:.3} %, \
+         max frame {:.3} % (O_max {:.3} m)",
+        100.0 * itself.report.mean,
+        100.0 * fine.report.mean,
+        100.0 * fine.report.worst_frame_mean,
+        fine.o_max
+    );
+    assert!(itself.report.mean < 1e-6, "{}", itself.report.mean);
+    assert!(
+        fine.report.mean > 1e-3 && fine.report.mean < 0.5,
+        "{}",
+        fine.report.mean
+    );
+    let touched_out = out.path().join("touched");
+    let cli = tokio::task::block_in_place(|| {
+        std::process::Command::new(env!("CARGO_BIN_EXE_lodcloth"))
+            .args([
+                "experiment",
+                "touched",
+                "--scene",
+                scene_path("paper-1-top-edge.toml").to_str().unwrap(),
+            ])
+            .args(["--recording", lct.to_str().unwrap(), "--reference", "24x24"])
+            .args(["--out", touched_out.to_str().unwrap()])
+            .output()
+            .expect("the lodcloth binary runs")
+    });
+    let text = String::from_utf8_lossy(&cli.stdout);
+    assert!(
+        cli.status.success() && text.contains(&format!("mean {:.3} %", 100.0 * fine.report.mean)),
+        "{text}{}",
+        String::from_utf8_lossy(&cli.stderr)
+    );
+    assert!(touched_out.join("touched.svg").exists());
+    let rows = std::fs::read_to_string(touched_out.join("touched.csv")).expect("the CSV");
+    assert_eq!(rows.lines().count(), fine.frames.len() + 1);
     d.shutdown().await.expect("clean exit");
 }

@@ -12,6 +12,7 @@ use clap::Subcommand;
 use tracing::info;
 
 mod readings;
+mod touched;
 
 use lodcloth::cache::CoefficientCache;
 use lodcloth::estimate::{FitOptions, Method, Reading, RecordSpec, Reference};
@@ -272,6 +273,29 @@ pub enum Experiment {
         #[arg(long, value_delimiter = ',', value_parser = parse_reading)]
         readings: Vec<Reading>,
     },
+    /// A recorded session (`lodcloth record --out`, with its inputs) scored
+    /// against the reference replaying the same inputs: the level's eq. 9
+    /// error while clients touched it (CSV and chart).
+    Touched {
+        /// The instance's scene file.
+        #[arg(long)]
+        scene: PathBuf,
+        /// The recording (.lct).
+        #[arg(long)]
+        recording: PathBuf,
+        /// Reference grid (default: the scene's own).
+        #[arg(long)]
+        reference: Option<GridLevel>,
+        /// The reference's dt (default: the scene's).
+        #[arg(long)]
+        dt: Option<f64>,
+        /// The recording's episode (default: the first with inputs).
+        #[arg(long)]
+        episode: Option<u64>,
+        /// Output directory (default: out/touched-<instance>).
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
     /// Switch reference ↔ a coarse level mid-run and measure the jump.
     SwitchTest {
         #[command(flatten)]
@@ -376,6 +400,24 @@ pub fn run(experiment: Experiment) -> Result<()> {
                 readings
             };
             readings::readings_cmd(&common, &levels, &readings)
+        }
+        Experiment::Touched {
+            scene,
+            recording,
+            reference,
+            dt,
+            episode,
+            out,
+        } => {
+            let reference = match reference {
+                None => None,
+                Some(l) => {
+                    let s = lodcloth::scene::Scene::load(&scene)?;
+                    let (nx, ny) = l.resolve(s.width, s.height);
+                    Some((nx, ny))
+                }
+            };
+            touched::touched_cmd(&scene, &recording, reference, dt, episode, out)
         }
         Experiment::SwitchTest {
             mut common,
