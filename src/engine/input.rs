@@ -93,8 +93,19 @@ impl Runner {
         let Some(touch) = self.touch.as_mut() else {
             return;
         };
-        if let Err(e) = touch.resolve(&mut self.sim) {
-            tracing::warn!(instance = %self.name, "an input did not carry over to the new level: {e}");
+        match touch.resolve(&mut self.sim) {
+            Ok(softened) => {
+                for s in softened {
+                    tracing::warn!(
+                        instance = %self.name,
+                        grab = s.id,
+                        from = s.from,
+                        to = s.to,
+                        "the grab was too stiff for the new level's step: softened to stay stable"
+                    );
+                }
+            }
+            Err(e) => tracing::warn!(instance = %self.name, "an input did not carry over to the new level: {e}"),
         }
     }
 }

@@ -29,6 +29,21 @@ pub struct Patch {
     pub radius: f64,
 }
 
+/// The fraction of a new level's largest stable grab stiffness a grab too
+/// stiff for it is softened to at a switch.
+pub const SOFTEN_AT_SWITCH: f64 = 0.9;
+
+/// A grab softened at a level switch ([`Touch::resolve`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Softened {
+    /// The grab.
+    pub id: u32,
+    /// Its stiffness before (N/m).
+    pub from: f64,
+    /// Its stiffness on the new level (N/m).
+    pub to: f64,
+}
+
 /// One thing a client does to the cloth.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Input {
@@ -466,23 +481,42 @@ impl Touch {
     /// Put the inputs in force on `sim` (a new level of the same cloth, at
     /// the time the old one reached): the same grabs on the same material
     /// patches, the same wind, the pins where their moves have them. A grab
-    /// too stiff for the new level's dt is refused like a new one: the
-    /// error names it and `sim` keeps the others.
-    pub fn resolve(&mut self, sim: &mut Simulation) -> Result<(), TouchError> {
+    /// too stiff for the new level's dt (a finer grid has lighter nodes) is
+    /// softened to [`SOFTEN_AT_SWITCH`] of the largest stiffness stable
+    /// there, so a drag survives the switch; each softened grab is returned.
+    /// One that no stiffness holds stably is let go, and the error names it.
+    pub fn resolve(&mut self, sim: &mut Simulation) -> Result<Vec<Softened>, TouchError> {
         let shape = grid(sim)?;
         let mut kept: Vec<GrabSpec> = Vec::new();
         let mut resolved: Vec<Grab> = Vec::new();
+        let mut softened = Vec::new();
         let mut refused = None;
         for g in &self.grabs {
-            let r = resolve_grab(g, &shape);
-            resolved.push(r);
+            let mut r = resolve_grab(g, &shape);
+            resolved.push(r.clone());
             if sim.grab_headroom(&resolved).stable() {
                 kept.push(*g);
+                continue;
+            }
+            resolved.pop();
+            let max = sim.max_grab_stiffness(&r, &resolved);
+            r.stiffness = SOFTEN_AT_SWITCH * max;
+            resolved.push(r.clone());
+            if max > 0.0 && sim.grab_headroom(&resolved).stable() {
+                softened.push(Softened {
+                    id: g.id,
+                    from: g.stiffness,
+                    to: r.stiffness,
+                });
+                kept.push(GrabSpec {
+                    stiffness: r.stiffness,
+                    ..*g
+                });
             } else {
-                let mine = resolved.pop().expect("pushed above");
+                resolved.pop();
                 refused = Some(TouchError::Unstable {
                     stiffness: g.stiffness,
-                    max: sim.max_grab_stiffness(&mine, &resolved),
+                    max,
                     dt: sim.params().dt,
                 });
             }
@@ -498,7 +532,7 @@ impl Touch {
                 sim.shift_pins(&on, *shift)?;
             }
         }
-        refused.map_or(Ok(()), Err)
+        refused.map_or(Ok(softened), Err)
     }
 
     /// Forget every input and take their loads off `sim` at once (the

@@ -344,6 +344,54 @@ fn a_level_switch_puts_the_same_grab_and_wind_on_the_new_level() {
     assert_eq!(touch.grab_ids(), vec![3]);
 }
 
+/// A switch to a finer grid (lighter nodes) can make a held grab unstable
+/// at the same dt: it is softened to 90 % of what the new level holds, kept
+/// (same id, same target) and reported, and the new level stays stable.
+#[test]
+fn a_grab_too_stiff_for_the_new_level_is_softened_and_kept_at_a_switch() {
+    let scene = free();
+    let mut coarse = at(&scene, 13, 9);
+    let mut touch = Touch::new(&scene);
+    let point = Patch {
+        u: 0.5,
+        v: 0.5,
+        radius: 0.0,
+    };
+    let grab = |k: f64| Input::Grab {
+        id: 7,
+        at: point,
+        target: Some([0.6, 0.1, 0.4]),
+        stiffness: k,
+        damping: 0.0,
+    };
+    let max_coarse = match touch.apply(&grab(1e9), &mut coarse) {
+        Err(TouchError::Unstable { max, .. }) => max,
+        other => panic!("not refused: {other:?}"),
+    };
+    touch
+        .apply(&grab(0.9 * max_coarse), &mut coarse)
+        .expect("stable on the coarse level");
+    let mut fine = at_level(&scene, 48, 32);
+    let softened = touch.resolve(&mut fine).expect("kept, softened");
+    assert_eq!(softened.len(), 1, "{softened:?}");
+    let s = softened[0];
+    assert_eq!((s.id, s.from), (7, 0.9 * max_coarse));
+    assert!(s.to < s.from, "{s:?}");
+    assert_eq!(touch.grab_ids(), vec![7]);
+    assert_eq!(fine.grabs()[0].stiffness, s.to);
+    assert_eq!(fine.grabs()[0].target, [0.6, 0.1, 0.4]);
+    for _ in 0..5_000 {
+        assert!(fine.step().finite, "the softened grab diverged");
+    }
+    // Forced at its old stiffness, the fine level diverges: the softening
+    // was needed.
+    let mut forced = at_level(&scene, 48, 32);
+    let mut g = fine.grabs().to_vec();
+    g[0].stiffness = s.from;
+    forced.set_grabs(g).expect("valid values");
+    assert!((0..5_000).any(|_| !forced.step().finite), "{s:?} was stable unsoftened");
+}
+
 fn at_level(scene: &Scene, nx: usize, ny: usize) -> Simulation {
     at(scene, nx, ny)
 }
