@@ -26,9 +26,12 @@ use browser::Browser;
 use daemon::*;
 use lodcloth::foxglove_bridge::{mesh_topic, metrics_topic};
 use lodcloth::plan::Level;
-use lodcloth::proto::v1;
+use lodcloth::proto::{unpack_positions, v1};
+use lodcloth::scene::Scene;
 use lodcloth::service::client::ClientOptions;
+use lodcloth::touch::Patch;
 use lodcloth::view::ViewOptions;
+use v1::control_request::Action;
 
 type Ws = WebSocketStream<MaybeTlsStream<TcpStream>>;
 
@@ -215,6 +218,381 @@ async fn the_page_draws_the_cloth_coloured_by_error_and_switches_level_from_a_cl
         )
         .await;
     let _ = stop_view.send(());
+}
+
+/// The camera the page draws with ([`Browser::eval`] of
+/// `window.lodclothCamera()`): puts world points on the screen here, in the
+/// test, so the daemon's positions can be compared with the mouse.
+struct Camera {
+    /// Column-major model-view-projection matrix.
+    mvp: [f64; 16],
+    /// The canvas's client rectangle (CSS px).
+    rect: [f64; 4],
+}
+
+impl Camera {
+    async fn of(browser: &mut Browser) -> Camera {
+        let c = browser.eval("window.lodclothCamera()").await;
+        let num = |v: &Value| v.as_f64().expect("a number");
+        let m = c["mvp"].as_array().expect("mvp");
+        assert_eq!(m.len(), 16);
+        Camera {
+            mvp: std::array::from_fn(|i| num(&m[i])),
+            rect: [num(&c["left"]), num(&c["top"]), num(&c["width"]), num(&c["height"])],
+        }
+    }
+
+    /// How far world point `p` is in front of the eye (m, along the view).
+    fn depth(&self, p: [f64; 3]) -> f64 {
+        (0..3).map(|c| self.mvp[c * 4 + 3] * p[c]).sum::<f64>() + self.mvp[15]
+    }
+
+    /// The client pixel of world point `p`.
+    fn project(&self, p: [f64; 3]) -> [f64; 2] {
+        let row = |r: usize| (0..3).map(|c| self.mvp[c * 4 + r] * p[c]).sum::<f64>() + self.mvp[12 + r];
+        let w = row(3);
+        assert!(w > 0.0, "{p:?} is behind the eye");
+        let [left, top, width, height] = self.rect;
+        [
+            left + (row(0) / w + 1.0) / 2.0 * width,
+            top + (1.0 - row(1) / w) / 2.0 * height,
+        ]
+    }
+}
+
+/// Where material point (u, v) of a grid cloth is in a state: the daemon's
+/// own definition of it (a patch of radius 0, bilinear in its cell).
+fn material_point(scene: &Scene, s: &v1::State, u: f64, v: f64) -> [f64; 3] {
+    let Level::Grid { nx, ny } = level_of(s) else {
+        panic!("a grid level")
+    };
+    let (nodes, weights) = Patch { u, v, radius: 0.0 }.weights(&scene.shape(nx, ny));
+    let pos = unpack_positions(&s.positions).expect("packed positions");
+    let n = nx * ny;
+    std::array::from_fn(|d| {
+        nodes
+            .iter()
+            .zip(&weights)
+            .map(|(&k, w)| w * pos[d * n + k as usize])
+            .sum()
+    })
+}
+
+fn pixel(v: &Value) -> [f64; 2] {
+    let a = v.as_array().unwrap_or_else(|| panic!("a pixel [x, y], got {v}"));
+    [a[0].as_f64().expect("x"), a[1].as_f64().expect("y")]
+}
+
+fn px_dist(a: [f64; 2], b: [f64; 2]) -> f64 {
+    (a[0] - b[0]).hypot(a[1] - b[1])
+}
+
+fn unix_nanos() -> u64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .expect("clock")
+        .as_nanos() as u64
+}
+
+async fn next_metrics(c: &lodcloth::service::client::Client, instance: &str) -> v1::Metrics {
+    let sub = c
+        .session
+        .declare_subscriber(lodcloth::service::keys::metrics(PREFIX, instance))
+        .await
+        .expect("subscriber");
+    let m = within(10, "metrics", sub.recv_async()).await.expect("metrics");
+    v1::Metrics::decode(m.payload().to_bytes().as_ref()).expect("Metrics")
+}
+
+/// Pause `drag-a` and wait until the page draws the still cloth; its
+/// state, from the states collected off the bus.
+async fn pause_drawn(
+    c: &lodcloth::service::client::Client,
+    browser: &mut Browser,
+    states: &std::sync::Mutex<Vec<v1::State>>,
+) -> v1::State {
+    let paused = within(5, "pause", c.control("drag-a", Action::Pause))
+        .await
+        .expect("paused");
+    browser
+        .wait_for(
+            10,
+            "the paused cloth drawn",
+            &format!("window.lodclothStats.frame === {}", paused.frame),
+        )
+        .await;
+    let still = states
+        .lock()
+        .expect("states")
+        .iter()
+        .rfind(|s| s.frame == paused.frame)
+        .cloned();
+    still.expect("the paused state on the bus")
+}
+
+/// Issue 22: a drag with the mouse in the page pulls the cloth after the
+/// pointer. Truth is the daemon's states on the bus: the grabbed material
+/// point, put on the screen with the page's camera, starts under the press
+/// and ends near where the pointer was dragged to; after the release the
+/// daemon holds no grab (its reply and `Metrics.touched`).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn dragging_the_cloth_in_the_page_pulls_the_grabbed_point_after_the_pointer_and_the_release_lets_go() {
+    if !browser::available(
+        "dragging_the_cloth_in_the_page_pulls_the_grabbed_point_after_the_pointer_and_the_release_lets_go",
+    ) {
+        return;
+    }
+    let _serial = daemon::serial().await;
+    let d = Daemon::start(("drag-a", "drag-b"));
+    let c = client(&[d.endpoint()]).await;
+    wait_info(&c, "drag-a").await;
+    let scene = Scene::load(&scene_path("paper-1-top-edge.toml")).expect("scene");
+    let (base, stop_view) = start_view(d.endpoint()).await;
+    let mut browser = Browser::open(&format!("{base}/?instance=drag-a")).await;
+    browser
+        .wait_for(
+            30,
+            "states drawn",
+            "(window.lodclothStats?.statesDrawn ?? 0) > 10 && window.lodclothStats.level === '16x16'",
+        )
+        .await;
+
+    // Every state from here on, as the daemon publishes it.
+    let sub = c
+        .session
+        .declare_subscriber(lodcloth::service::keys::state(PREFIX, "drag-a"))
+        .await
+        .expect("subscriber");
+    let states = std::sync::Arc::new(std::sync::Mutex::new(Vec::<v1::State>::new()));
+    let collector = {
+        let states = states.clone();
+        tokio::spawn(async move {
+            while let Ok(s) = sub.recv_async().await {
+                let s = v1::State::decode(s.payload().to_bytes().as_ref()).expect("a State");
+                states.lock().expect("states").push(s);
+            }
+        })
+    };
+    let latest = || states.lock().expect("states").last().cloned();
+    // Press after the scene's pull (1.0 to 2.5 s of its 6 s loop) and
+    // before it starts over (a touched cloth does not).
+    within(30, "the hanging part of the scene's loop", async {
+        while !latest().is_some_and(|s| (3.0..5.0).contains(&s.time)) {
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+    })
+    .await;
+    // The cloth keeps swinging (150 to 300 px/s on screen): it is paused
+    // for the press, so the point under the pointer is checked to the pixel.
+    let still = pause_drawn(&c, &mut browser, &states).await;
+    // Frame the still cloth (the page framed the first state it drew,
+    // wherever the cloth was then).
+    browser.click("#reset-view").await;
+    let (u, v) = (0.5, 0.75);
+    let camera = Camera::of(&mut browser).await;
+    let press = pixel(&browser.eval(&format!("window.lodclothProject({u}, {v})")).await);
+    let [left, top, width, height] = camera.rect;
+    assert!(
+        (left..left + width).contains(&press[0]) && (top + 50.0..top + height).contains(&press[1]),
+        "material point ({u}, {v}) is drawn off the canvas (or less than 50 px below its top), at {press:?}"
+    );
+    let daemon_uv = camera.project(material_point(&scene, &still, u, v));
+    assert!(
+        px_dist(daemon_uv, press) < 2.0,
+        "the page draws material point ({u}, {v}) at {press:?}, the daemon's is at {daemon_uv:?}"
+    );
+    browser.mouse_press(press[0], press[1]).await;
+    browser
+        .wait_for(10, "the grab held", "window.lodclothInput.held === true")
+        .await;
+    let grab = browser.eval("window.lodclothInput.grab").await;
+    let (gu, gv) = (grab["u"].as_f64().expect("u"), grab["v"].as_f64().expect("v"));
+    let frame = grab["frame"].as_u64().expect("the grab's frame");
+    // The page grabs the cloth's surface nearest the eye under the
+    // pointer: the material point pressed on, or one in front of it where
+    // the swinging cloth folds over it.
+    let x_uv = material_point(&scene, &still, u, v);
+    let x_grab = material_point(&scene, &still, gu, gv);
+    assert!(
+        ((gu - u).abs() < 0.01 && (gv - v).abs() < 0.01) || camera.depth(x_grab) < camera.depth(x_uv),
+        "pressed on material point ({u}, {v}), the page grabbed ({gu:.4}, {gv:.4}), which is not in front of it"
+    );
+    if (gu - u).abs() >= 0.01 || (gv - v).abs() >= 0.01 {
+        eprintln!(
+            "the cloth folds over ({u}, {v}): the page grabbed ({gu:.3}, {gv:.3}), {:.1} cm in front of it",
+            100.0 * (camera.depth(x_uv) - camera.depth(x_grab))
+        );
+    }
+    // Where the daemon takes hold (it stands still until resumed).
+    let x0 = x_grab;
+    let p0 = camera.project(x0);
+    eprintln!(
+        "pressed at ({:.1}, {:.1}) px on ({u}, {v}); the page grabbed ({gu:.4}, {gv:.4}), which the daemon has {:.2} px from the press",
+        press[0],
+        press[1],
+        px_dist(p0, press)
+    );
+    assert!(
+        px_dist(p0, press) < 3.0,
+        "the grabbed point is on screen at {p0:?}, the press at {press:?}"
+    );
+    within(5, "resume", c.control("drag-a", Action::Resume))
+        .await
+        .expect("resumed");
+
+    // Drag 120 px sideways towards the middle of the canvas (how the page
+    // frames the cloth depends on its first state) and 40 px up (down, the
+    // 20 N/m spring would have to stretch the hanging cloth), in 12 steps.
+    let drag: [f64; 2] = [if press[0] < left + width / 2.0 { 120.0 } else { -120.0 }, -40.0];
+    let length = drag[0].hypot(drag[1]);
+    let dir = [drag[0] / length, drag[1] / length];
+    let started = unix_nanos();
+    for k in 1..=12 {
+        let f = f64::from(k) / 12.0;
+        browser
+            .mouse_drag_to(press[0] + f * drag[0], press[1] + f * drag[1])
+            .await;
+        tokio::time::sleep(Duration::from_millis(25)).await;
+    }
+    let end = [press[0] + drag[0], press[1] + drag[1]];
+    let last_move = unix_nanos();
+    tokio::time::sleep(Duration::from_millis(1500)).await;
+    let after = Camera::of(&mut browser).await;
+    assert_eq!(after.mvp, camera.mvp, "the camera did not orbit during the drag");
+
+    // The grabbed point on screen, state by state: how far along the drag.
+    let track: Vec<(u64, [f64; 2])> = states
+        .lock()
+        .expect("states")
+        .iter()
+        .filter(|s| s.frame > frame && !s.transition)
+        .map(|s| (s.stepped_unix_nanos, camera.project(material_point(&scene, s, gu, gv))))
+        .collect();
+    let along = |p: [f64; 2]| (p[0] - p0[0]) * dir[0] + (p[1] - p0[1]) * dir[1];
+    let reached = |share: f64| {
+        track
+            .iter()
+            .find(|(_, p)| along(*p) >= share * length)
+            .map(|(t, _)| (*t as f64 - started as f64) / 1e6)
+    };
+    let recent: Vec<[f64; 2]> = track
+        .iter()
+        .filter(|(t, _)| *t + 300_000_000 >= track.last().expect("states").0)
+        .map(|(_, p)| *p)
+        .collect();
+    let n = recent.len() as f64;
+    let p1 = [
+        recent.iter().map(|p| p[0]).sum::<f64>() / n,
+        recent.iter().map(|p| p[1]).sum::<f64>() / n,
+    ];
+    let now = states.lock().expect("states").last().cloned().expect("states");
+    let x1 = material_point(&scene, &now, gu, gv);
+    let moved = (0..3).map(|k| (x1[k] - x0[k]).powi(2)).sum::<f64>().sqrt();
+    let ms = |t: Option<f64>| t.map_or_else(|| "never".into(), |t| format!("{t:.0} ms"));
+    eprintln!(
+        "dragged {length:.0} px in {:.0} ms: the point moved {:.0} px along the drag ({:.1} cm in the world) \
+         and ends {:.1} px from the pointer; half way after {}, 90 % after {} (from the first move)",
+        (last_move - started) as f64 / 1e6,
+        along(p1),
+        100.0 * moved,
+        px_dist(p1, end),
+        ms(reached(0.5)),
+        ms(reached(0.9))
+    );
+    assert!(
+        along(p1) > 0.7 * length,
+        "the grabbed point moved {:.1} px along a {length:.0} px drag",
+        along(p1)
+    );
+    assert!(
+        px_dist(p1, end) < 0.3 * length,
+        "the grabbed point is {:.1} px from the pointer",
+        px_dist(p1, end)
+    );
+
+    // The daemon counts the grab and the moves as inputs in force.
+    let touched = next_metrics(&c, "drag-a").await;
+    assert!(
+        touched.touched && touched.inputs >= 2,
+        "while dragging: touched {}, inputs {}",
+        touched.touched,
+        touched.inputs
+    );
+
+    // Let go: the daemon holds no grab.
+    browser.mouse_release(end[0], end[1]).await;
+    browser
+        .wait_for(
+            10,
+            "the release reply",
+            "window.lodclothInput.last?.op === 'release' && window.lodclothInput.last.ok === true",
+        )
+        .await;
+    let input = browser.eval("window.lodclothInput").await;
+    assert_eq!(input["last"]["grabs"], json!([]), "grabs held after the release");
+    assert!(input["sent"]["move"].as_u64().unwrap_or(0) >= 1, "{input}");
+    eprintln!(
+        "page: {} grab, {} moves, {} release sent; {} moves replaced by newer ones before they were sent",
+        input["sent"]["grab"], input["sent"]["move"], input["sent"]["release"], input["replaced"]
+    );
+    within(10, "the daemon lets go", async {
+        while next_metrics(&c, "drag-a").await.touched {}
+    })
+    .await;
+
+    // A grab the level cannot take is refused, and the page says why
+    // (pressed on the paused cloth, which swings after the release).
+    pause_drawn(&c, &mut browser, &states).await;
+    browser
+        .eval("(() => { document.querySelector('#drag-stiffness').value = '1e9'; return true; })()")
+        .await;
+    // Somewhere on the canvas: the released cloth swings, the top rows
+    // least (the top edge is pinned).
+    let mut at = None;
+    for v in [0.25, 0.5, 0.75] {
+        let p = pixel(&browser.eval(&format!("window.lodclothProject({u}, {v})")).await);
+        if (left + 20.0..left + width - 20.0).contains(&p[0]) && (top + 20.0..top + height - 20.0).contains(&p[1]) {
+            at = Some(p);
+            break;
+        }
+    }
+    let at = at.expect("a point of the cloth on the canvas");
+    browser.mouse_press(at[0], at[1]).await;
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while browser
+        .eval("window.lodclothInput.log.some((r) => r.op === 'grab' && r.ok === false)")
+        .await
+        != json!(true)
+    {
+        assert!(
+            Instant::now() < deadline,
+            "no refusal of a grab at {at:?} within 10 s; the page's input: {}",
+            browser.eval("window.lodclothInput").await
+        );
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    browser.mouse_release(at[0], at[1]).await;
+    within(5, "resume", c.control("drag-a", Action::Resume))
+        .await
+        .expect("resumed");
+    let refusal = browser
+        .eval("window.lodclothInput.log.find((r) => r.op === 'grab' && r.ok === false)")
+        .await;
+    assert_eq!(refusal["code"], "CODE_UNSTABLE", "{refusal}");
+    let status = browser
+        .eval("document.querySelector('#input-status').textContent")
+        .await;
+    let class = browser.eval("document.querySelector('#input-status').className").await;
+    assert!(
+        status.as_str().is_some_and(|s| s.contains("stable up to")) && class == "error",
+        "the reason is shown: {status} ({class})"
+    );
+    assert!(!next_metrics(&c, "drag-a").await.touched);
+
+    collector.abort();
+    let _ = stop_view.send(());
+    drop(c);
+    d.shutdown().await.expect("clean shutdown");
 }
 
 fn packed_count(bytes: &[u8]) -> usize {

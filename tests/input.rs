@@ -569,7 +569,7 @@ async fn a_recorded_session_replays_offline_to_the_recorded_states() {
         assert_eq!(e.input.as_ref(), Some(request));
         assert_eq!((e.frame, e.time, e.idle), (reply.frame, reply.time, false));
     }
-    let idle: Vec<_> = logged[sent.len()..].iter().map(|e| (e.idle, e.input.clone())).collect();
+    let idle: Vec<_> = logged[sent.len()..].iter().map(|e| (e.idle, e.input)).collect();
     assert_eq!(
         idle,
         vec![

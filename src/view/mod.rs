@@ -14,14 +14,30 @@
 //! - page → server, text JSON: `{"op":"select","instance":…}`,
 //!   `{"op":"info"}`, `{"op":"switch","id":…,"level":"16x16"}` or
 //!   `{…,"max_error":0.05}` (optional `"method"`), and `{"op":"ack"}` for
-//!   every state received.
+//!   every state received;
+//! - page → server, live input on the selected instance (issue 22; grids
+//!   only, a surface refuses): `{"op":"grab","id":7,"u":0.5,"v":0.8,
+//!   "radius":0.05}` with optional `"target":[x,y,z]` (m; absent: where the
+//!   patch is now), `"stiffness"` (N/m, default 20) and `"damping"` (N·s/m,
+//!   default 0.2); `{"op":"move","id":7,"target":[x,y,z]}`;
+//!   `{"op":"release","id":7}`; `{"op":"release_all"}`. Each one sent is
+//!   answered by `{"type":"input","op":…,"id":…,"ok":true,"frame":…,
+//!   "time":…,"grabs":[…],"level":"16x16","replaced":n,"message":…}` or
+//!   `{…,"ok":false,"code":"CODE_UNSTABLE","message":…}` (the daemon's
+//!   code and reason; a malformed op is answered `CODE_BAD_REQUEST` naming
+//!   the field, without reaching the bus). Grabs a connection still holds
+//!   when it closes are released.
 //!
 //! Flow control: at most [`MAX_IN_FLIGHT`] states are sent and not yet
 //! acknowledged; the next one is the latest when an ack comes back. Socket
 //! buffers therefore never hold a backlog of old states: a slow page (or a
-//! slow network) sees fewer, fresh states, never a growing delay.
+//! slow network) sees fewer, fresh states, never a growing delay. Inputs
+//! go the other way the same way: one at a time per connection, in order
+//! ([`InputQueue`]); a grab or release always goes, while a move still
+//! waiting is replaced by a newer move of the same grab (`replaced` counts
+//! them), so a slow bus delays the drag by one round trip, never a backlog.
 
-use std::collections::{BTreeMap, HashMap};
+use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::future::Future;
 use std::net::SocketAddr;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -39,10 +55,13 @@ use serde::{Deserialize, Serialize};
 use tokio::sync::{mpsc, watch};
 use zenoh::sample::SampleKind;
 
+mod input;
+
 use crate::plan::Level;
 use crate::proto::{v1, WireLevel};
 use crate::service::client::{Client, ClientError, ClientOptions};
 use crate::service::keys;
+use crate::touch::Input;
 
 /// The page, served at `/`.
 const INDEX_HTML: &str = include_str!("index.html");
@@ -294,7 +313,29 @@ enum Command {
         #[serde(default)]
         at_once: bool,
     },
+    /// Live input: the op's fields, checked by [`input_request`] (which
+    /// names the field at fault, as serde's own errors do not).
+    Grab(Fields),
+    Move(Fields),
+    Release(Fields),
+    ReleaseAll(Fields),
 }
+
+impl Command {
+    /// An input op's name and fields.
+    fn input(&self) -> Option<(&'static str, &Fields)> {
+        match self {
+            Command::Grab(f) => Some(("grab", f)),
+            Command::Move(f) => Some(("move", f)),
+            Command::Release(f) => Some(("release", f)),
+            Command::ReleaseAll(f) => Some(("release_all", f)),
+            _ => None,
+        }
+    }
+}
+
+pub use input::*;
+use input::{input_error, track_hold};
 
 /// The switch request a page command asks for, or why it cannot be sent.
 pub fn switch_request(
@@ -383,10 +424,68 @@ async fn changed(rx: Option<&mut Frames>) {
     std::future::pending().await
 }
 
+/// How long releasing a closed connection's grabs may take, each.
+const RELEASE_TIMEOUT: Duration = Duration::from_secs(2);
+
 async fn connection(mut socket: WebSocket, hub: Arc<Hub>) -> Result<(), axum::Error> {
+    let mut held = BTreeSet::new();
+    let result = serve_page(&mut socket, &hub, &mut held).await;
+    // A page that closes (or loses its connection) mid-drag lets go at
+    // once, not after the daemon's idle time.
+    for (instance, id) in held {
+        let request = crate::proto::input_request(&Input::Release { id });
+        match tokio::time::timeout(RELEASE_TIMEOUT, hub.client.input(&instance, &request)).await {
+            Ok(Ok(_)) => tracing::debug!(%instance, id, "released the grab of a closed page"),
+            Ok(Err(e)) => tracing::debug!(%instance, id, error = %e, "releasing the grab of a closed page"),
+            Err(_) => tracing::debug!(%instance, id, "releasing the grab of a closed page: no reply"),
+        }
+    }
+    result
+}
+
+/// The page's input op as a [`Queued`] input for the selected instance, or
+/// the reply refusing it.
+fn page_input(op: &str, fields: &Fields, selected: &Selected) -> Result<Queued, serde_json::Value> {
+    let id = fields
+        .get("id")
+        .and_then(|x| x.as_u64())
+        .and_then(|n| u32::try_from(n).ok());
+    let refuse = |message: String| input_reply(op, id, 0, Err(("CODE_BAD_REQUEST".into(), message)));
+    let Some(instance) = selected.name.clone() else {
+        return Err(refuse("select an instance first".into()));
+    };
+    let request = input_request(op, fields).map_err(refuse)?;
+    Ok(Queued {
+        instance,
+        op: op.to_string(),
+        id,
+        request,
+        replaced: 0,
+    })
+}
+
+/// Send the next queued input when none is in flight; its reply comes back
+/// on `done`.
+fn send_next_input(inputs: &mut InputQueue, hub: &Arc<Hub>, done: &mpsc::Sender<Message>) {
+    let Some(q) = inputs.take_next() else { return };
+    let (hub, done) = (hub.clone(), done.clone());
+    tokio::spawn(async move {
+        let result = hub.client.input(&q.instance, &q.request).await.map_err(input_error);
+        let _ = done.send(json(input_reply(&q.op, q.id, q.replaced, result))).await;
+    });
+}
+
+async fn serve_page(
+    socket: &mut WebSocket,
+    hub: &Arc<Hub>,
+    held: &mut BTreeSet<(String, u32)>,
+) -> Result<(), axum::Error> {
     let mut list = hub.instances.subscribe();
     let mut shutdown = hub.shutdown.clone();
     let (out_tx, mut out_rx) = mpsc::channel::<Message>(16);
+    // One input in flight at a time: its reply is the only message here.
+    let (done_tx, mut done_rx) = mpsc::channel::<Message>(1);
+    let mut inputs = InputQueue::default();
     let mut selected = Selected::default();
     let mut in_flight = 0u32;
     socket
@@ -401,12 +500,20 @@ async fn connection(mut socket: WebSocket, hub: Arc<Hub>) -> Result<(), axum::Er
                 Some(Ok(Message::Text(text))) => {
                     match serde_json::from_str::<Command>(text.as_str()) {
                         Ok(Command::Ack) => in_flight = in_flight.saturating_sub(1),
-                        Ok(cmd) => {
-                            if matches!(cmd, Command::Select { .. }) {
-                                in_flight = 0;
+                        Ok(cmd) => match cmd.input().map(|(op, fields)| page_input(op, fields, &selected)) {
+                            Some(Ok(q)) => {
+                                track_hold(held, &q);
+                                inputs.push(q);
+                                send_next_input(&mut inputs, hub, &done_tx);
                             }
-                            command(cmd, &hub, &mut selected, &out_tx);
-                        }
+                            Some(Err(reply)) => socket.send(json(reply)).await?,
+                            None => {
+                                if matches!(cmd, Command::Select { .. }) {
+                                    in_flight = 0;
+                                }
+                                command(cmd, hub, &mut selected, &out_tx);
+                            }
+                        },
                         Err(e) => socket.send(json(serde_json::json!({
                             "type": "error", "message": format!("unreadable command {:?}: {e}", text.as_str()),
                         }))).await?,
@@ -429,16 +536,21 @@ async fn connection(mut socket: WebSocket, hub: Arc<Hub>) -> Result<(), axum::Er
                     }
                     selected.last_state = Some(seq);
                     in_flight += 1;
-                    send_frame(&mut socket, &hub, bytes).await?;
+                    send_frame(socket, hub, bytes).await?;
                 }
             }
             () = changed(selected.metrics.as_mut()) => {
                 let latest = selected.metrics.as_mut().and_then(|rx| rx.borrow_and_update().clone());
                 if let Some((_, bytes)) = latest {
-                    send_frame(&mut socket, &hub, bytes).await?;
+                    send_frame(socket, hub, bytes).await?;
                 }
             }
             Some(msg) = out_rx.recv() => socket.send(msg).await?,
+            Some(reply) = done_rx.recv() => {
+                inputs.done();
+                send_next_input(&mut inputs, hub, &done_tx);
+                socket.send(reply).await?;
+            }
             _ = shutdown.changed() => break,
         }
     }
@@ -467,7 +579,8 @@ fn command(cmd: Command, hub: &Arc<Hub>, selected: &mut Selected, out: &mpsc::Se
             };
             send_info(hub, instance, out);
         }
-        Command::Ack => {}
+        // Acks and inputs are the connection's own (flow control, order).
+        Command::Ack | Command::Grab(_) | Command::Move(_) | Command::Release(_) | Command::ReleaseAll(_) => {}
         Command::Info => match &selected.name {
             Some(name) => send_info(hub, name.clone(), out),
             None => {
@@ -551,6 +664,17 @@ mod tests {
                 ..
             }
         ));
+    }
+
+    fn fields(text: &str) -> (&'static str, Fields) {
+        let cmd: Command = serde_json::from_str(text).unwrap();
+        let (op, f) = cmd.input().expect("an input op");
+        (op, f.clone())
+    }
+
+    pub(super) fn request(text: &str) -> Result<v1::InputRequest, String> {
+        let (op, f) = fields(text);
+        input_request(op, &f)
     }
 
     #[test]

@@ -199,6 +199,33 @@ impl Browser {
         }
     }
 
+    /// A left-button mouse event at client pixel (`x`, `y`) through CDP's
+    /// `Input.dispatchMouseEvent` (the page sees trusted pointer events):
+    /// `kind` is `mousePressed`, `mouseMoved` or `mouseReleased`; `held`
+    /// says whether the button is down during it.
+    pub async fn mouse(&mut self, kind: &str, x: f64, y: f64, held: bool) {
+        self.call(
+            "Input.dispatchMouseEvent",
+            json!({ "type": kind, "x": x, "y": y, "button": "left", "buttons": u8::from(held), "clickCount": 1 }),
+        )
+        .await;
+    }
+
+    /// Press the left button at (`x`, `y`).
+    pub async fn mouse_press(&mut self, x: f64, y: f64) {
+        self.mouse("mousePressed", x, y, true).await;
+    }
+
+    /// Move to (`x`, `y`) with the left button held.
+    pub async fn mouse_drag_to(&mut self, x: f64, y: f64) {
+        self.mouse("mouseMoved", x, y, true).await;
+    }
+
+    /// Release the left button at (`x`, `y`).
+    pub async fn mouse_release(&mut self, x: f64, y: f64) {
+        self.mouse("mouseReleased", x, y, false).await;
+    }
+
     pub async fn screenshot(&mut self, path: &Path) -> Vec<u8> {
         use base64::Engine;
         let r = self.call("Page.captureScreenshot", json!({ "format": "png" })).await;
