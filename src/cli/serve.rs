@@ -553,8 +553,9 @@ pub fn record(c: Connect, instance: String, seconds: f64, out: PathBuf) -> Resul
             }
         }
         w.finish_with_inputs(Some(&inputs))?;
+        // "<n> frames of" is what scripts read (.ci/compose_check.py).
         println!(
-            "{}: {frames} frames and {} inputs of {instance} at {l}",
+            "{}: {frames} frames of {instance} at {l}, with {} inputs",
             out.display(),
             inputs.len()
         );
