@@ -169,6 +169,7 @@ pub fn metrics_message(instance: &str, m: &MetricsFrame) -> v1::Metrics {
         method: m.method.to_string(),
         predicted_error: m.predicted_error,
         live_error: m.live_error,
+        live_error_time: m.live_error_time,
         step_cost_us: m.step_cost_us,
         real_time_factor: m.real_time_factor,
         overruns: m.overruns,

@@ -13,6 +13,7 @@ mod fuzz;
 
 mod clients;
 mod input;
+mod live_error;
 mod operations;
 mod robustness;
 mod security;

@@ -22,7 +22,7 @@ use lodcloth::touch::Patch;
 
 use v1::input_request::Action;
 
-fn vec3(p: [f64; 3]) -> Option<v1::Vec3> {
+pub(crate) fn vec3(p: [f64; 3]) -> Option<v1::Vec3> {
     Some(v1::Vec3 {
         x: p[0],
         y: p[1],
@@ -47,7 +47,7 @@ fn grab(id: u32, at: Patch, target: [f64; 3], stiffness: f64) -> v1::InputReques
 }
 
 /// The patch's position in a published state (SoA positions).
-fn patch_position(scene: &Scene, s: &v1::State, at: Patch) -> [f64; 3] {
+pub(crate) fn patch_position(scene: &Scene, s: &v1::State, at: Patch) -> [f64; 3] {
     let level = level_of(s);
     let Level::Grid { nx, ny } = level else {
         panic!("a grid level")

@@ -155,7 +155,7 @@ impl Runner {
             // Inputs are not saved: a resumed instance starts untouched.
             touch.reset(&mut self.sim).map_err(|e| e.to_string())?;
         }
-        self.touched_episode = false;
+        self.forget_episode_inputs();
         self.level = level;
         self.coefficient_version = saved.coefficient_version;
         self.frames = saved.frame;
@@ -177,7 +177,7 @@ impl Runner {
                 tracing::error!(instance = %self.name, "clearing the inputs failed: {e}");
             }
         }
-        self.touched_episode = false;
+        self.forget_episode_inputs();
         self.episode += 1;
         self.live_error = None;
         self.checkpoint.clone_from(self.sim.state());

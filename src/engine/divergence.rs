@@ -27,6 +27,14 @@ impl Runner {
             self.restart();
         }
         self.live_error = None;
+        self.live_error_time = None;
+        if self.touched_episode && !self.replica_failed {
+            // A replica replays the inputs on the cloth as it was; it went
+            // past the checkpoint and cannot follow the cloth back.
+            self.replica = None;
+            tracing::warn!(instance = %self.name, "rolled back in a touched episode: no live error until the next episode");
+            self.replica_failed = true;
+        }
         if self.consecutive_divergences >= MAX_CONSECUTIVE_DIVERGENCES {
             let reason = format!(
                 "diverged {} times in a row (last at t = {time:.3} s, level {}, dt {:.3e} s, {} integrator): \

@@ -39,6 +39,9 @@ pub struct MetricsFrame {
     pub method: Method,
     pub predicted_error: Option<f64>,
     pub live_error: Option<f64>,
+    /// Simulated time `live_error` is of: this step's interval, or while a
+    /// touched episode's reference replay catches up, earlier.
+    pub live_error_time: Option<f64>,
     pub step_cost_us: f64,
     pub real_time_factor: f64,
     pub overruns: u64,

@@ -27,6 +27,7 @@ mod divergence;
 mod frame;
 mod input;
 mod publish;
+mod replica;
 mod runner;
 mod shadow;
 mod switch;
@@ -119,6 +120,10 @@ pub struct EngineSettings {
     pub max_lag: f64,
     /// Metrics published per second per instance.
     pub metrics_hz: f64,
+    /// Called first on every background thread the engine starts (a
+    /// touched episode's reference replay), to put it below stepping (the
+    /// service's `lower_priority`).
+    pub background: fn(),
 }
 
 /// The running engine.

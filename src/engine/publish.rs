@@ -68,6 +68,7 @@ impl Runner {
                 method: self.method,
                 predicted_error: self.predicted_error,
                 live_error: self.live_error,
+                live_error_time: self.live_error_time,
                 step_cost_us: if self.window_steps > 0 {
                     self.window_busy.as_secs_f64() * 1e6 / self.window_steps as f64
                 } else {

@@ -9,6 +9,7 @@ use std::time::{Duration, Instant};
 use tokio::sync::watch;
 
 use super::divergence::{CHECKPOINT_INTERVAL, CLEAN_INTERVAL, DIVERGED_STRAIN};
+use super::replica::Replica;
 use super::shadow::Shadow;
 use super::{
     lock, AppliedInput, Command, EngineSettings, HandleParts, InstanceSetup, MetricsFrame, StateFrame, Status,
@@ -17,7 +18,7 @@ use crate::estimate::Method;
 use crate::plan::Level;
 use crate::points::cloud::CloudMap;
 use crate::sim::{Material, Pair, Simulation, State, StepReport};
-use crate::touch::Touch;
+use crate::touch::{Input, Touch};
 
 /// One instance on its stepping thread.
 pub(super) struct Runner {
@@ -32,6 +33,17 @@ pub(super) struct Runner {
     pub(super) shadow: Option<Shadow>,
     pub(super) shadow_wanted: bool,
     pub(super) live_error: Option<f64>,
+    /// Simulated time `live_error` is of (behind the cloth's while a
+    /// touched episode's replica catches up).
+    pub(super) live_error_time: Option<f64>,
+    /// A touched episode's reference, replaying its inputs.
+    pub(super) replica: Option<Replica>,
+    /// The replica of this episode failed (or could not follow a rollback):
+    /// no live error until the next episode.
+    pub(super) replica_failed: bool,
+    /// Inputs that took effect in this episode, (time, input) in order:
+    /// what a replica starting late replays.
+    pub(super) episode_inputs: Vec<(f64, Input)>,
     /// The reference's largest displacement, once calibrated.
     pub(super) o_max: Option<f64>,
     pub(super) duration: f64,
@@ -125,6 +137,10 @@ impl Runner {
             shadow: None,
             shadow_wanted: setup.shadow,
             live_error: None,
+            live_error_time: None,
+            replica: None,
+            replica_failed: false,
+            episode_inputs: Vec::new(),
             o_max: None,
             duration: setup.duration,
             looping: setup.looping,
@@ -276,13 +292,21 @@ impl Runner {
                 self.consecutive_divergences = 0;
             }
         }
-        if let Some(sh) = self.shadow.as_mut().filter(|_| !self.touched_episode) {
+        if let Some(sh) = self.shadow.as_mut() {
             // Once per reference metric frame interval, compare with the
             // reference interpolated linearly to this step's time (frame f
-            // of the recording is at time (f + 1)·interval).
+            // of the recording is at time (f + 1)·interval); in a touched
+            // episode, hand the state to the replica instead and take the
+            // newest error it has returned.
             let t = report.time;
             if sh.due(t) {
-                self.live_error = sh.error_at(t, &self.sim.state().pos, self.cloud.as_mut());
+                if !self.touched_episode {
+                    self.live_error = sh.error_at(t, &self.sim.state().pos, self.cloud.as_mut());
+                    self.live_error_time = self.live_error.map(|_| t);
+                } else if let (Some(replica), Some(problem)) = (self.replica.as_mut(), sh.problem()) {
+                    replica.compare(t, problem, &self.sim.state().pos);
+                    self.poll_replica();
+                }
             }
         }
         if self.looping && report.time >= self.duration && !self.touched() {

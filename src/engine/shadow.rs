@@ -40,6 +40,15 @@ impl Shadow {
         }
     }
 
+    /// The cloth level's problem (its reference and correlation); `None`
+    /// for a surface.
+    pub(super) fn problem(&self) -> Option<&Arc<crate::estimate::LodProblem>> {
+        match &self.prepared.basis {
+            Basis::Cloth(problem) => Some(problem),
+            Basis::Surface { .. } => None,
+        }
+    }
+
     /// True once per reference frame interval.
     pub(super) fn due(&mut self, t: f64) -> bool {
         let slot = (t / self.interval).floor() as i64;

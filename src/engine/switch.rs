@@ -25,6 +25,7 @@ impl Runner {
         self.shadow = self
             .shadow_wanted
             .then(|| Shadow::new(prepared.clone(), self.sim.topology().n_nodes));
+        self.sync_replica();
     }
 
     pub(super) fn switch(
@@ -73,9 +74,11 @@ impl Runner {
                 self.predicted_error = None;
                 self.o_max = None;
                 self.shadow = None;
+                self.sync_replica();
             }
         }
         self.live_error = None;
+        self.live_error_time = None;
         self.reanchor(Instant::now());
         self.update_status();
         let after = self.snapshot(true);

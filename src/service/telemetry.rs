@@ -353,6 +353,13 @@ impl Collector for DaemonCollector {
         )?;
         family(
             &mut enc,
+            "lodcloth_live_error_lag",
+            "How far the live error is behind the cloth in simulated time (a touched episode's reference replays its inputs in the background)",
+            Some(&Unit::Seconds),
+            &gauge(&|m| m.live_error_time.map(|t| m.time - t)),
+        )?;
+        family(
+            &mut enc,
             "lodcloth_max_strain",
             "Largest spring strain of the cloth now",
             None,
@@ -540,6 +547,7 @@ mod tests {
             method: Method::Same,
             predicted_error: Some(0.02),
             live_error: None,
+            live_error_time: None,
             step_cost_us: 40.0,
             real_time_factor: 1.0,
             overruns: 0,

@@ -450,3 +450,94 @@ fn the_fit_guard_returns_the_start_when_the_gain_is_not_earned() {
         .as_deref()
         .is_some_and(|k| k.contains("short-horizon")));
 }
+
+/// The reference replayed for a touched episode (the daemon's live error
+/// while a client interacts): without inputs it is the recording itself;
+/// with one it is the scene stepped with that input at its time, and it
+/// refuses what it cannot do (going back, another reference).
+#[test]
+fn a_replayed_reference_is_the_recording_without_inputs_and_the_touched_scene_with_them() {
+    use lodcloth::estimate::{ReplayError, ReplayedReference};
+    use lodcloth::touch::{Input, Patch, Touch};
+
+    let s = scene(12, "symplectic_euler", 2e-4);
+    let reference = record(&s, 2000, 50, 50);
+    let problem = LodProblem::new(
+        &s,
+        reference.clone(),
+        8,
+        8,
+        MassConvention::Lumped,
+        Integrator::SymplecticEuler,
+        2e-4,
+    )
+    .unwrap();
+    let n = 64;
+    let never = || false;
+    let mut mapped = vec![0.0; 3 * n];
+
+    // Untouched: each recorded frame, mapped onto the level, scores ~0
+    // (the recording keeps f32).
+    let mut replay = ReplayedReference::new(&problem).unwrap();
+    let mut worst = 0.0f64;
+    for (t, frame) in reference.frame_times.iter().zip(&reference.frames) {
+        problem.correlation().map(frame, &mut mapped);
+        worst = worst.max(replay.error_at(*t, &problem, &mapped, &never).unwrap());
+    }
+    assert!(worst < 1e-6, "the untouched replay is {worst} from the recording");
+    assert!(
+        matches!(
+            replay.error_at(reference.frame_times[3], &problem, &mapped, &never),
+            Err(ReplayError::Past { .. })
+        ),
+        "a replay does not go back"
+    );
+
+    // Touched: an impulse at t = 0.1 s, as the level took it (after the
+    // step ending there), against the scene stepped by hand.
+    let strike = Input::Impulse {
+        at: Patch {
+            u: 0.3,
+            v: 0.8,
+            radius: 0.1,
+        },
+        impulse: [0.0, 0.0, 0.02],
+    };
+    let mut replay = ReplayedReference::new(&problem).unwrap();
+    replay.push_input(0.1, strike).unwrap();
+    let mut truth = s.build().unwrap();
+    let mut touch = Touch::new(&s);
+    let mut struck = false;
+    let (mut away, mut mismatch) = (0.0f64, 0.0f64);
+    for (t, frame) in reference.frame_times.iter().zip(&reference.frames) {
+        while truth.state().time < t - 1e-4 {
+            if !struck && truth.state().time > 0.1 - 1e-4 {
+                touch.apply(&strike, &mut truth).unwrap();
+                struck = true;
+            }
+            truth.step();
+        }
+        problem.correlation().map(&truth.state().pos, &mut mapped);
+        mismatch = mismatch.max(replay.error_at(*t, &problem, &mapped, &never).unwrap());
+        problem.correlation().map(frame, &mut mapped);
+        away = away.max(replay.error_at(*t, &problem, &mapped, &never).unwrap());
+    }
+    assert!(struck);
+    assert_eq!(mismatch, 0.0, "the replay is not the scene struck at 0.1 s");
+    assert!(
+        away > 1e-3,
+        "the strike moved the replay only {away} from the recording"
+    );
+    assert!(
+        matches!(replay.push_input(0.05, strike), Err(ReplayError::Past { .. })),
+        "an input before the replay's time is refused"
+    );
+
+    // A level of another recording is not compared with this one.
+    let other = own_resolution(&s, &record(&s, 200, 50, 50));
+    let mut replay = ReplayedReference::new(&problem).unwrap();
+    assert_eq!(
+        replay.error_at(0.01, &other, &vec![0.0; 3 * 144], &never),
+        Err(ReplayError::OtherReference)
+    );
+}

@@ -25,6 +25,7 @@ pub mod fit;
 pub mod inverse;
 pub mod metric;
 pub mod reference;
+pub mod replayed;
 
 use std::fmt;
 use std::ops::Range;
@@ -34,6 +35,7 @@ pub use fit::{FitOptions, FitReport};
 pub use inverse::{Distribution, InverseEstimate, LsqEstimate, Reading, Rejections};
 pub use metric::{ErrorAccumulator, ErrorReport};
 pub use reference::{RecordSpec, Reference, ReferenceError, Sample};
+pub use replayed::{ReplayError, ReplayedReference};
 
 use crate::lod::{Correlation, LodError};
 use crate::scene::{MassConvention, Scene, SceneError};

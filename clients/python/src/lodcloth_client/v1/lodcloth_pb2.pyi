@@ -70,7 +70,7 @@ class State(_message.Message):
     def __init__(self, instance: _Optional[str] = ..., frame: _Optional[int] = ..., time: _Optional[float] = ..., level: _Optional[_Union[Level, _Mapping]] = ..., coefficient_version: _Optional[int] = ..., positions: _Optional[bytes] = ..., episode: _Optional[int] = ..., stepped_unix_nanos: _Optional[int] = ..., transition: bool = ..., simulation_positions: _Optional[bytes] = ..., normals: _Optional[bytes] = ..., reference_positions: _Optional[bytes] = ...) -> None: ...
 
 class Metrics(_message.Message):
-    __slots__ = ("instance", "frame", "time", "level", "method", "predicted_error", "live_error", "step_cost_us", "real_time_factor", "overruns", "kinetic_energy", "potential_energy", "max_strain", "coefficient_version", "paused", "dt", "steps", "lag_resets", "divergences", "rollbacks", "halted", "inputs", "touched")
+    __slots__ = ("instance", "frame", "time", "level", "method", "predicted_error", "live_error", "step_cost_us", "real_time_factor", "overruns", "kinetic_energy", "potential_energy", "max_strain", "coefficient_version", "paused", "dt", "steps", "lag_resets", "divergences", "rollbacks", "halted", "inputs", "touched", "live_error_time")
     INSTANCE_FIELD_NUMBER: _ClassVar[int]
     FRAME_FIELD_NUMBER: _ClassVar[int]
     TIME_FIELD_NUMBER: _ClassVar[int]
@@ -94,6 +94,7 @@ class Metrics(_message.Message):
     HALTED_FIELD_NUMBER: _ClassVar[int]
     INPUTS_FIELD_NUMBER: _ClassVar[int]
     TOUCHED_FIELD_NUMBER: _ClassVar[int]
+    LIVE_ERROR_TIME_FIELD_NUMBER: _ClassVar[int]
     instance: str
     frame: int
     time: float
@@ -117,7 +118,8 @@ class Metrics(_message.Message):
     halted: str
     inputs: int
     touched: bool
-    def __init__(self, instance: _Optional[str] = ..., frame: _Optional[int] = ..., time: _Optional[float] = ..., level: _Optional[_Union[Level, _Mapping]] = ..., method: _Optional[str] = ..., predicted_error: _Optional[float] = ..., live_error: _Optional[float] = ..., step_cost_us: _Optional[float] = ..., real_time_factor: _Optional[float] = ..., overruns: _Optional[int] = ..., kinetic_energy: _Optional[float] = ..., potential_energy: _Optional[float] = ..., max_strain: _Optional[float] = ..., coefficient_version: _Optional[int] = ..., paused: bool = ..., dt: _Optional[float] = ..., steps: _Optional[int] = ..., lag_resets: _Optional[int] = ..., divergences: _Optional[int] = ..., rollbacks: _Optional[int] = ..., halted: _Optional[str] = ..., inputs: _Optional[int] = ..., touched: bool = ...) -> None: ...
+    live_error_time: float
+    def __init__(self, instance: _Optional[str] = ..., frame: _Optional[int] = ..., time: _Optional[float] = ..., level: _Optional[_Union[Level, _Mapping]] = ..., method: _Optional[str] = ..., predicted_error: _Optional[float] = ..., live_error: _Optional[float] = ..., step_cost_us: _Optional[float] = ..., real_time_factor: _Optional[float] = ..., overruns: _Optional[int] = ..., kinetic_energy: _Optional[float] = ..., potential_energy: _Optional[float] = ..., max_strain: _Optional[float] = ..., coefficient_version: _Optional[int] = ..., paused: bool = ..., dt: _Optional[float] = ..., steps: _Optional[int] = ..., lag_resets: _Optional[int] = ..., divergences: _Optional[int] = ..., rollbacks: _Optional[int] = ..., halted: _Optional[str] = ..., inputs: _Optional[int] = ..., touched: bool = ..., live_error_time: _Optional[float] = ...) -> None: ...
 
 class LevelInfo(_message.Message):
     __slots__ = ("level", "predicted_error", "dt", "ready")
