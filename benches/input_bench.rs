@@ -4,9 +4,12 @@
 //! second drag the cloth.
 //!
 //! An in-process daemon (paper-1 at 24×24, 60 states/s, the default input
-//! limits) and a client on loopback.
+//! limits) and a client on loopback. With `--shadow`, the instance runs its
+//! shadow reference (the scene's 64×64 RK4): from the grab on, the
+//! reference replays the inputs on a background thread, and the bench
+//! prints how far its live error lags and whether stepping lost real time.
 //!
-//! `cargo bench --bench input_bench -- [--seconds 10] [--rate 1000]`
+//! `cargo bench --bench input_bench -- [--seconds 10] [--rate 1000] [--shadow]`
 
 use std::time::{Duration, Instant};
 
@@ -56,6 +59,7 @@ fn circle(t: f64) -> [f64; 3] {
 async fn main() {
     let seconds: f64 = arg("--seconds").and_then(|s| s.parse().ok()).unwrap_or(10.0);
     let rate: f64 = arg("--rate").and_then(|s| s.parse().ok()).unwrap_or(1000.0);
+    let shadow = std::env::args().any(|a| a == "--shadow");
     let port = std::net::TcpListener::bind("127.0.0.1:0")
         .expect("a free port")
         .local_addr()
@@ -80,6 +84,7 @@ scene = "config/scenes/paper-1-top-edge.toml"
 levels = ["24x24"]
 start = "24x24"
 method = "same"
+shadow_reference = {shadow}
 "#,
         cache.path().display()
     );
@@ -97,6 +102,27 @@ method = "same"
     );
     while client.info("p1").await.is_err() {
         tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    if shadow {
+        // The level's estimate (with its recorded reference) is in.
+        let metrics = client
+            .session
+            .declare_subscriber(keys::metrics("bench", "p1"))
+            .await
+            .expect("subscriber");
+        let waited = Instant::now();
+        loop {
+            let m = metrics.recv_async().await.expect("metrics");
+            let m = v1::Metrics::decode(m.payload().to_bytes().as_ref()).expect("Metrics");
+            if m.live_error.is_some() {
+                println!(
+                    "shadow reference live after {:.1} s (live error {:.3} %)",
+                    waited.elapsed().as_secs_f64(),
+                    100.0 * m.live_error.unwrap_or(f64::NAN)
+                );
+                break;
+            }
+        }
     }
     tokio::time::sleep(Duration::from_secs(1)).await;
     let grab = v1::InputRequest {
@@ -189,10 +215,12 @@ method = "same"
         })
     };
     let mut rtf = Vec::new();
+    let mut lags = Vec::new();
     while start.elapsed().as_secs_f64() < seconds {
         if let Ok(Ok(m)) = tokio::time::timeout(Duration::from_secs(1), metrics.recv_async()).await {
             if let Ok(m) = v1::Metrics::decode(m.payload().to_bytes().as_ref()) {
                 rtf.push(m.real_time_factor);
+                lags.push(m.live_error_time.map(|t| m.time - t));
             }
         }
     }
@@ -229,6 +257,21 @@ method = "same"
         after.step_cost_us,
         before.step_cost_us
     );
+    if shadow {
+        let with: Vec<f64> = lags.iter().flatten().copied().collect();
+        let mut sorted = with.clone();
+        sorted.sort_by(f64::total_cmp);
+        println!(
+            "touched live error (the reference replaying the inputs): in {} of {} metrics; \
+             lag first {:.3} s, last {:.3} s, p50 {:.3} s, max {:.3} s (simulated)",
+            with.len(),
+            lags.len(),
+            with.first().copied().unwrap_or(f64::NAN),
+            with.last().copied().unwrap_or(f64::NAN),
+            percentile(&sorted, 0.5),
+            sorted.last().copied().unwrap_or(f64::NAN)
+        );
+    }
     let _ = client.session.close().await;
     let _ = stop.send(());
     let _ = daemon.await;
