@@ -3,9 +3,12 @@
 //! the drag (its error is a fraction of how far the drag takes the cloth
 //! from its script), and the scene's own material converges under it.
 //! The issue's target, each level within 1.5× of its predicted error, is
-//! printed, not asserted: it holds for BCD (0.64–1.09×) and not for the
-//! scene's own material (3.7–5.9×), whose prediction is calibrated on the
-//! scripted motion alone (docs/results.md, "Coherence under input").
+//! asserted for BCD under five drags (0.57–1.16×) and printed for the
+//! scene's own material, which misses it (1.1–9.0×): its prediction is
+//! calibrated on the scripted motion, and its error under a touch grows
+//! with how far the touch folds the cloth (docs/results.md, "Coherence
+//! under input"). The daemon publishes the error under input live instead
+//! (tests/live_error.rs).
 
 use std::sync::Arc;
 
@@ -148,6 +151,80 @@ fn a_drag_replayed_on_every_level_is_followed_and_the_replay_of_no_input_is_the_
                 rows.windows(2).all(|w| w[1].dragged < w[0].dragged),
                 "same: the error under the drag does not fall with resolution"
             );
+        }
+    }
+}
+
+/// Five drags, none tuned: where the hand takes the cloth (material
+/// point), when, how stiffly, and where it carries it.
+fn five_drags(preparer: &Preparer) -> Vec<(&'static str, Script)> {
+    let drag = |u: f64, v: f64, t0: f64, stiffness: f64, legs: &[[f64; 3]]| {
+        let at = Patch { u, v, radius: 0.05 };
+        smooth_drag(reference_patch_at(preparer, at, t0), at, t0, stiffness, legs)
+    };
+    vec![
+        (
+            "bottom centre, up and out, across (6 N/m)",
+            drag(0.5, 1.0, 0.3, 6.0, &[[0.0, 0.3, 0.3], [0.3, 0.0, 0.0]]),
+        ),
+        (
+            "bottom corner, up and out, across (4 N/m)",
+            drag(0.75, 1.0, 0.4, 4.0, &[[-0.1, 0.25, 0.35], [0.3, 0.0, -0.2]]),
+        ),
+        (
+            "side, in and out, down (10 N/m)",
+            drag(0.25, 0.75, 0.8, 10.0, &[[-0.3, 0.0, 0.2], [0.0, -0.2, 0.2]]),
+        ),
+        (
+            "middle, a soft tug sideways (2 N/m)",
+            drag(0.5, 0.6, 1.5, 2.0, &[[0.2, 0.2, 0.0]]),
+        ),
+        (
+            "near a corner, out then across (20 N/m)",
+            drag(0.9, 0.9, 0.6, 20.0, &[[0.0, 0.0, 0.3], [-0.4, 0.0, 0.0]]),
+        ),
+    ]
+}
+
+/// The issue's target on five drags, with the error normalised like the
+/// daemon's live error and its prediction (by the recorded reference's
+/// largest displacement): BCD's error stays below 1.5× its prediction
+/// under every drag; the scene's own material does not under any vigorous one,
+/// and no single number could predict it, since its error grows with how
+/// far the drag folds the cloth (docs/results.md, "Coherence under input").
+#[test]
+fn under_five_drags_bcd_stays_within_one_and_a_half_times_its_prediction() {
+    let preparer = preparer();
+    let levels = [Level::new(8, 8), Level::new(12, 12), Level::new(16, 16)];
+    let drags = five_drags(&preparer);
+    for method in [Method::Bcd, Method::Same] {
+        let mut ratios = Vec::new();
+        for (name, script) in &drags {
+            let rows = drag_coherence(&preparer, &levels, method, script).expect("runs");
+            let cells: Vec<String> = rows
+                .iter()
+                .map(|r| {
+                    // Normalised like the live error and the prediction.
+                    let e = r.dragged * r.touched_o_max / r.recorded_o_max;
+                    ratios.push((r.level, *name, e / r.predicted));
+                    format!("{} {:.3} % ({:.2}x)", r.level, 100.0 * e, e / r.predicted)
+                })
+                .collect();
+            eprintln!("{method} under '{name}': {}", cells.join(", "));
+        }
+        let (lo, hi) = ratios
+            .iter()
+            .fold((f64::INFINITY, 0.0f64), |(lo, hi), r| (lo.min(r.2), hi.max(r.2)));
+        eprintln!("{method}: error under a drag / predicted error from {lo:.2}x to {hi:.2}x");
+        if method == Method::Bcd {
+            for (level, name, ratio) in &ratios {
+                // Not above 1.5× (below is a conservative prediction: the
+                // 8×8 level's is, at 0.57–0.81×).
+                assert!(
+                    *ratio <= 1.5,
+                    "bcd {level} under '{name}': {ratio:.2}x its predicted error"
+                );
+            }
         }
     }
 }

@@ -354,8 +354,14 @@ pub fn watch(c: Connect, instance: String, count: Option<u64>) -> Result<()> {
                     continue;
                 }
             };
+            // A touched episode's live error comes from a reference replay
+            // that may lag: say how far when it is more than a blink.
+            let lag = match (m.live_error, m.live_error_time) {
+                (Some(_), Some(t)) if m.time - t > 0.1 => format!("  live err of {:.1} s ago", m.time - t),
+                _ => String::new(),
+            };
             let line = format!(
-                "{:>10} {:>8.3} {:>7} {:>6} {:>9} {:>9} {:>9.1} {:>6.2} {:>8} {:>9.4} {:>7.2}%{}",
+                "{:>10} {:>8.3} {:>7} {:>6} {:>9} {:>9} {:>9.1} {:>6.2} {:>8} {:>9.4} {:>7.2}%{}{lag}",
                 m.frame,
                 m.time,
                 level(&m.level),

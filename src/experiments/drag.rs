@@ -25,6 +25,12 @@ pub struct DragCoherence {
     /// The level left alone (no input) against the touched reference: how
     /// far the touches take the cloth from its script, in the same units.
     pub untouched: f64,
+    /// The touched reference's largest displacement from rest (m), the
+    /// normaliser of `dragged` and `untouched`.
+    pub touched_o_max: f64,
+    /// The recorded (untouched) reference's, the normaliser of `predicted`
+    /// and of the daemon's live error (m).
+    pub recorded_o_max: f64,
 }
 
 /// A reference run under `script`: metric frames (SoA) at the recording's
@@ -127,6 +133,8 @@ pub fn drag_coherence(
             predicted: prepared.predicted_error,
             dragged,
             untouched,
+            touched_o_max: touched.o_max,
+            recorded_o_max: r.o_max,
         });
     }
     Ok(out)
