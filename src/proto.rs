@@ -28,6 +28,7 @@ pub mod schema {
     pub const INPUT_REQUEST: &str = "lodcloth.v1.InputRequest";
     pub const INPUT_REPLY: &str = "lodcloth.v1.InputReply";
     pub const INPUT_EVENT: &str = "lodcloth.v1.InputEvent";
+    pub const EPISODE_INPUTS: &str = "lodcloth.v1.EpisodeInputs";
     pub const ERROR: &str = "lodcloth.v1.Error";
 }
 
@@ -138,6 +139,7 @@ pub fn input_event(instance: &str, a: &AppliedInput) -> v1::InputEvent {
         level: Some(a.level.to_wire()),
         input: Some(input_request(&a.input)),
         idle: a.idle,
+        seq: a.seq,
     }
 }
 

@@ -479,6 +479,60 @@ fn start_recorder(d: &Daemon, instance: &str, args: &[&str]) -> std::process::Ch
     child
 }
 
+/// Replay `script` (none: the scene alone) on `scene` at 16×16 from rest
+/// against the recorded `frames` of one episode, from `first` (the first
+/// input's time) on, then on to `until`: the largest distance from a
+/// recorded position, how many positions differ as f32, how many states
+/// were compared, and the simulation at the end.
+fn replay_recorded(
+    scene: &Scene,
+    frames: &[lodcloth::output::Frame],
+    script: Option<&lodcloth::touch::Script>,
+    first: f64,
+    until: f64,
+) -> (f64, usize, usize, lodcloth::sim::Simulation) {
+    let mut sim = scene.build_at(16, 16).expect("the level");
+    let mut touch = lodcloth::touch::Touch::new(scene);
+    let mut next = 0;
+    let dt = sim.params().dt;
+    let mut step = |sim: &mut lodcloth::sim::Simulation, next: &mut usize| {
+        if let Some(script) = script {
+            script.apply_due(next, &mut touch, sim).expect("replays");
+        }
+        sim.step();
+    };
+    let mut worst = 0.0f64;
+    let mut mismatches = 0;
+    let mut compared = 0;
+    let mut last_time = f64::NEG_INFINITY;
+    for f in frames {
+        // Until the episode ends (a loop).
+        if f.time < last_time {
+            break;
+        }
+        last_time = f.time;
+        while sim.state().time < f.time - 0.5 * dt {
+            step(&mut sim, &mut next);
+        }
+        if f.time < first {
+            continue;
+        }
+        let n = sim.topology().n_nodes;
+        let pos = &sim.state().pos;
+        for (k, p) in f.positions.iter().enumerate() {
+            let x = [pos[k], pos[n + k], pos[2 * n + k]];
+            // The recording holds f32: the replay rounded the same way.
+            worst = worst.max(dist(*p, x));
+            mismatches += usize::from((0..3).any(|c| p[c] as f32 != x[c] as f32));
+        }
+        compared += 1;
+    }
+    while sim.state().time < until - 0.5 * dt {
+        step(&mut sim, &mut next);
+    }
+    (worst, mismatches, compared, sim)
+}
+
 /// A session recorded with `lodcloth record` (.lct and MCAP) replays
 /// offline: the scene at the instance's level, with the recorded inputs at
 /// their simulated times, reproduces every recorded state bit for bit (as
@@ -611,56 +665,7 @@ async fn a_recorded_session_replays_offline_to_the_recorded_states() {
         Some(lodcloth::proto::coefficients(&scene.material_at(16, 16)))
     );
     let run = |with_inputs: bool, until: f64| {
-        let mut sim = scene.build_at(16, 16).expect("the level");
-        let mut touch = lodcloth::touch::Touch::new(&scene);
-        let mut next = 0;
-        let dt = sim.params().dt;
-        let mut worst = 0.0f64;
-        let mut mismatches = 0;
-        let mut compared = 0;
-        let mut last_time = f64::NEG_INFINITY;
-        for f in &frames {
-            // From the first input on, until the episode ends (a loop).
-            if f.time < last_time {
-                break;
-            }
-            last_time = f.time;
-            let before = f.time < first;
-            while sim.state().time < f.time - 0.5 * dt {
-                if with_inputs {
-                    replay
-                        .script
-                        .apply_due(&mut next, &mut touch, &mut sim)
-                        .expect("replays");
-                }
-                sim.step();
-            }
-            let n = sim.topology().n_nodes;
-            let pos = &sim.state().pos;
-            for (k, p) in f.positions.iter().enumerate() {
-                let x = [pos[k], pos[n + k], pos[2 * n + k]];
-                // The recording holds f32: the replay rounded the same way.
-                let same = (0..3).all(|c| p[c] as f32 == x[c] as f32);
-                if !before {
-                    worst = worst.max(dist(*p, x));
-                    mismatches += usize::from(!same);
-                }
-            }
-            if before {
-                continue;
-            }
-            compared += 1;
-        }
-        while sim.state().time < until - 0.5 * dt {
-            if with_inputs {
-                replay
-                    .script
-                    .apply_due(&mut next, &mut touch, &mut sim)
-                    .expect("replays");
-            }
-            sim.step();
-        }
-        (worst, mismatches, compared, sim)
+        replay_recorded(&scene, &frames, with_inputs.then_some(&replay.script), first, until)
     };
     let (with, mismatches, compared, replayed) = run(true, 6.0);
     let (without, _, _, _) = run(false, 0.0);
@@ -783,4 +788,101 @@ async fn a_recorded_session_replays_offline_to_the_recorded_states() {
     let rows = std::fs::read_to_string(touched_out.join("touched.csv")).expect("the CSV");
     assert_eq!(rows.lines().count(), fine.frames.len() + 1);
     d.shutdown().await.expect("clean exit");
+}
+
+/// A recorder started in the middle of a touched episode gets the inputs
+/// from before it subscribed (`<prefix>/<instance>/episode_inputs`), merged
+/// with those it saw by their number: the recording holds every input of
+/// the episode once, and replays from rest to the recorded states exactly.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_recording_started_mid_episode_gets_the_inputs_before_it_and_replays_exactly() {
+    let _serial = daemon::serial().await;
+    let d = Daemon::start(("late", "late-b"));
+    let c = client(&[d.endpoint()]).await;
+    wait_info(&c, "late").await;
+    let out = tempfile::tempdir().expect("temp dir");
+    let lct = out.path().join("late.lct");
+    let scene = Scene::load(&scene_path("paper-1-top-edge.toml")).expect("scene");
+    let at = Patch {
+        u: 0.5,
+        v: 1.0,
+        radius: 0.05,
+    };
+    let episode = latest(&c, "late").await.episode;
+    let mut replies = vec![within(5, "grab", c.input("late", &grab_here(1, at)))
+        .await
+        .expect("grab")];
+    let p0 = patch_position(&scene, &latest(&c, "late").await, at);
+    let mv = |s: f64| v1::InputRequest {
+        action: Some(Action::Move(v1::input_request::Move {
+            id: 1,
+            target: vec3([p0[0] + 0.2 * s, p0[1] + 0.1 * s, p0[2] + 0.2 * s]),
+        })),
+    };
+    for k in 1..=6 {
+        tokio::time::sleep(Duration::from_millis(50)).await;
+        replies.push(
+            within(5, "move", c.input("late", &mv(f64::from(k) / 12.0)))
+                .await
+                .expect("move"),
+        );
+    }
+    // The daemon's log of the episode so far.
+    let log = within(5, "episode inputs", c.episode_inputs("late"))
+        .await
+        .expect("the log");
+    assert_eq!((log.episode, log.events.len(), log.complete), (episode, 7, true));
+    let recorder = tokio::task::block_in_place(|| {
+        start_recorder(&d, "late", &["--seconds", "2.0", "--out", lct.to_str().unwrap()])
+    });
+    for k in 7..=12 {
+        tokio::time::sleep(Duration::from_millis(50)).await;
+        replies.push(
+            within(5, "move", c.input("late", &mv(f64::from(k) / 12.0)))
+                .await
+                .expect("move"),
+        );
+    }
+    let done = tokio::task::block_in_place(|| recorder.wait_with_output().expect("recorder"));
+    let said = String::from_utf8_lossy(&done.stdout);
+    eprintln!("{said}");
+    assert!(
+        done.status.success() && said.contains("with 13 inputs (7 from before the recording began)"),
+        "{said}"
+    );
+
+    // Every input once, in order, as the replies named them.
+    let logged = lodcloth::output::recorded_inputs(&lct).expect("the input log");
+    assert_eq!(logged.len(), 13, "{logged:#?}");
+    for (k, (e, reply)) in logged.iter().zip(&replies).enumerate() {
+        assert_eq!(
+            (e.seq, e.frame, e.time, e.episode),
+            (k as u64 + 1, reply.frame, reply.time, episode)
+        );
+    }
+
+    // From rest, with every input, the replay is the recording.
+    let mut reader = lodcloth::output::TrajectoryReader::open(&lct).expect("the trajectory");
+    let mut frames = Vec::new();
+    while let Some(f) = reader.next_frame().expect("a frame") {
+        frames.push(f);
+    }
+    let info = c.info("late").await.expect("info");
+    let mut level_scene = scene.clone();
+    level_scene.params.dt = info.dt;
+    let all = lodcloth::output::Replay::of(&logged, None, &lct).expect("a replay");
+    let (worst, mismatches, compared, _) = replay_recorded(&level_scene, &frames, Some(&all.script), 0.0, 0.0);
+    // Without the grab, the moves after it do not even apply; the scene
+    // alone is this far off.
+    let (without, _, _, _) = replay_recorded(&level_scene, &frames, None, 0.0, 0.0);
+    eprintln!(
+        "recorded from t = {:.3} s: {compared} states, {mismatches} f32 positions differ from the replay with every input \
+         (largest {worst:.1e} m); the scene without them {without:.3} m off",
+        frames[0].time
+    );
+    assert!(compared >= 50, "only {compared} states");
+    assert_eq!(mismatches, 0, "the replay is up to {worst} m from the recording");
+    assert!(without > 0.01, "the earlier inputs moved the cloth only {without} m");
+    drop(c);
+    d.shutdown().await.expect("clean shutdown");
 }

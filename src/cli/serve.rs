@@ -488,6 +488,8 @@ pub fn record(c: Connect, instance: String, seconds: f64, out: PathBuf) -> Resul
         let mut writer: Option<(TrajectoryWriter, Level)> = None;
         let mut frames = 0u64;
         let mut inputs: Vec<v1::InputEvent> = Vec::new();
+        // The episode's inputs from before the recording started.
+        let mut earlier: Vec<v1::InputEvent> = Vec::new();
         loop {
             let sample = tokio::select! {
                 () = tokio::time::sleep_until(deadline) => break,
@@ -533,6 +535,20 @@ pub fn record(c: Connect, instance: String, seconds: f64, out: PathBuf) -> Resul
                 // States arrive: the inputs subscription, declared before
                 // the states', reaches the daemon too.
                 eprintln!("recording {instance} to {}", out.display());
+                // Asked once subscribed: what came before is in the log,
+                // what comes after on the subscription (merged by seq).
+                match client.episode_inputs(&instance).await {
+                    Ok(log) if log.episode == s.episode && !log.events.is_empty() => {
+                        if !log.complete {
+                            eprintln!("warning: the daemon kept only the last {} inputs of this episode; a replay misses the first", log.events.len());
+                        }
+                        earlier = log.events;
+                    }
+                    Ok(_) => {}
+                    Err(e) => eprintln!(
+                        "warning: the inputs before the recording started are unknown ({e}); a replay of an episode touched before it misses them"
+                    ),
+                }
                 let dt = 1.0 / info.publish_hz.max(1e-9);
                 let w = TrajectoryWriter::create(&out, nodes, lv.grid(), dt, 1, Precision::F32, false)?;
                 writer = Some((w, lv));
@@ -558,10 +574,16 @@ pub fn record(c: Connect, instance: String, seconds: f64, out: PathBuf) -> Resul
                 inputs.push(e);
             }
         }
+        let live: std::collections::HashSet<u64> = inputs.iter().map(|e| e.seq).collect();
+        earlier.retain(|e| !live.contains(&e.seq));
+        let before = earlier.len();
+        earlier.append(&mut inputs);
+        let mut inputs = earlier;
+        inputs.sort_by_key(|e| e.seq);
         w.finish_with_inputs(Some(&inputs))?;
         // "<n> frames of" is what scripts read (.ci/compose_check.py).
         println!(
-            "{}: {frames} frames of {instance} at {l}, with {} inputs",
+            "{}: {frames} frames of {instance} at {l}, with {} inputs ({before} from before the recording began)",
             out.display(),
             inputs.len()
         );

@@ -123,6 +123,8 @@ pub struct AppliedInput {
     pub input: Input,
     /// Applied by the idle rule, not a client.
     pub idle: bool,
+    /// Its number among every input the instance applied, from 1.
+    pub seq: u64,
 }
 
 /// State after a control command.

@@ -106,8 +106,10 @@ impl Runner {
             self.replica = None;
             self.live_error = None;
         }
+        self.applied_seq += 1;
         // A closed receiver (no service, or it is stopping) wants none.
         let _ = self.applied.send(AppliedInput {
+            seq: self.applied_seq,
             frame: self.frames,
             time: self.sim.state().time,
             episode: self.episode,

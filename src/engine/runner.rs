@@ -44,6 +44,9 @@ pub(super) struct Runner {
     /// Inputs that took effect in this episode, (time, input) in order:
     /// what a replica starting late replays.
     pub(super) episode_inputs: Vec<(f64, Input)>,
+    /// Inputs applied since the instance started (clients' and the idle
+    /// rule's): the last one's `AppliedInput::seq`.
+    pub(super) applied_seq: u64,
     /// The reference's largest displacement, once calibrated.
     pub(super) o_max: Option<f64>,
     pub(super) duration: f64,
@@ -141,6 +144,7 @@ impl Runner {
             replica: None,
             replica_failed: false,
             episode_inputs: Vec::new(),
+            applied_seq: 0,
             o_max: None,
             duration: setup.duration,
             looping: setup.looping,

@@ -421,6 +421,7 @@ mod tests {
             }),
             input: Some(crate::proto::input_request(&input)),
             idle: frame == 9,
+            seq: frame,
         }
     }
 

@@ -227,6 +227,13 @@ impl Client {
             .await
     }
 
+    /// The inputs of `instance`'s latest episode so far (a recorder
+    /// starting mid-episode asks for the ones before it subscribed).
+    pub async fn episode_inputs(&self, instance: &str) -> Result<v1::EpisodeInputs, ClientError> {
+        self.request(&keys::episode_inputs(&self.prefix, instance), None, self.timeout)
+            .await
+    }
+
     /// Send a switch request; waits up to `timeout` (an uncached level is
     /// estimated first).
     pub async fn switch(

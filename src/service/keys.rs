@@ -36,6 +36,12 @@ pub fn inputs(prefix: &str, instance: &str) -> String {
     format!("{prefix}/{instance}/inputs")
 }
 
+/// `<prefix>/<instance>/episode_inputs`: query the inputs of the latest
+/// episode so far.
+pub fn episode_inputs(prefix: &str, instance: &str) -> String {
+    format!("{prefix}/{instance}/episode_inputs")
+}
+
 /// `<prefix>/instances`
 pub fn instances(prefix: &str) -> String {
     format!("{prefix}/instances")

@@ -86,6 +86,36 @@ struct Instance {
     pending_switches: AtomicUsize,
     /// The instance's input rate limit (`[input] rate`, `burst`).
     input_rate: std::sync::Mutex<request::TokenBucket>,
+    /// The inputs of its latest episode with inputs, as published.
+    episode_log: std::sync::Mutex<EpisodeLog>,
+}
+
+/// Inputs kept per episode for late recorders (as the engine keeps them for
+/// its replica).
+const MAX_LOGGED_INPUTS: usize = 100_000;
+
+/// The latest episode's inputs, as published (`episode_inputs`).
+#[derive(Default)]
+struct EpisodeLog {
+    episode: u64,
+    events: Vec<crate::proto::v1::InputEvent>,
+    complete: bool,
+}
+
+impl EpisodeLog {
+    /// Keep `e`; an event of another episode starts the log over.
+    fn push(&mut self, e: &crate::proto::v1::InputEvent) {
+        if self.events.is_empty() || e.episode != self.episode {
+            self.episode = e.episode;
+            self.events.clear();
+            self.complete = true;
+        }
+        if self.events.len() < MAX_LOGGED_INPUTS {
+            self.events.push(e.clone());
+        } else {
+            self.complete = false;
+        }
+    }
 }
 
 impl Instance {
@@ -93,6 +123,17 @@ impl Instance {
     /// its share.
     fn input_allowed(&self, now: std::time::Instant) -> bool {
         self.input_rate.lock().unwrap_or_else(|e| e.into_inner()).take(now)
+    }
+
+    /// The latest episode's inputs so far.
+    fn episode_inputs(&self) -> crate::proto::v1::EpisodeInputs {
+        let log = self.episode_log.lock().unwrap_or_else(|e| e.into_inner());
+        crate::proto::v1::EpisodeInputs {
+            instance: self.handle.name.clone(),
+            episode: log.episode,
+            events: log.events.clone(),
+            complete: log.complete || log.events.is_empty(),
+        }
     }
 }
 
@@ -212,6 +253,7 @@ async fn answer(
             _ = &mut shutdown => break,
             Ok(query) = q.info.recv_async() => handlers::answer_info(ctx, query).await,
             Ok(query) = q.list.recv_async() => handlers::answer_list(ctx, query).await,
+            Ok(query) = q.episode_inputs.recv_async() => handlers::answer_episode_inputs(ctx, query).await,
             Ok(query) = q.switch.recv_async() => {
                 if requests.len() >= MAX_REQUESTS_IN_FLIGHT {
                     handlers::busy(ctx, query).await;

@@ -92,10 +92,11 @@ pub(super) async fn publish_metrics(
 /// Put every input that took effect on `<prefix>/<instance>/inputs`, in
 /// order.
 pub(super) async fn publish_inputs(
-    handle: InstanceHandle,
+    inst: Arc<super::Instance>,
     publisher: zenoh::pubsub::Publisher<'static>,
     closing: watch::Receiver<bool>,
 ) {
+    let handle = &inst.handle;
     let mut applied = handle.applied.lock().await;
     let mut closing = closing;
     loop {
@@ -107,7 +108,11 @@ pub(super) async fn publish_inputs(
                 None => break,
             },
         };
-        let bytes = proto::input_event(&handle.name, &a).encode_to_vec();
+        let event = proto::input_event(&handle.name, &a);
+        // Logged before it is published: a recorder that subscribed, then
+        // queried the log, finds every input in one or the other.
+        inst.episode_log.lock().unwrap_or_else(|e| e.into_inner()).push(&event);
+        let bytes = event.encode_to_vec();
         if let Err(e) = publisher.put(bytes).await {
             tracing::warn!(instance = %handle.name, "publishing an input: {e}");
         }

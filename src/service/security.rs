@@ -5,7 +5,7 @@
 //! The policy the daemon generates (when `[zenoh.access]` is present) is
 //! *observe for all, operate for operators*:
 //! - any admitted session may subscribe to states, metrics and liveliness
-//!   under the prefix, and query `info` and `instances`;
+//!   under the prefix, and query `info`, `instances` and `episode_inputs`;
 //! - only sessions matching `operator_usernames` (user/password
 //!   authentication) or `operator_certificates` (the common name of a client
 //!   certificate checked by mTLS) may query `switch`, `control` and `input`
@@ -230,7 +230,7 @@ pub fn access_control(prefix: &str, access: &RawAccess) -> serde_json::Value {
                 "permission": "allow",
                 "flows": ["ingress", "egress"],
                 "messages": ["query", "reply", "declare_queryable"],
-                "key_exprs": [keys::info(prefix, "*"), keys::instances(prefix)],
+                "key_exprs": [keys::info(prefix, "*"), keys::instances(prefix), keys::episode_inputs(prefix, "*")],
             },
             {
                 "id": "operate",

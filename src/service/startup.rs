@@ -118,6 +118,7 @@ pub(super) fn start_engine(config: &ServiceConfig) -> Result<Started, ServiceErr
                     config.input.burst,
                     std::time::Instant::now(),
                 )),
+                episode_log: std::sync::Mutex::new(super::EpisodeLog::default()),
             }),
         );
     }
@@ -169,7 +170,7 @@ pub(super) async fn declare_outputs(
             .congestion_control(CongestionControl::Block)
             .await
             .map_err(zerr)?;
-        tasks.spawn(publish_inputs(inst.handle.clone(), inputs, closing.clone()));
+        tasks.spawn(publish_inputs(inst.clone(), inputs, closing.clone()));
         tokens.push(
             session
                 .liveliness()
@@ -181,12 +182,13 @@ pub(super) async fn declare_outputs(
     Ok(tokens)
 }
 
-/// The daemon's five queryables, for every instance at once (`*`).
+/// The daemon's six queryables, for every instance at once (`*`).
 pub(super) struct Queryables {
     pub(super) info: Queryable<FifoChannelHandler<Query>>,
     pub(super) switch: Queryable<FifoChannelHandler<Query>>,
     pub(super) control: Queryable<FifoChannelHandler<Query>>,
     pub(super) input: Queryable<FifoChannelHandler<Query>>,
+    pub(super) episode_inputs: Queryable<FifoChannelHandler<Query>>,
     pub(super) list: Queryable<FifoChannelHandler<Query>>,
 }
 
@@ -205,12 +207,17 @@ impl Queryables {
             .declare_queryable(keys::input(prefix, "*"))
             .await
             .map_err(zerr)?;
+        let episode_inputs = session
+            .declare_queryable(keys::episode_inputs(prefix, "*"))
+            .await
+            .map_err(zerr)?;
         let list = session.declare_queryable(keys::instances(prefix)).await.map_err(zerr)?;
         Ok(Queryables {
             info,
             switch,
             control,
             input,
+            episode_inputs,
             list,
         })
     }

@@ -162,6 +162,10 @@ class LiveDaemon(unittest.TestCase):
                 self.client.grab("hanging", 1.5, 1.0, (0, 0, 0))
             self.assertEqual(ctx.exception.code, v1.Error.CODE_BAD_REQUEST)
             self.assertIn("grab.at.u", ctx.exception.message)
+            # The episode's log has the grab too, numbered like the event.
+            log = self.client.episode_inputs("hanging")
+            self.assertIn(grab.seq, [e.seq for e in log.events])
+            self.assertEqual(log.episode, grab.episode)
         finally:
             r = self.client.release("hanging")
             sub.close()

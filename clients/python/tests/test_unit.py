@@ -267,6 +267,7 @@ class Keys(unittest.TestCase):
         self.assertEqual(keys.control("p", "a"), "p/a/control")
         self.assertEqual(keys.input("p", "a"), "p/a/input")
         self.assertEqual(keys.inputs("p", "a"), "p/a/inputs")
+        self.assertEqual(keys.episode_inputs("p", "a"), "p/a/episode_inputs")
         self.assertEqual(keys.instances("p"), "p/instances")
         self.assertEqual(keys.alive("p", "*"), "p/alive/*")
 

@@ -35,6 +35,31 @@ pub(in crate::service) async fn answer_info(ctx: &Context, q: Query) {
     }
 }
 
+/// The inputs of each addressed instance's latest episode so far.
+pub(in crate::service) async fn answer_episode_inputs(ctx: &Context, q: Query) {
+    let matched = addressed(ctx, &q, keys::episode_inputs);
+    if matched.is_empty() {
+        let key = q.key_expr().as_str();
+        let message = match keys::instance_of(&ctx.prefix, "episode_inputs", key) {
+            Some(name) => unknown_instance(ctx, name),
+            None => format!(
+                "key '{key}' matches none of {}",
+                ctx.instances.keys().cloned().collect::<Vec<_>>().join(", ")
+            ),
+        };
+        return reply_error(ctx, &q, Code::UnknownInstance, message).await;
+    }
+    for inst in matched {
+        reply_ok(
+            &q,
+            keys::episode_inputs(&ctx.prefix, &inst.handle.name),
+            schema::EPISODE_INPUTS,
+            inst.episode_inputs().encode_to_vec(),
+        )
+        .await;
+    }
+}
+
 fn instance_info(inst: &Instance) -> v1::InstanceInfo {
     let s = inst.handle.status();
     let c = inst.preparer.plan();

@@ -17,7 +17,7 @@ use crate::proto::v1::error::Code;
 use crate::proto::{self, schema};
 
 pub(super) use control::answer_control;
-pub(super) use info::{answer_info, answer_list};
+pub(super) use info::{answer_episode_inputs, answer_info, answer_list};
 pub(super) use input::{finish_input, submit_input};
 pub(super) use switch::answer_switch;
 

@@ -180,6 +180,16 @@ class Client:
             v1.InstanceInfo, keys.info(self.prefix, instance), self.timeout if timeout is None else timeout
         )
 
+    def episode_inputs(self, instance: str, timeout: Optional[float] = None) -> "v1.EpisodeInputs":
+        """Every input that took effect in ``instance``'s latest episode with
+        inputs so far (``EpisodeInputs``): with ``on_input`` from before it
+        was called, a session's whole input log (merge by ``seq``)."""
+        return self._request(
+            v1.EpisodeInputs,
+            keys.episode_inputs(self.prefix, instance),
+            self.timeout if timeout is None else timeout,
+        )
+
     def switch(
         self,
         instance: str,

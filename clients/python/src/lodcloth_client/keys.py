@@ -16,6 +16,7 @@ __all__ = [
     "control",
     "input",
     "inputs",
+    "episode_inputs",
     "instances",
     "alive",
     "instance_of",
@@ -58,6 +59,12 @@ def input(prefix: str, instance: str) -> str:
 def inputs(prefix: str, instance: str) -> str:
     """``<prefix>/<instance>/inputs``: ``InputEvent`` for every input that took effect."""
     return f"{prefix}/{instance}/inputs"
+
+
+def episode_inputs(prefix: str, instance: str) -> str:
+    """``<prefix>/<instance>/episode_inputs``: queryable answering ``EpisodeInputs``
+    (every input of the latest episode with inputs, so far)."""
+    return f"{prefix}/{instance}/episode_inputs"
 
 
 def instances(prefix: str) -> str:

@@ -408,7 +408,7 @@ class InputReply(_message.Message):
     def __init__(self, instance: _Optional[str] = ..., frame: _Optional[int] = ..., time: _Optional[float] = ..., grabs: _Optional[_Iterable[int]] = ..., level: _Optional[_Union[Level, _Mapping]] = ...) -> None: ...
 
 class InputEvent(_message.Message):
-    __slots__ = ("instance", "frame", "time", "episode", "level", "input", "idle")
+    __slots__ = ("instance", "frame", "time", "episode", "level", "input", "idle", "seq")
     INSTANCE_FIELD_NUMBER: _ClassVar[int]
     FRAME_FIELD_NUMBER: _ClassVar[int]
     TIME_FIELD_NUMBER: _ClassVar[int]
@@ -416,6 +416,7 @@ class InputEvent(_message.Message):
     LEVEL_FIELD_NUMBER: _ClassVar[int]
     INPUT_FIELD_NUMBER: _ClassVar[int]
     IDLE_FIELD_NUMBER: _ClassVar[int]
+    SEQ_FIELD_NUMBER: _ClassVar[int]
     instance: str
     frame: int
     time: float
@@ -423,4 +424,17 @@ class InputEvent(_message.Message):
     level: Level
     input: InputRequest
     idle: bool
-    def __init__(self, instance: _Optional[str] = ..., frame: _Optional[int] = ..., time: _Optional[float] = ..., episode: _Optional[int] = ..., level: _Optional[_Union[Level, _Mapping]] = ..., input: _Optional[_Union[InputRequest, _Mapping]] = ..., idle: bool = ...) -> None: ...
+    seq: int
+    def __init__(self, instance: _Optional[str] = ..., frame: _Optional[int] = ..., time: _Optional[float] = ..., episode: _Optional[int] = ..., level: _Optional[_Union[Level, _Mapping]] = ..., input: _Optional[_Union[InputRequest, _Mapping]] = ..., idle: bool = ..., seq: _Optional[int] = ...) -> None: ...
+
+class EpisodeInputs(_message.Message):
+    __slots__ = ("instance", "episode", "events", "complete")
+    INSTANCE_FIELD_NUMBER: _ClassVar[int]
+    EPISODE_FIELD_NUMBER: _ClassVar[int]
+    EVENTS_FIELD_NUMBER: _ClassVar[int]
+    COMPLETE_FIELD_NUMBER: _ClassVar[int]
+    instance: str
+    episode: int
+    events: _containers.RepeatedCompositeFieldContainer[InputEvent]
+    complete: bool
+    def __init__(self, instance: _Optional[str] = ..., episode: _Optional[int] = ..., events: _Optional[_Iterable[_Union[InputEvent, _Mapping]]] = ..., complete: bool = ...) -> None: ...
