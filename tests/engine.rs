@@ -67,3 +67,54 @@ fn a_split_cloth_in_the_engine_steps_exactly_as_on_one_thread() {
         eprintln!("{threads} thread(s): {steps} steps in 0.6 s, identical to serial");
     }
 }
+
+/// An engine its owner drops without `stop` (a cancelled task, a panic)
+/// stops its threads anyway: nobody's cloth keeps stepping in the
+/// background of the process. Truth: the instance's command channel closes
+/// once its stepping thread has exited and dropped it.
+#[test]
+fn an_engine_dropped_without_stop_stops_its_threads() {
+    let scene = Scene::load(std::path::Path::new("config/scenes/paper-1-top-edge.toml")).expect("scene");
+    let sim = scene.build_at(16, 16).expect("builds");
+    let engine = Engine::start(
+        vec![InstanceSetup {
+            name: "dropped".into(),
+            sim,
+            cloud: None,
+            level: Level::new(16, 16),
+            method: Method::Same,
+            publish_hz: 30.0,
+            duration: 1e9,
+            looping: false,
+            shadow: false,
+            hold: false,
+            touch: None,
+            input_idle: 10.0,
+        }],
+        EngineSettings {
+            threads: 2,
+            max_substeps: 64,
+            max_lag: 0.25,
+            metrics_hz: 10.0,
+            background: || {},
+        },
+    )
+    .expect("engine");
+    let handle = engine.handles()[0].clone();
+    std::thread::sleep(Duration::from_millis(200));
+    let (tx, _rx) = tokio::sync::oneshot::channel();
+    assert!(handle.send(Command::Snapshot { reply: tx }).is_ok(), "the engine steps");
+    drop(engine);
+    let deadline = std::time::Instant::now() + Duration::from_secs(2);
+    loop {
+        let (tx, _rx) = tokio::sync::oneshot::channel();
+        if handle.send(Command::Snapshot { reply: tx }).is_err() {
+            break;
+        }
+        assert!(
+            std::time::Instant::now() < deadline,
+            "2 s after the engine was dropped, its stepping thread still takes commands"
+        );
+        std::thread::sleep(Duration::from_millis(10));
+    }
+}

@@ -222,15 +222,29 @@ impl Engine {
     }
 
     /// Finish the current steps and join every thread.
-    pub fn stop(self) {
+    pub fn stop(mut self) {
         self.stop.store(true, Ordering::SeqCst);
-        for t in &self.threads {
+        let threads = std::mem::take(&mut self.threads);
+        for t in &threads {
             t.thread().unpark();
         }
-        for t in self.threads {
+        for t in threads {
             if t.join().is_err() {
                 tracing::error!("a stepping thread panicked");
             }
+        }
+    }
+}
+
+impl Drop for Engine {
+    /// An engine dropped without [`Engine::stop`] (the task that owned it
+    /// was cancelled, its owner panicked) still stops its threads, without
+    /// waiting for them: they finish the step they are in and exit, and
+    /// never keep stepping for nobody.
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::SeqCst);
+        for t in &self.threads {
+            t.thread().unpark();
         }
     }
 }

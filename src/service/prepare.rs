@@ -73,6 +73,17 @@ pub(super) async fn prepare_first(
     })
 }
 
+/// Held around each preparation installed into the client pool. A pool
+/// thread that waits in a parallel loop runs other jobs meanwhile, injected
+/// ones too: a second preparation of the same level, run on a thread whose
+/// stack already holds that level's lock (`Preparer::prepare_with`), waited
+/// for itself forever, and with both pool threads caught so every later
+/// switch hung (seen under 32 concurrent switches: gdb showed both
+/// `lodcloth-client` threads in `prepare_with`'s lock beneath a `join`).
+/// With one installed preparation at a time, a waiting pool thread only
+/// finds that preparation's own parallel work.
+static CLIENT_TURN: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
 /// Run `work` on a thread of `waiting`'s class (its parallel loops in that
 /// class's rayon pool) and build the prepared level's live simulation there.
 async fn on_thread(
@@ -97,7 +108,13 @@ async fn on_thread(
                 Waiting::Client => {
                     client_priority();
                     match CLIENT_POOL.get() {
-                        Some(pool) => pool.install(run),
+                        Some(pool) => {
+                            // One preparation in the pool at a time (see
+                            // `CLIENT_TURN`); the others wait here, on
+                            // their own threads.
+                            let _turn = CLIENT_TURN.lock().unwrap_or_else(|e| e.into_inner());
+                            pool.install(run)
+                        }
                         None => run(),
                     }
                 }
