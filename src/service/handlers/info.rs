@@ -10,37 +10,41 @@ use crate::proto::{self, schema, v1, WireLevel};
 use crate::service::{keys, Context, Instance};
 
 pub(in crate::service) async fn answer_info(ctx: &Context, q: Query) {
-    let matched = addressed(ctx, &q, keys::info);
-    if matched.is_empty() {
-        // Every query gets an answer, a wildcard matching nothing too.
-        let key = q.key_expr().as_str();
-        let message = match keys::instance_of(&ctx.prefix, "info", key) {
-            Some(name) => unknown_instance(ctx, name),
-            None => format!(
-                "key '{key}' matches none of {}",
-                ctx.instances.keys().cloned().collect::<Vec<_>>().join(", ")
-            ),
-        };
-        return reply_error(ctx, &q, Code::UnknownInstance, message).await;
-    }
-    for inst in matched {
-        let info = instance_info(inst);
-        reply_ok(
-            &q,
-            keys::info(&ctx.prefix, &inst.handle.name),
-            schema::INSTANCE_INFO,
-            info.encode_to_vec(),
-        )
-        .await;
-    }
+    answer_each(ctx, q, "info", keys::info, schema::INSTANCE_INFO, |inst| {
+        instance_info(inst).encode_to_vec()
+    })
+    .await;
 }
 
 /// The inputs of each addressed instance's latest episode so far.
 pub(in crate::service) async fn answer_episode_inputs(ctx: &Context, q: Query) {
-    let matched = addressed(ctx, &q, keys::episode_inputs);
+    answer_each(
+        ctx,
+        q,
+        "episode_inputs",
+        keys::episode_inputs,
+        schema::EPISODE_INPUTS,
+        |inst| inst.episode_inputs().encode_to_vec(),
+    )
+    .await;
+}
+
+/// A read-only query on `<prefix>/<instance>/<leaf>`: one reply per
+/// instance the key addresses (a wildcard may address several), and an
+/// error naming the unknown instance when it addresses none (every query
+/// gets an answer, a wildcard matching nothing too).
+async fn answer_each(
+    ctx: &Context,
+    q: Query,
+    leaf: &str,
+    key_of: fn(&str, &str) -> String,
+    schema: &'static str,
+    reply: impl Fn(&Instance) -> Vec<u8>,
+) {
+    let matched = addressed(ctx, &q, key_of);
     if matched.is_empty() {
         let key = q.key_expr().as_str();
-        let message = match keys::instance_of(&ctx.prefix, "episode_inputs", key) {
+        let message = match keys::instance_of(&ctx.prefix, leaf, key) {
             Some(name) => unknown_instance(ctx, name),
             None => format!(
                 "key '{key}' matches none of {}",
@@ -50,13 +54,7 @@ pub(in crate::service) async fn answer_episode_inputs(ctx: &Context, q: Query) {
         return reply_error(ctx, &q, Code::UnknownInstance, message).await;
     }
     for inst in matched {
-        reply_ok(
-            &q,
-            keys::episode_inputs(&ctx.prefix, &inst.handle.name),
-            schema::EPISODE_INPUTS,
-            inst.episode_inputs().encode_to_vec(),
-        )
-        .await;
+        reply_ok(&q, key_of(&ctx.prefix, &inst.handle.name), schema, reply(inst)).await;
     }
 }
 
