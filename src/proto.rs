@@ -188,6 +188,8 @@ pub fn metrics_message(instance: &str, m: &MetricsFrame) -> v1::Metrics {
         halted: m.halted.as_deref().unwrap_or_default().to_string(),
         inputs: m.inputs,
         touched: m.touched,
+        // The service knows it (the preparer's), not the engine.
+        predicted_error_under_input: None,
     }
 }
 

@@ -187,42 +187,83 @@ fn five_drags(preparer: &Preparer) -> Vec<(&'static str, Script)> {
 }
 
 /// The issue's target on five drags, with the error normalised like the
-/// daemon's live error and its prediction (by the recorded reference's
-/// largest displacement): BCD's error stays below 1.5× its prediction
-/// under every drag; the scene's own material does not under any vigorous one,
-/// and no single number could predict it, since its error grows with how
-/// far the drag folds the cloth (docs/results.md, "Coherence under input").
+/// daemon's live error and its predictions (by the recorded reference's
+/// largest displacement). Against the prediction calibrated on the script,
+/// BCD's error stays below 1.5× under every drag and the scene's own
+/// material's does not under any vigorous one (its error grows with how far
+/// the drag folds the cloth). Against the prediction *under input* (the
+/// largest error under the scene's three standard drags,
+/// `lodcloth_core::estimate::touched`, fixed by rule and sharing nothing
+/// with these five), both stay below 1.5× under every drag.
 #[test]
-fn under_five_drags_bcd_stays_within_one_and_a_half_times_its_prediction() {
+fn under_five_drags_each_level_stays_within_one_and_a_half_times_its_prediction_under_input() {
     let preparer = preparer();
     let levels = [Level::new(8, 8), Level::new(12, 12), Level::new(16, 16)];
     let drags = five_drags(&preparer);
     for method in [Method::Bcd, Method::Same] {
+        let mut touched = Vec::new();
+        for &level in &levels {
+            let prepared = preparer.prepare(level, method).expect("prepares");
+            let t = preparer
+                .predict_touched(&prepared, &|| false)
+                .expect("predicts under the drags")
+                .expect("a cloth");
+            let each: Vec<String> = t
+                .scores
+                .iter()
+                .map(|s| format!("{} {:.3} %", s.probe, 100.0 * s.report.mean))
+                .collect();
+            eprintln!(
+                "{method} {level}: predicted {:.3} %, under input {:.3} % ({})",
+                100.0 * prepared.predicted_error,
+                100.0 * t.error,
+                each.join("; ")
+            );
+            touched.push((level, t.error));
+        }
         let mut ratios = Vec::new();
         for (name, script) in &drags {
             let rows = drag_coherence(&preparer, &levels, method, script).expect("runs");
             let cells: Vec<String> = rows
                 .iter()
                 .map(|r| {
-                    // Normalised like the live error and the prediction.
+                    // Normalised like the live error and the predictions.
                     let e = r.dragged * r.touched_o_max / r.recorded_o_max;
-                    ratios.push((r.level, *name, e / r.predicted));
-                    format!("{} {:.3} % ({:.2}x)", r.level, 100.0 * e, e / r.predicted)
+                    let under_input = touched.iter().find(|t| t.0 == r.level).expect("predicted").1;
+                    ratios.push((r.level, *name, e / r.predicted, e / under_input));
+                    format!(
+                        "{} {:.3} % ({:.2}x, {:.2}x under input)",
+                        r.level,
+                        100.0 * e,
+                        e / r.predicted,
+                        e / under_input
+                    )
                 })
                 .collect();
             eprintln!("{method} under '{name}': {}", cells.join(", "));
         }
-        let (lo, hi) = ratios
-            .iter()
-            .fold((f64::INFINITY, 0.0f64), |(lo, hi), r| (lo.min(r.2), hi.max(r.2)));
-        eprintln!("{method}: error under a drag / predicted error from {lo:.2}x to {hi:.2}x");
-        if method == Method::Bcd {
-            for (level, name, ratio) in &ratios {
-                // Not above 1.5× (below is a conservative prediction: the
-                // 8×8 level's is, at 0.57–0.81×).
+        let range = |pick: fn(&(Level, &str, f64, f64)) -> f64| {
+            ratios
+                .iter()
+                .map(pick)
+                .fold((f64::INFINITY, 0.0f64), |(lo, hi), r| (lo.min(r), hi.max(r)))
+        };
+        let (lo, hi) = range(|r| r.2);
+        let (tlo, thi) = range(|r| r.3);
+        eprintln!(
+            "{method}: error under a drag / predicted error from {lo:.2}x to {hi:.2}x; \
+             / predicted error under input from {tlo:.2}x to {thi:.2}x"
+        );
+        for (level, name, scripted, under_input) in &ratios {
+            // Not above 1.5× (below is a conservative prediction).
+            assert!(
+                *under_input <= 1.5,
+                "{method} {level} under '{name}': {under_input:.2}x its predicted error under input"
+            );
+            if method == Method::Bcd {
                 assert!(
-                    *ratio <= 1.5,
-                    "bcd {level} under '{name}': {ratio:.2}x its predicted error"
+                    *scripted <= 1.5,
+                    "bcd {level} under '{name}': {scripted:.2}x its predicted error"
                 );
             }
         }

@@ -7,9 +7,8 @@
 
 use std::sync::Arc;
 
-use crate::estimate::{ErrorAccumulator, Method};
+use crate::estimate::{record_touched, ErrorAccumulator, Method, Probe, TouchedReference};
 use crate::plan::{Basis, Level, Preparer};
-use crate::sim::Simulation;
 use crate::touch::{Script, Touch};
 
 /// One level under the script.
@@ -33,40 +32,6 @@ pub struct DragCoherence {
     pub recorded_o_max: f64,
 }
 
-/// A reference run under `script`: metric frames (SoA) at the recording's
-/// frame steps, and its largest displacement from rest.
-struct Touched {
-    frames: Vec<Vec<f32>>,
-    o_max: f64,
-}
-
-fn record(mut sim: Simulation, mut touch: Touch, script: &Script, steps: u64, stride: u64) -> Result<Touched, String> {
-    let n = sim.topology().n_nodes;
-    let rest = sim.state().pos.clone();
-    let mut next = 0;
-    let mut frames = Vec::with_capacity((steps / stride) as usize);
-    let mut o_max2: f64 = 0.0;
-    for step in 1..=steps {
-        script
-            .apply_due(&mut next, &mut touch, &mut sim)
-            .map_err(|e| e.to_string())?;
-        if !sim.step().finite {
-            return Err(format!("the touched reference diverged at step {step}"));
-        }
-        let pos = &sim.state().pos;
-        for k in 0..n {
-            o_max2 = o_max2.max((0..3).map(|c| (pos[c * n + k] - rest[c * n + k]).powi(2)).sum::<f64>());
-        }
-        if step % stride == 0 {
-            frames.push(pos.iter().map(|&x| x as f32).collect());
-        }
-    }
-    Ok(Touched {
-        frames,
-        o_max: o_max2.sqrt(),
-    })
-}
-
 /// Run each of `levels` (prepared with `method`) and the reference under
 /// `script` over the reference's recorded span, and score them.
 pub fn drag_coherence(
@@ -75,7 +40,7 @@ pub fn drag_coherence(
     method: Method,
     script: &Script,
 ) -> Result<Vec<DragCoherence>, String> {
-    let mut reference: Option<(Arc<crate::estimate::Reference>, Touched)> = None;
+    let mut reference: Option<(Arc<crate::estimate::Reference>, TouchedReference)> = None;
     let mut out = Vec::new();
     for &level in levels {
         let prepared = preparer.prepare(level, method).map_err(|e| e.to_string())?;
@@ -87,46 +52,36 @@ pub fn drag_coherence(
             .is_none_or(|(r, _)| !Arc::ptr_eq(r, &problem.reference))
         {
             let r = problem.reference.clone();
-            let sim = problem.scene.build().map_err(|e| e.to_string())?;
-            let touched = record(
-                sim,
-                Touch::new(&problem.scene),
-                script,
-                r.spec.frames,
-                r.spec.metric_stride,
-            )?;
+            let probe = Probe {
+                name: "the script".into(),
+                script: script.clone(),
+            };
+            let touched = record_touched(&problem.scene, &r, &probe, &|| false).map_err(|e| e.to_string())?;
             reference = Some((r, touched));
         }
         let (r, touched) = reference.as_ref().expect("recorded above");
-        let interval = r.dt * r.spec.metric_stride as f64;
-        let steps_per_frame = (interval / prepared.dt).round() as u64;
-        let n = problem.topology().n_nodes;
-        let mut mapped = vec![0.0; 3 * n];
-        let mut score = |with_script: bool| -> Result<f64, String> {
-            let mut sim = prepared.simulation().map_err(|e| e.to_string())?;
-            let mut touch = Touch::new(&problem.scene);
-            let empty = Script::default();
-            let script = if with_script { script } else { &empty };
-            let mut next = 0;
-            let mut acc = ErrorAccumulator::new(touched.o_max, n, touched.frames.len());
-            for (f, frame) in touched.frames.iter().enumerate() {
-                for _ in 0..steps_per_frame {
-                    script
-                        .apply_due(&mut next, &mut touch, &mut sim)
-                        .map_err(|e| e.to_string())?;
-                    sim.step();
-                }
-                if sim.diverged() {
-                    acc.mark_diverged();
-                    break;
-                }
-                problem.correlation().map(frame, &mut mapped);
-                acc.push(r.frame_times[f], &mapped, &sim.state().pos);
-            }
-            Ok(acc.report().mean)
+        // Scored against the touched reference, renormalised by its own
+        // largest displacement; then the level left alone against it.
+        let renormalise = r.o_max / touched.o_max;
+        let dragged = problem
+            .score_touched(prepared.material, touched, &|| false)
+            .map_err(|e| e.to_string())?
+            .report
+            .mean
+            * renormalise;
+        let alone = TouchedReference {
+            probe: Probe {
+                name: "no input".into(),
+                script: Script::default(),
+            },
+            ..touched.clone()
         };
-        let dragged = score(true)?;
-        let untouched = score(false)?;
+        let untouched = problem
+            .score_touched(prepared.material, &alone, &|| false)
+            .map_err(|e| e.to_string())?
+            .report
+            .mean
+            * renormalise;
         out.push(DragCoherence {
             level,
             method,

@@ -257,6 +257,12 @@ pub struct RawEstimation {
     /// start-up, so that switches answer from memory (default true).
     #[serde(default = "yes")]
     pub precompute: bool,
+    /// Give every prepared cloth level a prediction under input (its error
+    /// under three standard drags; a reference run per drag per instance,
+    /// then a run per drag per level, all in the background) (default
+    /// true).
+    #[serde(default = "yes")]
+    pub predict_under_input: bool,
 }
 
 impl Default for RawEstimation {
@@ -268,6 +274,7 @@ impl Default for RawEstimation {
             fit_frames: default_fit_frames(),
             fit_iterations: default_fit_iterations(),
             precompute: true,
+            predict_under_input: true,
         }
     }
 }
@@ -554,6 +561,7 @@ impl ServiceConfig {
                 fit_frames: s.fit_frames,
                 fit_iterations: s.fit_iterations,
                 precompute: s.precompute,
+                predict_under_input: s.predict_under_input,
             },
             input: InputSettings {
                 idle: raw.input.idle,

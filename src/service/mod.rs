@@ -26,6 +26,7 @@ mod prepare;
 mod publish;
 mod startup;
 mod telemetry;
+mod touched;
 
 pub mod client;
 pub mod config;
@@ -88,6 +89,16 @@ struct Instance {
     input_rate: std::sync::Mutex<request::TokenBucket>,
     /// The inputs of its latest episode with inputs, as published.
     episode_log: std::sync::Mutex<EpisodeLog>,
+    /// Where its levels go for their prediction under input.
+    touched: touched::TouchedQueue,
+}
+
+impl Instance {
+    /// Have `prepared` (a level of this instance) predicted under input in
+    /// the background, unless it is already.
+    fn predict_under_input(&self, prepared: &Arc<crate::plan::Prepared>) {
+        self.touched.submit(&self.preparer, prepared);
+    }
 }
 
 /// Inputs kept per episode for late recorders (as the engine keeps them for
@@ -222,6 +233,11 @@ pub async fn serve(
 
     tracing::info!("shutting down: stop publishing, finish the current steps");
     let _ = closing_tx.send(true);
+    if let Some(inst) = ctx.instances.values().next() {
+        // One queue for the daemon: stopping it through any instance stops
+        // the background predictions under input.
+        inst.touched.stop();
+    }
     requests.abort_all();
     tasks.abort_all();
     while tasks.join_next().await.is_some() {}

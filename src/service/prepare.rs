@@ -146,8 +146,9 @@ pub(super) async fn precompute(ctx: Arc<Context>, all_levels: bool, resumes: BTr
     for inst in ctx.instances.values() {
         let config = inst.preparer.plan().clone();
         for &level in &config.levels {
-            if let Err(e) = prepare(Waiting::Background, inst.preparer.clone(), level, config.method).await {
-                tracing::warn!(instance = %config.name, %level, "cannot prepare: {e}");
+            match prepare(Waiting::Background, inst.preparer.clone(), level, config.method).await {
+                Ok(ready) => inst.predict_under_input(&ready.prepared),
+                Err(e) => tracing::warn!(instance = %config.name, %level, "cannot prepare: {e}"),
             }
         }
     }
@@ -190,14 +191,19 @@ pub(super) async fn estimate_in_place(
     }
     match prepared {
         Ok(ready) => match switch_to(&inst.handle, ready).await {
-            Ok(o) => tracing::info!(
-                instance = %name,
-                %level,
-                %method,
-                predicted_error = o.predicted_error,
-                coefficient_version = o.coefficient_version,
-                "estimated coefficients live"
-            ),
+            Ok(o) => {
+                tracing::info!(
+                    instance = %name,
+                    %level,
+                    %method,
+                    predicted_error = o.predicted_error,
+                    coefficient_version = o.coefficient_version,
+                    "estimated coefficients live"
+                );
+                if let Some(p) = inst.preparer.get(level, method) {
+                    inst.predict_under_input(&p);
+                }
+            }
             Err(e) => tracing::error!(instance = %name, %level, "applying the estimate: {e}"),
         },
         Err(e) => tracing::error!(instance = %name, %level, %method, "preparing the estimate: {e}"),

@@ -79,7 +79,9 @@ pub(super) async fn publish_metrics(
                     break;
                 }
                 let Some(m) = metrics.borrow_and_update().clone() else { continue };
-                let bytes = proto::metrics_message(&handle.name, &m).encode_to_vec();
+                let mut message = proto::metrics_message(&handle.name, &m);
+                message.predicted_error_under_input = under_input(&ctx, &handle.name, &m);
+                let bytes = message.encode_to_vec();
                 match publisher.put(bytes).await {
                     Ok(()) => ctx.telemetry.metrics_published(&handle.name),
                     Err(e) => tracing::warn!(instance = %handle.name, "publishing metrics: {e}"),
@@ -117,4 +119,12 @@ pub(super) async fn publish_inputs(
             tracing::warn!(instance = %handle.name, "publishing an input: {e}");
         }
     }
+}
+
+/// The live level's prediction under input, while its coefficients are the
+/// prepared ones it was made for (they have a predicted error).
+fn under_input(ctx: &Context, name: &str, m: &crate::engine::MetricsFrame) -> Option<f64> {
+    m.predicted_error?;
+    let inst = ctx.instances.get(name)?;
+    inst.preparer.touched_prediction(m.level, m.method).map(|t| t.error)
 }

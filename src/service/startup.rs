@@ -103,6 +103,7 @@ pub(super) fn start_engine(config: &ServiceConfig) -> Result<Started, ServiceErr
         preparers.push(preparer);
     }
     let engine = Engine::start(setups, config.engine)?;
+    let touched = super::touched::TouchedQueue::start(config.estimation.predict_under_input)?;
     let mut instances = BTreeMap::new();
     for (handle, preparer) in engine.handles().iter().zip(&preparers) {
         debug_assert_eq!(handle.name, preparer.plan().name);
@@ -119,6 +120,7 @@ pub(super) fn start_engine(config: &ServiceConfig) -> Result<Started, ServiceErr
                     std::time::Instant::now(),
                 )),
                 episode_log: std::sync::Mutex::new(super::EpisodeLog::default()),
+                touched: touched.clone(),
             }),
         );
     }

@@ -71,6 +71,7 @@ fn instance_info(inst: &Instance) -> v1::InstanceInfo {
                 predicted_error: p.as_ref().map(|p| p.predicted_error),
                 dt: p.as_ref().map_or(0.0, |p| p.dt),
                 ready: p.is_some(),
+                predicted_error_under_input: inst.preparer.touched_prediction(l, c.method).map(|t| t.error),
             }
         })
         .collect();

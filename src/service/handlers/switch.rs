@@ -12,12 +12,12 @@ use zenoh::query::Query;
 use super::{decode, refuse, reply_error, reply_ok, target};
 use crate::engine::SwitchOutcome;
 use crate::estimate::Method;
-use crate::plan::{Level, PrepareError};
+use crate::plan::{Level, PrepareError, Prepared};
 use crate::proto::v1::error::Code;
 use crate::proto::{self, schema, v1, WireLevel};
 use crate::service::prepare::{estimate_in_place, prepare, prepare_first, switch_at_once, switch_to, Ready, Waiting};
 use crate::service::request::{self, SwitchTarget};
-use crate::service::{keys, Context, Instance, MAX_PENDING_SWITCHES};
+use crate::service::{client_priority, keys, Context, Instance, MAX_PENDING_SWITCHES};
 
 /// Holds one of an instance's bounded switch slots (see
 /// [`MAX_PENDING_SWITCHES`]); frees it when dropped.
@@ -68,7 +68,7 @@ pub(in crate::service) async fn answer_switch(ctx: Arc<Context>, q: Query) {
     let method = plan.method;
     let level = match plan.target {
         SwitchTarget::Level(level) => level,
-        SwitchTarget::MaxError(bound) => match cheapest_meeting(inst, method, bound).await {
+        SwitchTarget::MaxError(bound) => match cheapest_meeting(inst, method, bound, touched(inst)).await {
             Ok(level) => level,
             Err(message) => return reply_error(&ctx, &q, Code::NoLevelMeetsError, message).await,
         },
@@ -89,7 +89,7 @@ pub(in crate::service) async fn answer_switch(ctx: Arc<Context>, q: Query) {
                     o.coefficient_version,
                     None,
                 ));
-                return reply_switched(&ctx, &q, &config.name, &o, arrived, false, true).await;
+                return reply_switched(&ctx, &q, inst, &o, arrived, false, true).await;
             }
             Err(e) => return reply_error(&ctx, &q, prepare_code(&e), e.to_string()).await,
         }
@@ -102,8 +102,10 @@ pub(in crate::service) async fn answer_switch(ctx: Arc<Context>, q: Query) {
     };
     let cached = !provisional && (was_ready || ready.prepared.cached);
     let live_error = ready.prepared.predicted_error;
+    let live = ready.prepared.clone();
     match switch_to(&inst.handle, ready).await {
         Ok(o) => {
+            inst.predict_under_input(&live);
             if provisional {
                 tokio::spawn(refine(
                     ctx.clone(),
@@ -114,7 +116,7 @@ pub(in crate::service) async fn answer_switch(ctx: Arc<Context>, q: Query) {
                     Some(live_error),
                 ));
             }
-            reply_switched(&ctx, &q, &config.name, &o, arrived, cached, provisional).await
+            reply_switched(&ctx, &q, inst, &o, arrived, cached, provisional).await
         }
         Err(e) => reply_error(&ctx, &q, Code::Unavailable, e).await,
     }
@@ -133,12 +135,16 @@ fn prepare_code(e: &PrepareError) -> Code {
 async fn reply_switched(
     ctx: &Context,
     q: &Query,
-    name: &str,
+    inst: &Instance,
     o: &SwitchOutcome,
     arrived: Instant,
     cached: bool,
     refining: bool,
 ) {
+    let name = inst.handle.name.as_str();
+    let under_input = o
+        .predicted_error
+        .and_then(|_| inst.preparer.touched_prediction(o.level, o.method).map(|t| t.error));
     tracing::info!(instance = %name, from = %o.previous, to = %o.level, method = %o.method, refining, "switched");
     let reply = v1::SwitchReply {
         instance: name.to_string(),
@@ -153,6 +159,7 @@ async fn reply_switched(
         coefficient_version: o.coefficient_version,
         frame: o.frame,
         refining,
+        predicted_error_under_input: under_input,
     };
     if let Some(c) = ctx.telemetry.instance(name) {
         c.switches.fetch_add(1, Ordering::Relaxed);
@@ -176,22 +183,35 @@ async fn refine(ctx: Arc<Context>, name: String, level: Level, method: Method, v
     }
 }
 
+/// A client's input acts on the instance now (its latest metrics say so).
+fn touched(inst: &Instance) -> bool {
+    inst.handle.metrics.borrow().as_ref().is_some_and(|m| m.touched)
+}
+
 /// The coarsest allowed level whose predicted error is at most `bound`:
 /// every level's prediction is needed, so they are prepared cheapest first
-/// until one meets it. Err: why none does (the best one's error).
-async fn cheapest_meeting(inst: &Instance, method: Method, bound: f64) -> Result<Level, String> {
+/// until one meets it. `under_input` (a client touches the cloth): by the
+/// levels' predictions under input, made where missing (a reference run per
+/// standard drag, once per instance, then a run per drag per level). Err:
+/// why none does (the best one's error).
+async fn cheapest_meeting(inst: &Instance, method: Method, bound: f64, under_input: bool) -> Result<Level, String> {
     let config = inst.preparer.plan();
     let mut levels = config.levels.clone();
     levels.sort_by_key(|l| l.nodes());
     let mut best: Option<(Level, f64)> = None;
     for l in levels {
-        match prepare(Waiting::Client, inst.preparer.clone(), l, method).await {
-            Ok(Ready { prepared: p, .. }) => {
-                if p.predicted_error <= bound {
+        let predicted = match prepare(Waiting::Client, inst.preparer.clone(), l, method).await {
+            Ok(Ready { prepared: p, .. }) if under_input => predict_under_input(inst, p).await,
+            Ok(Ready { prepared: p, .. }) => Ok(p.predicted_error),
+            Err(err) => Err(err.to_string()),
+        };
+        match predicted {
+            Ok(error) => {
+                if error <= bound {
                     return Ok(l);
                 }
-                if best.is_none_or(|(_, b)| p.predicted_error < b) {
-                    best = Some((l, p.predicted_error));
+                if best.is_none_or(|(_, b)| error < b) {
+                    best = Some((l, error));
                 }
             }
             Err(err) => tracing::warn!(instance = %config.name, %l, "skipped for max_error: {err}"),
@@ -200,9 +220,34 @@ async fn cheapest_meeting(inst: &Instance, method: Method, bound: f64) -> Result
     let best = best.map_or("no level could be prepared".to_string(), |(l, b)| {
         format!("the best is {l} at {:.2} %", 100.0 * b)
     });
+    let which = if under_input {
+        "prediction under input (a client touches it)"
+    } else {
+        "predicted error"
+    };
     Err(format!(
-        "no allowed level of '{}' has a predicted error ≤ {:.2} %; {best}",
+        "no allowed level of '{}' has a {which} ≤ {:.2} %; {best}",
         config.name,
         100.0 * bound
     ))
+}
+
+/// `prepared`'s prediction under input, made now if need be, on a thread in
+/// the class of work a client waits for.
+async fn predict_under_input(inst: &Instance, prepared: Arc<Prepared>) -> Result<f64, String> {
+    let preparer = inst.preparer.clone();
+    let (tx, rx) = tokio::sync::oneshot::channel();
+    std::thread::Builder::new()
+        .name("lodcloth-prepare".into())
+        .spawn(move || {
+            client_priority();
+            let _ = tx.send(preparer.predict_touched(&prepared, &|| false));
+        })
+        .map_err(|e| format!("cannot start a thread: {e}"))?;
+    match rx.await {
+        Ok(Ok(Some(t))) => Ok(t.error),
+        Ok(Ok(None)) => Err("a surface takes no input".into()),
+        Ok(Err(e)) => Err(e.to_string()),
+        Err(_) => Err("the prediction's thread stopped".into()),
+    }
 }

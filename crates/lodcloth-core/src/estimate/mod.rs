@@ -26,6 +26,7 @@ pub mod inverse;
 pub mod metric;
 pub mod reference;
 pub mod replayed;
+pub mod touched;
 
 use std::fmt;
 use std::ops::Range;
@@ -36,6 +37,7 @@ pub use inverse::{Distribution, InverseEstimate, LsqEstimate, Reading, Rejection
 pub use metric::{ErrorAccumulator, ErrorReport};
 pub use reference::{RecordSpec, Reference, ReferenceError, Sample};
 pub use replayed::{ReplayError, ReplayedReference};
+pub use touched::{probes, record_touched, Probe, TouchedError, TouchedReference, TouchedScore, PROBES};
 
 use crate::lod::{Correlation, LodError};
 use crate::scene::{MassConvention, Scene, SceneError};

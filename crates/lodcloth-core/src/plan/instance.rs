@@ -24,6 +24,10 @@ pub struct EstimationPlan {
     /// Prepare every allowed level in the background after start, so later
     /// switches answer from memory.
     pub precompute: bool,
+    /// Give every prepared cloth level a prediction under input (its error
+    /// under the standard drags, [`crate::estimate::touched`]) in the
+    /// background once it is prepared.
+    pub predict_under_input: bool,
 }
 
 /// What an instance simulates.

@@ -9,6 +9,7 @@ mod estimator;
 mod instance;
 mod level;
 mod prepare;
+mod touched;
 
 pub use estimator::{
     default_problem, level_dt, notes, record_reference, stable_problem, Estimated, Estimator, PlanError,
@@ -16,3 +17,4 @@ pub use estimator::{
 pub use instance::{EstimationPlan, InstanceKind, InstancePlan};
 pub use level::{GridLevel, Level};
 pub use prepare::{allowed, Basis, PrepareError, Prepared, Preparer, Start};
+pub use touched::TouchedPrediction;

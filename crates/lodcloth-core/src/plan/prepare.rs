@@ -157,6 +157,9 @@ pub struct Preparer {
     /// levels and methods (a client's switch beside the background's fit)
     /// go on.
     work: Mutex<HashMap<(Level, Method), WorkLock>>,
+    /// The standard drags' references and each level's prediction under
+    /// them ([`Preparer::predict_touched`]).
+    pub(super) touched: super::touched::TouchedCache,
 }
 
 /// Held while one level and method is prepared.
@@ -178,6 +181,7 @@ impl Preparer {
             surface_reference: Mutex::new(None),
             prepared: Mutex::new(HashMap::new()),
             work: Mutex::new(HashMap::new()),
+            touched: Default::default(),
         }
     }
 

@@ -70,7 +70,7 @@ class State(_message.Message):
     def __init__(self, instance: _Optional[str] = ..., frame: _Optional[int] = ..., time: _Optional[float] = ..., level: _Optional[_Union[Level, _Mapping]] = ..., coefficient_version: _Optional[int] = ..., positions: _Optional[bytes] = ..., episode: _Optional[int] = ..., stepped_unix_nanos: _Optional[int] = ..., transition: bool = ..., simulation_positions: _Optional[bytes] = ..., normals: _Optional[bytes] = ..., reference_positions: _Optional[bytes] = ...) -> None: ...
 
 class Metrics(_message.Message):
-    __slots__ = ("instance", "frame", "time", "level", "method", "predicted_error", "live_error", "step_cost_us", "real_time_factor", "overruns", "kinetic_energy", "potential_energy", "max_strain", "coefficient_version", "paused", "dt", "steps", "lag_resets", "divergences", "rollbacks", "halted", "inputs", "touched", "live_error_time")
+    __slots__ = ("instance", "frame", "time", "level", "method", "predicted_error", "live_error", "step_cost_us", "real_time_factor", "overruns", "kinetic_energy", "potential_energy", "max_strain", "coefficient_version", "paused", "dt", "steps", "lag_resets", "divergences", "rollbacks", "halted", "inputs", "touched", "live_error_time", "predicted_error_under_input")
     INSTANCE_FIELD_NUMBER: _ClassVar[int]
     FRAME_FIELD_NUMBER: _ClassVar[int]
     TIME_FIELD_NUMBER: _ClassVar[int]
@@ -95,6 +95,7 @@ class Metrics(_message.Message):
     INPUTS_FIELD_NUMBER: _ClassVar[int]
     TOUCHED_FIELD_NUMBER: _ClassVar[int]
     LIVE_ERROR_TIME_FIELD_NUMBER: _ClassVar[int]
+    PREDICTED_ERROR_UNDER_INPUT_FIELD_NUMBER: _ClassVar[int]
     instance: str
     frame: int
     time: float
@@ -119,19 +120,22 @@ class Metrics(_message.Message):
     inputs: int
     touched: bool
     live_error_time: float
-    def __init__(self, instance: _Optional[str] = ..., frame: _Optional[int] = ..., time: _Optional[float] = ..., level: _Optional[_Union[Level, _Mapping]] = ..., method: _Optional[str] = ..., predicted_error: _Optional[float] = ..., live_error: _Optional[float] = ..., step_cost_us: _Optional[float] = ..., real_time_factor: _Optional[float] = ..., overruns: _Optional[int] = ..., kinetic_energy: _Optional[float] = ..., potential_energy: _Optional[float] = ..., max_strain: _Optional[float] = ..., coefficient_version: _Optional[int] = ..., paused: bool = ..., dt: _Optional[float] = ..., steps: _Optional[int] = ..., lag_resets: _Optional[int] = ..., divergences: _Optional[int] = ..., rollbacks: _Optional[int] = ..., halted: _Optional[str] = ..., inputs: _Optional[int] = ..., touched: bool = ..., live_error_time: _Optional[float] = ...) -> None: ...
+    predicted_error_under_input: float
+    def __init__(self, instance: _Optional[str] = ..., frame: _Optional[int] = ..., time: _Optional[float] = ..., level: _Optional[_Union[Level, _Mapping]] = ..., method: _Optional[str] = ..., predicted_error: _Optional[float] = ..., live_error: _Optional[float] = ..., step_cost_us: _Optional[float] = ..., real_time_factor: _Optional[float] = ..., overruns: _Optional[int] = ..., kinetic_energy: _Optional[float] = ..., potential_energy: _Optional[float] = ..., max_strain: _Optional[float] = ..., coefficient_version: _Optional[int] = ..., paused: bool = ..., dt: _Optional[float] = ..., steps: _Optional[int] = ..., lag_resets: _Optional[int] = ..., divergences: _Optional[int] = ..., rollbacks: _Optional[int] = ..., halted: _Optional[str] = ..., inputs: _Optional[int] = ..., touched: bool = ..., live_error_time: _Optional[float] = ..., predicted_error_under_input: _Optional[float] = ...) -> None: ...
 
 class LevelInfo(_message.Message):
-    __slots__ = ("level", "predicted_error", "dt", "ready")
+    __slots__ = ("level", "predicted_error", "dt", "ready", "predicted_error_under_input")
     LEVEL_FIELD_NUMBER: _ClassVar[int]
     PREDICTED_ERROR_FIELD_NUMBER: _ClassVar[int]
     DT_FIELD_NUMBER: _ClassVar[int]
     READY_FIELD_NUMBER: _ClassVar[int]
+    PREDICTED_ERROR_UNDER_INPUT_FIELD_NUMBER: _ClassVar[int]
     level: Level
     predicted_error: float
     dt: float
     ready: bool
-    def __init__(self, level: _Optional[_Union[Level, _Mapping]] = ..., predicted_error: _Optional[float] = ..., dt: _Optional[float] = ..., ready: bool = ...) -> None: ...
+    predicted_error_under_input: float
+    def __init__(self, level: _Optional[_Union[Level, _Mapping]] = ..., predicted_error: _Optional[float] = ..., dt: _Optional[float] = ..., ready: bool = ..., predicted_error_under_input: _Optional[float] = ...) -> None: ...
 
 class InstanceInfo(_message.Message):
     __slots__ = ("instance", "scene", "description", "level", "reference", "levels", "method", "integrator", "dt", "coefficients", "coefficient_version", "triangles", "pinned", "publish_hz", "o_max", "shadow_reference", "paused", "kind", "simulation_points", "cloud_points", "rest_positions", "halted")
@@ -216,7 +220,7 @@ class SwitchRequest(_message.Message):
     def __init__(self, level: _Optional[_Union[Level, _Mapping]] = ..., max_error: _Optional[float] = ..., method: _Optional[str] = ..., at_once: bool = ...) -> None: ...
 
 class SwitchReply(_message.Message):
-    __slots__ = ("instance", "previous", "level", "method", "coefficients", "predicted_error", "dt", "seconds", "cached", "coefficient_version", "frame", "refining")
+    __slots__ = ("instance", "previous", "level", "method", "coefficients", "predicted_error", "dt", "seconds", "cached", "coefficient_version", "frame", "refining", "predicted_error_under_input")
     INSTANCE_FIELD_NUMBER: _ClassVar[int]
     PREVIOUS_FIELD_NUMBER: _ClassVar[int]
     LEVEL_FIELD_NUMBER: _ClassVar[int]
@@ -229,6 +233,7 @@ class SwitchReply(_message.Message):
     COEFFICIENT_VERSION_FIELD_NUMBER: _ClassVar[int]
     FRAME_FIELD_NUMBER: _ClassVar[int]
     REFINING_FIELD_NUMBER: _ClassVar[int]
+    PREDICTED_ERROR_UNDER_INPUT_FIELD_NUMBER: _ClassVar[int]
     instance: str
     previous: Level
     level: Level
@@ -241,7 +246,8 @@ class SwitchReply(_message.Message):
     coefficient_version: int
     frame: int
     refining: bool
-    def __init__(self, instance: _Optional[str] = ..., previous: _Optional[_Union[Level, _Mapping]] = ..., level: _Optional[_Union[Level, _Mapping]] = ..., method: _Optional[str] = ..., coefficients: _Optional[_Union[Coefficients, _Mapping]] = ..., predicted_error: _Optional[float] = ..., dt: _Optional[float] = ..., seconds: _Optional[float] = ..., cached: bool = ..., coefficient_version: _Optional[int] = ..., frame: _Optional[int] = ..., refining: bool = ...) -> None: ...
+    predicted_error_under_input: float
+    def __init__(self, instance: _Optional[str] = ..., previous: _Optional[_Union[Level, _Mapping]] = ..., level: _Optional[_Union[Level, _Mapping]] = ..., method: _Optional[str] = ..., coefficients: _Optional[_Union[Coefficients, _Mapping]] = ..., predicted_error: _Optional[float] = ..., dt: _Optional[float] = ..., seconds: _Optional[float] = ..., cached: bool = ..., coefficient_version: _Optional[int] = ..., frame: _Optional[int] = ..., refining: bool = ..., predicted_error_under_input: _Optional[float] = ...) -> None: ...
 
 class ControlRequest(_message.Message):
     __slots__ = ("action",)
