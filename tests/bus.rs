@@ -19,3 +19,4 @@ mod robustness;
 mod security;
 mod service;
 mod snapshots;
+mod under_input;

@@ -360,6 +360,11 @@ pub fn watch(c: Connect, instance: String, count: Option<u64>) -> Result<()> {
                 (Some(_), Some(t)) if m.time - t > 0.1 => format!("  live err of {:.1} s ago", m.time - t),
                 _ => String::new(),
             };
+            // While touched, what the level is predicted to do under input.
+            let lag = match m.predicted_error_under_input {
+                Some(e) if m.touched => format!("{lag}  touched: predicted {:.3}% under input", 100.0 * e),
+                _ => lag,
+            };
             let line = format!(
                 "{:>10} {:>8.3} {:>7} {:>6} {:>9} {:>9} {:>9.1} {:>6.2} {:>8} {:>9.4} {:>7.2}%{}{lag}",
                 m.frame,
@@ -436,12 +441,14 @@ pub fn switch(c: Connect, args: SwitchArgs) -> Result<()> {
             .await?;
         let k = r.coefficients.unwrap_or_default();
         println!(
-            "{}: {} → {} ({}), predicted error {}, dt {:.3e} s, took {:.3} s{}, coefficient version {}",
+            "{}: {} → {} ({}), predicted error {}{}, dt {:.3e} s, took {:.3} s{}, coefficient version {}",
             r.instance,
             level(&r.previous),
             level(&r.level),
             r.method,
             pct(r.predicted_error),
+            r.predicted_error_under_input
+                .map_or(String::new(), |e| format!(" ({:.3}% under input)", 100.0 * e)),
             r.dt,
             r.seconds,
             if r.refining && r.predicted_error.is_none() {

@@ -196,7 +196,9 @@ def print_metrics(m: "v1.Metrics") -> None:
     print(
         f"metrics frame {m.frame:>7}  t {m.time:8.3f} s  level {level_str(m.level):<7} "
         f"predicted {percent(m, 'predicted_error'):>8}  live {percent(m, 'live_error'):>8}  "
-        f"RTF {m.real_time_factor:.3f}" + (f"  halted: {m.halted}" if m.halted else "")
+        + (f"under input {percent(m, 'predicted_error_under_input'):>8}  " if m.touched else "")
+        + f"RTF {m.real_time_factor:.3f}"
+        + (f"  halted: {m.halted}" if m.halted else "")
     )
 
 
@@ -213,7 +215,8 @@ def cmd_switch(args, client: Client) -> None:
     c = r.coefficients
     print(
         f"{r.instance}: {level_str(r.previous)} -> {level_str(r.level)} ({r.method}), "
-        f"predicted error {percent(r, 'predicted_error')}, dt {r.dt:.3e} s, "
+        f"predicted error {percent(r, 'predicted_error')} "
+        f"({percent(r, 'predicted_error_under_input')} under input), dt {r.dt:.3e} s, "
         f"took {r.seconds:.3f} s ({'prepared' if r.cached else 'estimated now'}; "
         f"{time.monotonic() - started:.1f} s here), "
         f"coefficient version {r.coefficient_version}, frame {r.frame}"
@@ -245,6 +248,7 @@ def cmd_info(args, client: Client) -> None:
         mark = "*" if lv.level == i.level else " "
         print(
             f"  {mark} {level_str(lv.level):<8} predicted {percent(lv, 'predicted_error'):>8}  "
+            f"under input {percent(lv, 'predicted_error_under_input'):>8}  "
             f"dt {lv.dt:.3e} s  {'ready' if lv.ready else 'not prepared'}"
         )
 
