@@ -16,7 +16,7 @@
 //! Meshes are built only while a sink (a subscribed Foxglove client, an
 //! MCAP file) wants them, and at most `max_hz` times a second per instance.
 
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::future::Future;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -236,6 +236,22 @@ struct InstanceChannels {
     inputs: Arc<RawChannel>,
     info: Option<v1::InstanceInfo>,
     last_mesh: Option<Instant>,
+    /// `seq` of every input logged, so one that is both in the episode log
+    /// and on the subscription is logged once.
+    inputs_logged: HashSet<u64>,
+    /// The episode log was asked for (at the instance's first state).
+    asked_log: bool,
+}
+
+impl InstanceChannels {
+    /// Log an input event (encoded) unless its `seq` was logged already.
+    fn log_input(&mut self, bytes: &[u8], seq: u64) -> bool {
+        if !self.inputs_logged.insert(seq) {
+            return false;
+        }
+        self.inputs.log(bytes);
+        true
+    }
 }
 
 /// Instances' channels opened in a context ahead of [`relay`]. Open them
@@ -283,7 +299,38 @@ fn open_instance(ctx: &Arc<Context>, name: &str) -> anyhow::Result<InstanceChann
         metrics,
         info: None,
         last_mesh: None,
+        inputs_logged: HashSet::new(),
+        asked_log: false,
     })
+}
+
+/// Log the inputs of `name`'s `episode` that the daemon applied before the
+/// relay subscribed (its `episode_inputs` log, when it is of that episode);
+/// how many were new.
+async fn log_earlier_inputs(client: &Client, name: &str, episode: u64, ch: &mut InstanceChannels) -> u64 {
+    match client.episode_inputs(name).await {
+        Ok(log) if log.episode != episode => 0,
+        Ok(log) => {
+            if !log.complete {
+                tracing::warn!(
+                    instance = name,
+                    kept = log.events.len(),
+                    "the daemon kept only the latest inputs of this episode; a replay misses the first"
+                );
+            }
+            let mut new = 0;
+            for e in &log.events {
+                if ch.log_input(&e.encode_to_vec(), e.seq) {
+                    new += 1;
+                }
+            }
+            new
+        }
+        Err(e) => {
+            tracing::warn!(instance = name, error = %e, "no episode log: inputs from before the relay started are unknown");
+            0
+        }
+    }
 }
 
 /// What a relay did.
@@ -365,8 +412,11 @@ pub async fn relay(
                     channels.insert(name.to_string(), open_instance(ctx, name)?);
                 }
                 let bytes = sample.payload().to_bytes();
-                channels[name].inputs.log(&bytes);
-                counts.inputs += 1;
+                let seq = v1::InputEvent::decode(bytes.as_ref()).map_or(0, |e| e.seq);
+                let ch = channels.get_mut(name).expect("inserted above");
+                if ch.log_input(&bytes, seq) {
+                    counts.inputs += 1;
+                }
             }
             sample = states.recv_async() => {
                 let Ok(sample) = sample else { break };
@@ -378,6 +428,16 @@ pub async fn relay(
                     channels.insert(name.to_string(), open_instance(ctx, name)?);
                 }
                 let ch = channels.get_mut(name).expect("inserted above");
+                if !ch.asked_log {
+                    // States arrive, so the inputs subscription (declared
+                    // first) does too: the inputs of this episode from
+                    // before it are in the daemon's episode log.
+                    ch.asked_log = true;
+                    let episode = v1::State::decode(sample.payload().to_bytes().as_ref()).map(|s| s.episode);
+                    if let Ok(episode) = episode {
+                        counts.inputs += log_earlier_inputs(client, name, episode, ch).await;
+                    }
+                }
                 let due = ch.last_mesh.is_none_or(|t| t.elapsed() >= min_interval);
                 if !due || !ch.mesh.has_sinks() {
                     continue;

@@ -24,7 +24,7 @@ use tokio_tungstenite::{MaybeTlsStream, WebSocketStream};
 
 use browser::Browser;
 use daemon::*;
-use lodcloth::foxglove_bridge::{mesh_topic, metrics_topic};
+use lodcloth::foxglove_bridge::{inputs_topic, mesh_topic, metrics_topic};
 use lodcloth::plan::Level;
 use lodcloth::proto::{unpack_positions, v1};
 use lodcloth::scene::Scene;
@@ -787,6 +787,22 @@ async fn record_writes_an_mcap_file_that_reads_back_with_the_mcap_crate() {
     let d = start_daemon(("mcap-a", "mcap-b"));
     let c = client(&[d.endpoint()]).await;
     let info = wait_info(&c, "mcap-a").await;
+    // A hand takes hold before the recorder starts: the file must still
+    // hold that input (from the daemon's episode log), once.
+    let grab = v1::InputRequest {
+        action: Some(v1::input_request::Action::Grab(v1::input_request::Grab {
+            id: 7,
+            at: Some(v1::Patch {
+                u: 0.5,
+                v: 1.0,
+                radius: 0.05,
+            }),
+            target: None,
+            stiffness: 4.0,
+            damping: 0.1,
+        })),
+    };
+    let grabbed = within(5, "grab", c.input("mcap-a", &grab)).await.expect("grab");
     let dir = tempfile::tempdir().expect("temp dir");
     let path = dir.path().join("a.mcap");
     let endpoint = d.endpoint();
@@ -818,6 +834,7 @@ async fn record_writes_an_mcap_file_that_reads_back_with_the_mcap_crate() {
     let bytes = std::fs::read(&path).expect("the MCAP file");
     let mut meshes = Vec::new();
     let mut metrics = 0;
+    let mut inputs = Vec::new();
     for m in mcap::MessageStream::new(&bytes).expect("an MCAP file") {
         let m = m.expect("a readable message");
         let schema = m.channel.schema.as_ref().expect("a schema");
@@ -836,8 +853,20 @@ async fn record_writes_an_mcap_file_that_reads_back_with_the_mcap_crate() {
                 "mcap-a"
             );
             metrics += 1;
+        } else if m.channel.topic == inputs_topic("mcap-a") {
+            assert_eq!(schema.name, "lodcloth.v1.InputEvent");
+            inputs.push(v1::InputEvent::decode(m.data.as_ref()).expect("InputEvent"));
         }
     }
+    assert_eq!(inputs.len(), 1, "the grab from before the recording, once: {inputs:#?}");
+    assert_eq!((inputs[0].seq, inputs[0].frame), (1, grabbed.frame));
+    assert!(
+        matches!(
+            inputs[0].input.as_ref().and_then(|r| r.action.as_ref()),
+            Some(v1::input_request::Action::Grab(g)) if g.id == 7
+        ),
+        "{inputs:#?}"
+    );
     // 50 states a second for 2 s, every one recorded (allowing for start-up).
     assert!(meshes.len() >= 50, "{} meshes", meshes.len());
     assert!(metrics >= 2, "{metrics} metrics");
@@ -856,7 +885,7 @@ async fn record_writes_an_mcap_file_that_reads_back_with_the_mcap_crate() {
         .expect("a summary section");
     assert_eq!(
         summary.stats.expect("statistics").message_count as usize,
-        meshes.len() + metrics
+        meshes.len() + metrics + inputs.len()
     );
     drop(c);
     d.shutdown().await.expect("clean shutdown");
