@@ -789,19 +789,12 @@ async fn record_writes_an_mcap_file_that_reads_back_with_the_mcap_crate() {
     let info = wait_info(&c, "mcap-a").await;
     // A hand takes hold before the recorder starts: the file must still
     // hold that input (from the daemon's episode log), once.
-    let grab = v1::InputRequest {
-        action: Some(v1::input_request::Action::Grab(v1::input_request::Grab {
-            id: 7,
-            at: Some(v1::Patch {
-                u: 0.5,
-                v: 1.0,
-                radius: 0.05,
-            }),
-            target: None,
-            stiffness: 4.0,
-            damping: 0.1,
-        })),
+    let at = Patch {
+        u: 0.5,
+        v: 1.0,
+        radius: 0.05,
     };
+    let grab = grab_where_it_is(7, at, 4.0, 0.1);
     let grabbed = within(5, "grab", c.input("mcap-a", &grab)).await.expect("grab");
     let dir = tempfile::tempdir().expect("temp dir");
     let path = dir.path().join("a.mcap");

@@ -12,7 +12,7 @@
 
 use std::sync::Arc;
 
-use lodcloth::estimate::Method;
+use lodcloth::estimate::{eased_drag, Method};
 use lodcloth::experiments::drag::drag_coherence;
 use lodcloth::plan::{Level, Preparer};
 use lodcloth::service::config::ServiceConfig;
@@ -68,32 +68,14 @@ fn reference_patch_at(preparer: &Preparer, at: Patch, t0: f64) -> [f64; 3] {
 /// smooth path (cosine-eased legs, 60 target updates a second), then lets
 /// go.
 fn smooth_drag(start: [f64; 3], at: Patch, t0: f64, stiffness: f64, legs: &[[f64; 3]]) -> Script {
-    let mut events = vec![(
-        t0,
-        Input::Grab {
-            id: 1,
-            at,
-            target: None,
-            stiffness,
-            damping: 0.1,
-        },
-    )];
-    let (leg, hold, hz) = (0.6, 0.3, 60.0);
-    let mut t = t0;
-    let mut from = start;
-    for d in legs {
-        let to = [from[0] + d[0], from[1] + d[1], from[2] + d[2]];
-        let n = (leg * hz) as usize;
-        for i in 1..=n {
-            let s = 0.5 - 0.5 * (std::f64::consts::PI * i as f64 / n as f64).cos();
-            let target = [0, 1, 2].map(|c| from[c] + s * (to[c] - from[c]));
-            events.push((t + leg * i as f64 / n as f64, Input::Move { id: 1, target }));
-        }
-        t += leg + hold;
-        from = to;
-    }
-    events.push((t, Input::Release { id: 1 }));
-    Script::new(events).expect("valid")
+    let grab = Input::Grab {
+        id: 1,
+        at,
+        target: None,
+        stiffness,
+        damping: 0.1,
+    };
+    Script::new(eased_drag(grab, t0, start, legs, 0.6, 0.3, 60.0)).expect("valid")
 }
 
 #[test]

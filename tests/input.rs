@@ -439,19 +439,7 @@ async fn an_instance_left_untouched_for_the_idle_time_lets_go_and_returns_to_its
 }
 
 fn grab_here(id: u32, at: Patch) -> v1::InputRequest {
-    v1::InputRequest {
-        action: Some(Action::Grab(v1::input_request::Grab {
-            id,
-            at: Some(v1::Patch {
-                u: at.u,
-                v: at.v,
-                radius: at.radius,
-            }),
-            target: None,
-            stiffness: 20.0,
-            damping: 0.2,
-        })),
-    }
+    grab_where_it_is(id, at, 20.0, 0.2)
 }
 
 /// Start `lodcloth record <instance> <args…>` and return once it says it is

@@ -75,19 +75,7 @@ async fn while_a_client_drags_the_live_error_is_the_reference_replaying_the_same
         v: 1.0,
         radius: 0.05,
     };
-    let grab = v1::InputRequest {
-        action: Some(Action::Grab(v1::input_request::Grab {
-            id: 1,
-            at: Some(v1::Patch {
-                u: at.u,
-                v: at.v,
-                radius: at.radius,
-            }),
-            target: None,
-            stiffness: 4.0,
-            damping: 0.1,
-        })),
-    };
+    let grab = grab_where_it_is(1, at, 4.0, 0.1);
     let reply = within(5, "grab", c.input("live", &grab)).await.expect("grab");
     let n = 16 * 16;
     let bottom = patch_position(&scene, &latest_state(), at);

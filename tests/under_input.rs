@@ -16,8 +16,6 @@ use lodcloth::plan::{Level, Preparer};
 use lodcloth::proto::{v1, WireLevel};
 use lodcloth::service::config::ServiceConfig;
 
-use v1::input_request::Action;
-
 /// Each level's (scripted prediction, prediction under input), prepared in
 /// this process from the test daemon's own config.
 fn in_process(names: (&str, &str)) -> Vec<(Level, f64, f64)> {
@@ -133,19 +131,12 @@ async fn each_level_gets_a_prediction_under_input_and_max_error_chooses_by_it_wh
 
     // A hand takes the cloth; once the metrics say it is touched, the same
     // request chooses by the predictions under input.
-    let grab = v1::InputRequest {
-        action: Some(Action::Grab(v1::input_request::Grab {
-            id: 1,
-            at: Some(v1::Patch {
-                u: 0.5,
-                v: 1.0,
-                radius: 0.05,
-            }),
-            target: None,
-            stiffness: 4.0,
-            damping: 0.1,
-        })),
+    let at = lodcloth::touch::Patch {
+        u: 0.5,
+        v: 1.0,
+        radius: 0.05,
     };
+    let grab = grab_where_it_is(1, at, 4.0, 0.1);
     within(5, "grab", c.input("drag", &grab)).await.expect("grab");
     within(10, "metrics saying touched", async {
         loop {

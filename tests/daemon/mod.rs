@@ -233,3 +233,20 @@ pub async fn http_get(addr: std::net::SocketAddr, path: &str) -> std::io::Result
     let status = head.split_whitespace().nth(1).and_then(|c| c.parse().ok()).unwrap_or(0);
     Ok((status, head.to_string(), body.to_string()))
 }
+
+/// A grab of `at` without a target (the hand closes where the patch is).
+pub fn grab_where_it_is(id: u32, at: lodcloth::touch::Patch, stiffness: f64, damping: f64) -> v1::InputRequest {
+    v1::InputRequest {
+        action: Some(v1::input_request::Action::Grab(v1::input_request::Grab {
+            id,
+            at: Some(v1::Patch {
+                u: at.u,
+                v: at.v,
+                radius: at.radius,
+            }),
+            target: None,
+            stiffness,
+            damping,
+        })),
+    }
+}

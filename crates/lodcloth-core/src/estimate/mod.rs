@@ -37,7 +37,7 @@ pub use inverse::{Distribution, InverseEstimate, LsqEstimate, Reading, Rejection
 pub use metric::{ErrorAccumulator, ErrorReport};
 pub use reference::{RecordSpec, Reference, ReferenceError, Sample};
 pub use replayed::{ReplayError, ReplayedReference};
-pub use touched::{probes, record_touched, Probe, TouchedError, TouchedReference, TouchedScore, PROBES};
+pub use touched::{eased_drag, probes, record_touched, Probe, TouchedError, TouchedReference, TouchedScore, PROBES};
 
 use crate::lod::{Correlation, LodError};
 use crate::scene::{MassConvention, Scene, SceneError};

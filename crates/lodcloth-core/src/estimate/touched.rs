@@ -203,30 +203,15 @@ pub fn probes(scene: &Scene, reference: &Reference) -> Result<Vec<Probe>, Touche
         let patch = Patch { u, v, radius };
         let start = patch_position(&shape, &patch, &reference.frames[f0]);
         let across = if u >= 0.5 { e_u.map(|x| -x) } else { e_u };
-        let mut events = vec![(
-            t0,
-            Input::Grab {
-                id: 1,
-                at: patch,
-                target: None,
-                stiffness,
-                damping,
-            },
-        )];
-        let mut t = t0;
-        let mut from = start;
-        let moves = (leg * hz).ceil().max(1.0) as usize;
-        for dir in [normal, across] {
-            let to = [0, 1, 2].map(|c| from[c] + reach * dir[c]);
-            for i in 1..=moves {
-                let s = 0.5 - 0.5 * (std::f64::consts::PI * i as f64 / moves as f64).cos();
-                let target = [0, 1, 2].map(|c| from[c] + s * (to[c] - from[c]));
-                events.push((t + leg * i as f64 / moves as f64, Input::Move { id: 1, target }));
-            }
-            t += leg + hold;
-            from = to;
-        }
-        events.push((t, Input::Release { id: 1 }));
+        let grab = Input::Grab {
+            id: 1,
+            at: patch,
+            target: None,
+            stiffness,
+            damping,
+        };
+        let legs = [normal, across].map(|d| d.map(|x| reach * x));
+        let events = eased_drag(grab, t0, start, &legs, leg, hold, hz);
         let name = format!("u={u} v={v}, {stiffness:.3} N/m");
         let script = Script::new(events).map_err(|e| TouchedError::Input {
             probe: name.clone(),
@@ -236,6 +221,42 @@ pub fn probes(scene: &Scene, reference: &Reference) -> Result<Vec<Probe>, Touche
         out.push(Probe { name, script });
     }
     Ok(out)
+}
+
+/// A hand closing on a patch at `t0` (`grab`, which names the patch, the
+/// grab's id and its spring; its target is where the patch is then,
+/// `start`) and carrying it along `legs` (displacements, m), each over
+/// `leg` seconds, cosine-eased, with `hz` target updates a second, holding
+/// `hold` seconds after each, then letting go.
+pub fn eased_drag(
+    grab: Input,
+    t0: f64,
+    start: [f64; 3],
+    legs: &[[f64; 3]],
+    leg: f64,
+    hold: f64,
+    hz: f64,
+) -> Vec<(f64, Input)> {
+    let id = match grab {
+        Input::Grab { id, .. } => id,
+        _ => 0,
+    };
+    let mut events = vec![(t0, grab)];
+    let mut t = t0;
+    let mut from = start;
+    let moves = (leg * hz).round().max(1.0) as usize;
+    for d in legs {
+        let to = [0, 1, 2].map(|c| from[c] + d[c]);
+        for i in 1..=moves {
+            let s = 0.5 - 0.5 * (std::f64::consts::PI * i as f64 / moves as f64).cos();
+            let target = [0, 1, 2].map(|c| from[c] + s * (to[c] - from[c]));
+            events.push((t + leg * i as f64 / moves as f64, Input::Move { id, target }));
+        }
+        t += leg + hold;
+        from = to;
+    }
+    events.push((t, Input::Release { id }));
+    events
 }
 
 /// Run the reference of `scene` (its own resolution, integrator and step,
