@@ -479,3 +479,111 @@ fn bad_inputs_are_refused_naming_their_field_and_change_nothing() {
     }
     assert!(!touch.active(0.0));
 }
+
+/// The standard drags behind a level's prediction under input
+/// (`estimate::touched::probes`), worked out by hand from the rule for a
+/// 1.2 × 0.8 m cloth pinned along its top edge under gravity: the three
+/// free candidates farthest from the pinned nodes and from each other are
+/// the bottom edge's middle (on 24 columns no pinned node lies exactly
+/// above it, so it is a hair farther than the corners), then the
+/// bottom-left corner (tied with the bottom-right at 0.6 m, first in row
+/// order), then the bottom-right; the hand closes at
+/// the frame nearest a fifth of the span, with the cloth's weight over 5 %
+/// of √(W·H) as its stiffness, carries the patch 0.3 √(W·H) up (against
+/// gravity: out of the horizontal rest plane) and then as far towards the
+/// middle along the width, and lets go.
+#[test]
+fn the_standard_drags_take_the_free_points_farthest_from_the_pins_and_carry_them_as_the_rule_says() {
+    use lodcloth::estimate::{probes, RecordSpec, Reference};
+    let text = FREE.replace("gravity = [0.0, 0.0, 0.0]", "gravity = [0.0, -9.81, 0.0]")
+        + "\n[[pins]]\nnodes = { edge = \"top\" }\n";
+    let scene = Scene::from_toml(&text, "<pinned, gravity>").expect("valid");
+    let spec = RecordSpec {
+        frames: 2000,
+        metric_stride: 20,
+        estimate_stride: 20,
+        difference_span: 1,
+    };
+    let reference = Reference::record(scene.build().expect("builds"), spec, &mut |_, _| {}).expect("records");
+    let drags = probes(&scene, &reference).expect("three drags");
+    let names: Vec<&str> = drags
+        .iter()
+        .map(|p| p.name.split(',').next().expect("a name"))
+        .collect();
+    assert_eq!(names, ["u=0.5 v=1", "u=0 v=1", "u=1 v=1"]);
+
+    let (w, h) = (1.2, 0.8);
+    let size = f64::sqrt(w * h);
+    let span = *reference.frame_times.last().expect("frames");
+    let stiffness = w * h * 0.2 * 9.81 / (0.05 * size);
+    for (p, towards_middle) in drags.iter().zip([-1.0, 1.0, -1.0]) {
+        let events = p.script.events();
+        let (
+            t0,
+            Input::Grab {
+                stiffness: k, target, ..
+            },
+        ) = events[0]
+        else {
+            panic!("{}: starts with a grab", p.name)
+        };
+        assert!(
+            (t0 - 0.2 * span).abs() <= 0.5 * 20.0 * 1e-4,
+            "{}: grabs at {t0}",
+            p.name
+        );
+        assert!((k - stiffness).abs() <= 1e-9 * stiffness, "{}: {k} N/m", p.name);
+        assert_eq!(target, None, "{}: the hand closes where the patch is", p.name);
+        let moves: Vec<[f64; 3]> = events
+            .iter()
+            .filter_map(|(_, i)| match i {
+                Input::Move { target, .. } => Some(*target),
+                _ => None,
+            })
+            .collect();
+        // Two legs of 0.2 × span × 60 targets each.
+        let per_leg = (0.2 * span * 60.0).round() as usize;
+        assert_eq!(moves.len(), 2 * per_leg, "{}", p.name);
+        // Where the reference has the patch at t0.
+        let f0 = reference
+            .frame_times
+            .iter()
+            .position(|&t| t == t0)
+            .expect("t0 is a frame time");
+        let shape = reference.topology.grid.expect("a grid");
+        let at = match events[0].1 {
+            Input::Grab { at, .. } => at,
+            _ => unreachable!(),
+        };
+        let (nodes, weights) = at.weights(&shape);
+        let n = shape.nx * shape.ny;
+        let frame = &reference.frames[f0];
+        let start = [0, 1, 2].map(|c| {
+            nodes
+                .iter()
+                .zip(&weights)
+                .map(|(&k, &wk)| wk * f64::from(frame[c * n + k as usize]))
+                .sum::<f64>()
+        });
+        let up = moves[per_leg - 1];
+        let across = moves[2 * per_leg - 1];
+        let close = |a: [f64; 3], b: [f64; 3]| (0..3).all(|c| (a[c] - b[c]).abs() < 1e-9);
+        assert!(
+            close(up, [start[0], start[1] + 0.3 * size, start[2]]),
+            "{}: leg 1 ends at {up:?}",
+            p.name
+        );
+        assert!(
+            close(across, [up[0] + towards_middle * 0.3 * size, up[1], up[2]]),
+            "{}: leg 2 ends at {across:?}, from {up:?}",
+            p.name
+        );
+        let (t_end, last) = events.last().expect("events");
+        assert!(matches!(last, Input::Release { id: 1 }), "{}: lets go last", p.name);
+        assert!(
+            (t_end - (t0 + 0.6 * span)).abs() < 1e-9,
+            "{}: lets go at {t_end}",
+            p.name
+        );
+    }
+}
