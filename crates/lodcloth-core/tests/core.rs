@@ -11,6 +11,7 @@ mod common;
 
 mod cache;
 mod conservation;
+mod contact;
 mod convergence;
 mod energy;
 mod equilibrium;

@@ -94,6 +94,7 @@ fn test_loads(topology: &Topology, with_wind: bool) -> Loads {
                 profile: Profile::Ramp { start: 0.0, end: 1.0 },
             },
         ],
+        colliders: Vec::new(),
     }
 }
 

@@ -74,6 +74,27 @@ impl Scene {
                 profile: *profile,
             });
         }
+        // A free node that starts inside a body would be thrown out of it
+        // at the first step: refuse the scene instead, naming the body.
+        for (i, body) in self.colliders.iter().enumerate() {
+            let inside: Vec<usize> = (0..topology.n_nodes)
+                .filter(|&k| !pins.iter().any(|p| p.node as usize == k))
+                .filter(|&k| body.distance(topology.rest_positions[k], 0.0) < 0.0)
+                .collect();
+            if let Some(&k) = inside.first() {
+                let p = topology.rest_positions[k];
+                problems.push(format!(
+                    "colliders[{i}]: {} free node(s) of the rest cloth at {}×{} start inside it \
+                     (first: node {k} at [{:.4}, {:.4}, {:.4}] m)",
+                    inside.len(),
+                    shape.nx,
+                    shape.ny,
+                    p[0],
+                    p[1],
+                    p[2]
+                ));
+            }
+        }
         if !problems.is_empty() {
             return Err(SceneError::Invalid {
                 origin: self.origin.clone(),
@@ -85,6 +106,7 @@ impl Scene {
             wind: self.wind,
             pins,
             tethers: Vec::new(),
+            colliders: self.colliders.clone(),
         })
     }
 

@@ -34,7 +34,9 @@
 
 use std::path::Path;
 
-use crate::sim::{GridShape, Material, Membrane, Orientation, PinPath, Profile, SimParams, StabilityCheck, Wind};
+use crate::sim::{
+    Collider, GridShape, Material, Membrane, Orientation, PinPath, Profile, SimParams, StabilityCheck, Wind,
+};
 
 mod build;
 mod error;
@@ -44,8 +46,9 @@ mod validate;
 
 pub use error::SceneError;
 pub use raw::{
-    MassConvention, RawAdjustment, RawCloth, RawCoeffs, RawForce, RawLimit, RawMaterial, RawModuli, RawOrientation,
-    RawPin, RawPinPath, RawProfile, RawRegion, RawScene, RawSelector, RawSimulation, RawSprings, RawStrain, RawWind,
+    MassConvention, RawAdjustment, RawCloth, RawCoeffs, RawCollider, RawForce, RawLimit, RawMaterial, RawModuli,
+    RawOrientation, RawPin, RawPinPath, RawProfile, RawRegion, RawScene, RawSelector, RawShape, RawSimulation,
+    RawSprings, RawStrain, RawWind,
 };
 pub use selector::{patch_weights, select as select_nodes, Edge, Selector};
 
@@ -100,6 +103,7 @@ pub struct Scene {
     pins: Vec<ScenePin>,
     forces: Vec<SceneForce>,
     wind: Option<Wind>,
+    colliders: Vec<Collider>,
 }
 
 impl Scene {
@@ -107,6 +111,11 @@ impl Scene {
     /// live pin move names by index.
     pub fn pin_sets(&self) -> Vec<Selector> {
         self.pins.iter().map(|p| p.0.clone()).collect()
+    }
+
+    /// The scene's rigid bodies (`[[colliders]]` in file order).
+    pub fn colliders(&self) -> &[Collider] {
+        &self.colliders
     }
 
     /// The scene's own wind, if it has one.

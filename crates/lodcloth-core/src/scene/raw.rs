@@ -38,6 +38,9 @@ pub struct RawScene {
     pub forces: Vec<RawForce>,
     /// `[wind]`: optional aerodynamic drag of moving air; default no wind.
     pub wind: Option<RawWind>,
+    /// `[[colliders]]`: rigid bodies the cloth drapes over; default none.
+    #[serde(default)]
+    pub colliders: Vec<RawCollider>,
 }
 
 /// `[cloth]`: a width × height rectangle sampled by nx × ny nodes at the
@@ -387,4 +390,60 @@ pub struct RawWind {
 
 fn default_air_density() -> f64 {
     1.2
+}
+
+/// The kind of a `[[colliders]]` body.
+#[derive(Debug, Clone, Copy, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum RawShape {
+    /// `plane`: the half-space behind the plane through `point` with outward
+    /// `normal`.
+    Plane,
+    /// `sphere`: `center` and `radius`.
+    Sphere,
+    /// `capsule`: the points within `radius` of the segment between `ends`.
+    Capsule,
+    /// `box`: axis-aligned, `center` and `size`.
+    Box,
+}
+
+/// `[[colliders]]`: a rigid body the cloth's nodes cannot enter, with
+/// Coulomb friction (see [`Collider`](crate::sim::Collider)). Which fields
+/// a body needs depends on its `shape`; validation names any missing or
+/// out of place.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RawCollider {
+    /// `plane`, `sphere`, `capsule` or `box`.
+    pub shape: RawShape,
+    /// A plane's point (m).
+    pub point: Option<[f64; 3]>,
+    /// A plane's outward normal (any length > 0; made unit).
+    pub normal: Option<[f64; 3]>,
+    /// A sphere's or box's centre (m).
+    pub center: Option<[f64; 3]>,
+    /// A sphere's or capsule's radius (m, > 0).
+    pub radius: Option<f64>,
+    /// A capsule's two axis ends (m).
+    pub ends: Option<[[f64; 3]; 2]>,
+    /// A box's full size along x, y, z (m, each > 0).
+    pub size: Option<[f64; 3]>,
+    /// Coulomb friction coefficient μ (≥ 0); default 0.3.
+    #[serde(default = "default_friction")]
+    pub friction: f64,
+    /// Distance kept between nodes and the surface (m, ≥ 0); default 5 mm.
+    #[serde(default = "default_clearance")]
+    pub clearance: f64,
+    /// How the body moves (it never rotates); default `fixed`. The same
+    /// forms as a pin's path.
+    #[serde(default)]
+    pub path: RawPinPath,
+}
+
+fn default_friction() -> f64 {
+    0.3
+}
+
+fn default_clearance() -> f64 {
+    0.005
 }

@@ -2,20 +2,20 @@
 //! reported at once, each with its field path (`springs.shear.k: …`).
 //!
 //! Sections are checked in a fixed order — cloth, springs, simulation,
-//! strain, pins, forces, wind — and within a section field by field, so the
+//! strain, pins, forces, wind, colliders — and within a section field by field, so the
 //! list of problems reads like the file. Each check records a problem and
 //! carries on with the value as given, so one mistake never hides another.
 
 use super::raw::{
-    RawCloth, RawCoeffs, RawForce, RawLimit, RawMaterial, RawModuli, RawOrientation, RawPin, RawPinPath, RawProfile,
-    RawScene, RawSelector, RawSimulation, RawSprings, RawStrain, RawWind,
+    RawCloth, RawCoeffs, RawCollider, RawForce, RawLimit, RawMaterial, RawModuli, RawOrientation, RawPin, RawPinPath,
+    RawProfile, RawScene, RawSelector, RawShape, RawSimulation, RawSprings, RawStrain, RawWind,
 };
 use super::selector::{Edge, Selector};
 use super::{Scene, SceneError, SceneForce, ScenePin};
 use crate::problems::Problems;
 use crate::sim::{
-    CgSettings, GridShape, Material, Membrane, Moduli, Orientation, PinPath, Profile, SimParams, SpringCoeffs,
-    SpringKind, StabilityCheck, StiffnessAdjustment, StrainLimit, Wind,
+    CgSettings, Collider, GridShape, Material, Membrane, Moduli, Orientation, PinPath, Profile, Shape, SimParams,
+    SpringCoeffs, SpringKind, StabilityCheck, StiffnessAdjustment, StrainLimit, Wind,
 };
 
 impl Scene {
@@ -32,6 +32,7 @@ impl Scene {
         let pins = p.pins(&raw.pins, &reference);
         let forces = p.forces(&raw.forces, &reference);
         let wind = raw.wind.as_ref().map(|w| p.wind(w));
+        let colliders = p.colliders(&raw.colliders);
 
         if let Err(problems) = p.finish() {
             return Err(SceneError::Invalid {
@@ -73,6 +74,7 @@ impl Scene {
             pins,
             forces,
             wind,
+            colliders,
         })
     }
 }
@@ -330,6 +332,116 @@ impl Problems {
             profile: self.profile("wind.profile", w.profile),
             air_density: w.air_density,
             drag_coefficient: w.drag_coefficient,
+        }
+    }
+}
+
+impl Problems {
+    /// `[[colliders]]`: each body's shape and the fields it needs (and no
+    /// other), then friction, clearance and path.
+    fn colliders(&mut self, bodies: &[RawCollider]) -> Vec<Collider> {
+        bodies
+            .iter()
+            .enumerate()
+            .map(|(i, b)| self.collider(&format!("colliders[{i}]"), b))
+            .collect()
+    }
+
+    fn collider(&mut self, path: &str, b: &RawCollider) -> Collider {
+        let kind = match b.shape {
+            RawShape::Plane => "plane",
+            RawShape::Sphere => "sphere",
+            RawShape::Capsule => "capsule",
+            RawShape::Box => "box",
+        };
+        let needs: &[&str] = match b.shape {
+            RawShape::Plane => &["point", "normal"],
+            RawShape::Sphere => &["center", "radius"],
+            RawShape::Capsule => &["ends", "radius"],
+            RawShape::Box => &["center", "size"],
+        };
+        let given = [
+            ("point", b.point.is_some()),
+            ("normal", b.normal.is_some()),
+            ("center", b.center.is_some()),
+            ("radius", b.radius.is_some()),
+            ("ends", b.ends.is_some()),
+            ("size", b.size.is_some()),
+        ];
+        for (field, present) in given {
+            match (needs.contains(&field), present) {
+                (true, false) => self.push(format!("{path}.{field}: a {kind} needs it")),
+                (false, true) => self.push(format!("{path}.{field}: a {kind} has no {field}")),
+                _ => {}
+            }
+        }
+        let mut vector = |field: &str, v: Option<[f64; 3]>| {
+            let v = v.unwrap_or_default();
+            for (c, x) in v.iter().enumerate() {
+                self.finite(&format!("{path}.{field}[{c}]"), *x);
+            }
+            v
+        };
+        let (position, shape) = match b.shape {
+            RawShape::Plane => {
+                let point = vector("point", b.point);
+                let normal = vector("normal", b.normal);
+                let len = crate::sim::vec3::norm(normal);
+                if b.normal.is_some() && !(len > 0.0) {
+                    self.push(format!("{path}.normal: must not be zero"));
+                }
+                let normal = if len > 0.0 {
+                    normal.map(|x| x / len)
+                } else {
+                    [0.0, 1.0, 0.0]
+                };
+                (point, Shape::Plane { normal })
+            }
+            RawShape::Sphere => (
+                vector("center", b.center),
+                Shape::Sphere {
+                    radius: b.radius.unwrap_or(1.0),
+                },
+            ),
+            RawShape::Capsule => {
+                let [a, e] = b.ends.unwrap_or_default();
+                let (a, e) = (vector("ends[0]", Some(a)), vector("ends[1]", Some(e)));
+                (
+                    [0, 1, 2].map(|c| 0.5 * (a[c] + e[c])),
+                    Shape::Capsule {
+                        half_axis: [0, 1, 2].map(|c| 0.5 * (e[c] - a[c])),
+                        radius: b.radius.unwrap_or(1.0),
+                    },
+                )
+            }
+            RawShape::Box => {
+                let center = vector("center", b.center);
+                let size = b.size.unwrap_or([1.0; 3]);
+                for (c, x) in size.iter().enumerate() {
+                    if b.size.is_some() {
+                        self.positive(&format!("{path}.size[{c}]"), *x);
+                    }
+                }
+                (
+                    center,
+                    Shape::Cuboid {
+                        half_extents: size.map(|x| 0.5 * x),
+                    },
+                )
+            }
+        };
+        if let Some(r) = b.radius {
+            self.positive(&format!("{path}.radius"), r);
+        }
+        self.non_negative(&format!("{path}.friction"), b.friction);
+        self.non_negative(&format!("{path}.clearance"), b.clearance);
+        let motion = self.pin_path(&format!("{path}.path"), b.path);
+        Collider {
+            shape,
+            position,
+            path: motion,
+            friction: b.friction,
+            clearance: b.clearance,
         }
     }
 }

@@ -293,6 +293,8 @@ pub struct Loads {
     /// Springs from nodes to world points. Their energy is not part of
     /// [`StepReport`](super::StepReport)'s elastic energy.
     pub tethers: Vec<Tether>,
+    /// Rigid bodies the free nodes cannot enter (see [`super::contact`]).
+    pub colliders: Vec<super::contact::Collider>,
 }
 
 impl Loads {

@@ -5,6 +5,7 @@
 //! and returns a [`StepReport`]. Numerical trouble comes back as data
 //! (`report.finite == false`), never as a panic or an error.
 
+mod contact;
 mod forces;
 mod implicit;
 mod live;
@@ -23,6 +24,7 @@ pub mod vec3;
 
 use std::sync::Arc;
 
+pub use contact::{Collider, Shape};
 pub use forces::{SpringKernel, SpringTotals};
 pub use live::GrabHeadroom;
 pub use loads::{Grab, Loads, NodeLoad, Pin, PinPath, PinShift, Profile, Tether, Wind};
@@ -129,6 +131,8 @@ pub struct StepReport {
     pub solver_residual: f64,
     /// Strain-limiting sweeps that corrected something.
     pub strain_iterations: u32,
+    /// Node–body contacts resolved this step (0 without colliders).
+    pub contacts: u32,
 }
 
 impl StepReport {
@@ -170,6 +174,9 @@ struct Workspace {
     stage_acc: Paged,
     implicit: Option<ImplicitWorkspace>,
     strain: Option<StrainWorkspace>,
+    /// Positions at the start of the step, for contact's swept test (empty
+    /// without colliders).
+    before: Vec<f64>,
     /// Springs in f32 ([`SpringPrecision::F32`]); None in f64.
     mixed: Option<Box<Mixed>>,
 }
@@ -235,6 +242,11 @@ impl Workspace {
             stage_acc: Paged::new(rk, colour(4)),
             implicit: (params.integrator == Integrator::ImplicitEuler).then(|| ImplicitWorkspace::new(topology)),
             strain: params.strain_limit.map(|_| StrainWorkspace::new(topology)),
+            before: if loads.colliders.is_empty() {
+                Vec::new()
+            } else {
+                vec![0.0; n3]
+            },
             mixed: None,
         }
     }
@@ -801,6 +813,9 @@ impl Simulation {
         let dt = self.model.params.dt;
         let t0 = self.state.time;
         let mut solver = (0, 0.0);
+        if !self.model.loads.colliders.is_empty() {
+            self.ws.before.copy_from_slice(&self.state.pos);
+        }
         match self.model.params.integrator {
             integrator @ (Integrator::ExplicitEuler | Integrator::SymplecticEuler) => {
                 // Explicit Euler moves x with the old v, symplectic with the new.
@@ -874,10 +889,20 @@ impl Simulation {
             );
             strain_iterations = out.iterations;
         }
+        // Contact last, so no state a reader sees has a node inside a body.
+        let contacts = contact::resolve(
+            &self.model.loads.colliders,
+            (t0, self.state.time),
+            &self.ws.before,
+            &mut self.state.pos,
+            &mut self.state.vel,
+            &self.model.free,
+        );
         self.cached = false;
         self.ensure_cache(par);
 
-        let report = self.measure(solver, strain_iterations, par);
+        let mut report = self.measure(solver, strain_iterations, par);
+        report.contacts = contacts;
         self.last = Some(report);
         report
     }
@@ -1127,6 +1152,7 @@ impl Simulation {
             solver_iterations: solver.0,
             solver_residual: solver.1,
             strain_iterations,
+            contacts: 0,
         }
     }
 }
@@ -1270,6 +1296,9 @@ fn validate_loads(loads: &Loads, n: usize) -> Result<(), SimError> {
             ));
         }
     }
+    for (i, body) in loads.colliders.iter().enumerate() {
+        validate_collider(i, body)?;
+    }
     for pin in &loads.pins {
         if pin.node as usize >= n {
             return Err(SimError::NodeOutOfRange {
@@ -1284,6 +1313,63 @@ fn validate_loads(loads: &Loads, n: usize) -> Result<(), SimError> {
                 f64::NAN,
                 "pin anchor must be finite",
             ));
+        }
+    }
+    Ok(())
+}
+
+fn validate_collider(i: usize, body: &Collider) -> Result<(), SimError> {
+    let name = |what: &str| format!("colliders[{i}].{what}");
+    let speed = match body.path {
+        PinPath::Fixed => 0.0,
+        PinPath::Linear { velocity, .. } => vec3::norm(velocity),
+        PinPath::Sine { amplitude, frequency } => vec3::norm(amplitude) * frequency,
+    };
+    let checks: [(&str, f64, bool, &'static str); 4] = [
+        ("position", vec3::norm(body.position), true, "must be finite"),
+        ("path", speed, true, "must be finite"),
+        (
+            "friction",
+            body.friction,
+            body.friction >= 0.0,
+            "must be finite and ≥ 0",
+        ),
+        (
+            "clearance",
+            body.clearance,
+            body.clearance >= 0.0,
+            "must be finite and ≥ 0",
+        ),
+    ];
+    for (what, x, ok, reason) in checks {
+        if !(x.is_finite() && ok) {
+            return Err(invalid(name(what), x, reason));
+        }
+    }
+    match body.shape {
+        Shape::Plane { normal } => {
+            if !((vec3::norm(normal) - 1.0).abs() < 1e-9) {
+                return Err(invalid(
+                    name("normal"),
+                    vec3::norm(normal),
+                    "a plane's normal must be a unit vector",
+                ));
+            }
+        }
+        Shape::Sphere { radius } | Shape::Capsule { radius, .. } => {
+            if !(radius.is_finite() && radius > 0.0) {
+                return Err(invalid(name("radius"), radius, "must be finite and > 0"));
+            }
+            if let Shape::Capsule { half_axis, .. } = body.shape {
+                if !vec3::norm(half_axis).is_finite() {
+                    return Err(invalid(name("half_axis"), vec3::norm(half_axis), "must be finite"));
+                }
+            }
+        }
+        Shape::Cuboid { half_extents } => {
+            if let Some(&e) = half_extents.iter().find(|e| !(e.is_finite() && **e > 0.0)) {
+                return Err(invalid(name("half_extents"), e, "each must be finite and > 0"));
+            }
         }
     }
     Ok(())
