@@ -323,3 +323,47 @@ fn a_collider_missing_a_field_or_given_another_shapes_field_is_refused_naming_it
         "{e}"
     );
 }
+
+/// What clients draw of a body lies on its surface and faces outwards.
+#[test]
+fn the_drawing_of_each_body_lies_on_its_surface_and_faces_out() {
+    let shapes = [
+        Shape::Plane {
+            normal: [0.6, 0.0, 0.8],
+        },
+        Shape::Sphere { radius: 0.3 },
+        Shape::Capsule {
+            half_axis: [0.1, 0.2, -0.2],
+            radius: 0.15,
+        },
+        Shape::Cuboid {
+            half_extents: [0.5, 0.1, 0.25],
+        },
+    ];
+    for shape in shapes {
+        let t = shape.triangles(4.0);
+        assert!(t.len() >= 6 && t.len() % 3 == 0, "{shape:?}: {} vertices", t.len());
+        let mut faced = 0;
+        for tri in t.chunks(3) {
+            for v in tri {
+                let (d, _) = shape.distance(*v);
+                assert!(d.abs() < 1e-9, "{shape:?}: vertex {v:?} is {d:e} m off the surface");
+            }
+            let (a, b, c) = (tri[0], tri[1], tri[2]);
+            let e1 = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
+            let e2 = [c[0] - a[0], c[1] - a[1], c[2] - a[2]];
+            let n = common::cross(e1, e2);
+            if common::norm(n) < 1e-12 {
+                continue; // a pole's degenerate triangle
+            }
+            let mid = [0, 1, 2].map(|i| (a[i] + b[i] + c[i]) / 3.0);
+            let (_, outward) = shape.distance(mid);
+            assert!(
+                n[0] * outward[0] + n[1] * outward[1] + n[2] * outward[2] > 0.0,
+                "{shape:?}: a triangle at {mid:?} faces inwards"
+            );
+            faced += 1;
+        }
+        assert!(faced * 3 >= t.len() / 2, "{shape:?}: too few proper triangles");
+    }
+}

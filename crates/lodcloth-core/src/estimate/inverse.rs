@@ -12,7 +12,9 @@
 //! otherwise (second order). The spring force a coarse node must feel to
 //! follow the reference is `F_spring = m·a − F_ext` with `F_ext` = scene
 //! loads, wind, gravity and drag of the coarse cloth
-//! ([`Simulation::external_forces`]). Pinned nodes carry no information.
+//! ([`Simulation::external_forces`]). Pinned nodes carry no information,
+//! nor, in a sample, do nodes near a collider (their acceleration holds an
+//! unknown contact force; [`Observation::touching`]).
 //!
 //! # Per-class bases
 //! Eq. 1 is linear in the coefficients: the spring force on node i is
@@ -169,6 +171,17 @@ pub struct Observation {
     pub fine_vel: Vec<f64>,
     /// Index of the reference sample.
     pub sample: usize,
+    /// Per coarse node: near a collider at one of the sample's three frames,
+    /// so its observed acceleration carries an unknown contact force (empty
+    /// when the scene has no colliders).
+    pub touching: Vec<bool>,
+}
+
+impl Observation {
+    /// Whether node `k`'s observed `spring_force` is the springs' alone.
+    pub fn springs_alone(&self, k: usize) -> bool {
+        !self.touching.get(k).copied().unwrap_or(false)
+    }
 }
 
 /// Every observation of one coarse level, and which of its nodes are free
@@ -227,6 +240,7 @@ pub fn observe(
             })
             .collect();
         coarse.external_forces(s.time, &pos, &vel, &mut ext);
+        let touching = touching(coarse, dt, s.time, [&prev, &pos, &next]);
         let mut spring_force = vec![0.0; 3 * n];
         for c in 0..3 {
             for k in 0..n {
@@ -244,6 +258,7 @@ pub fn observe(
             spring_force,
             fine_vel,
             sample: si,
+            touching,
         });
         progress(Progress {
             stage: "observe",
@@ -256,6 +271,29 @@ pub fn observe(
         masses,
         samples: out,
     }
+}
+
+/// Which coarse nodes are near a collider at any of a sample's three
+/// mapped frames (`frames` at t − dt, t, t + dt): within the body's
+/// clearance plus one coarse cell, since a mapped position blends reference
+/// nodes up to a cell away, any of which may be pressed against the body.
+/// Empty without colliders.
+fn touching(coarse: &Simulation, dt: f64, t: f64, frames: [&[f64]; 3]) -> Vec<bool> {
+    let colliders = &coarse.loads().colliders;
+    if colliders.is_empty() {
+        return Vec::new();
+    }
+    let topo = coarse.topology();
+    let n = topo.n_nodes;
+    let cell = topo.grid.map_or(0.0, |g| g.hx().max(g.hy()));
+    (0..n)
+        .map(|k| {
+            frames.iter().zip([t - dt, t, t + dt]).any(|(x, time)| {
+                let p = [x[k], x[n + k], x[2 * n + k]];
+                colliders.iter().any(|b| b.distance(p, time) < b.clearance + cell)
+            })
+        })
+        .collect()
 }
 
 fn pinned_mask(sim: &Simulation) -> Vec<bool> {
@@ -515,7 +553,8 @@ pub fn inverse_estimate(
         }
         bases.compute(coarse, &obs.pos, &obs.vel);
         for k in 0..n {
-            if !free[k] {
+            // A node against a body: its observed force holds the contact's.
+            if !free[k] || (!reading.reference_forces() && !obs.springs_alone(k)) {
                 continue;
             }
             // The type-t force the coarse node's springs must supply.
@@ -714,7 +753,7 @@ pub fn lsq_estimate(
     for (oi, obs) in observations.samples.iter().enumerate() {
         bases.compute(coarse, &obs.pos, &obs.vel);
         for c in 0..3 {
-            for k in (0..n).filter(|&k| observations.free[k]) {
+            for k in (0..n).filter(|&k| observations.free[k] && obs.springs_alone(k)) {
                 let i = c * n + k;
                 let b = obs.spring_force[i];
                 let row = VecP::from_fn(|j, _| {

@@ -34,7 +34,7 @@
 //! (≥ 2 cm on the bodies' ≥ 10 cm features) this does not show.
 
 use super::loads::PinPath;
-use super::vec3::{add, dot, norm, scale, sub, V3};
+use super::vec3::{add, dot, norm, normalize, scale, sub, tangent_basis, V3};
 
 /// A rigid body's shape, in its own frame (centred on the body's position).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -97,6 +97,90 @@ impl Shape {
                     (d[c], n)
                 }
             }
+        }
+    }
+}
+
+impl Shape {
+    /// Its surface as a triangle soup about its centre (three vertices per
+    /// triangle, wound outwards), for drawing: a sphere or capsule as 24
+    /// segments by 12 rings a hemisphere, a box as its 12 triangles, a plane
+    /// as a square `plane_size` across.
+    pub fn triangles(&self, plane_size: f64) -> Vec<V3> {
+        let mut out = Vec::new();
+        match *self {
+            Shape::Plane { normal } => {
+                let (t1, t2) = tangent_basis(normal);
+                let h = 0.5 * plane_size;
+                let corner = |a: f64, b: f64| add(scale(t1, a * h), scale(t2, b * h));
+                let [p00, p10, p11, p01] = [
+                    corner(-1.0, -1.0),
+                    corner(1.0, -1.0),
+                    corner(1.0, 1.0),
+                    corner(-1.0, 1.0),
+                ];
+                out.extend([p00, p10, p11, p00, p11, p01]);
+            }
+            Shape::Sphere { radius } => round_triangles(radius, [0.0, 0.0, 0.0], &mut out),
+            Shape::Capsule { half_axis, radius } => round_triangles(radius, half_axis, &mut out),
+            Shape::Cuboid { half_extents: e } => {
+                for axis in 0..3 {
+                    let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
+                    for sign in [1.0, -1.0] {
+                        let vertex = |a: f64, b: f64| {
+                            let mut p = [0.0; 3];
+                            p[axis] = sign * e[axis];
+                            p[u] = a * e[u];
+                            p[v] = b * sign * e[v];
+                            p
+                        };
+                        let [p00, p10, p11, p01] = [
+                            vertex(-1.0, -1.0),
+                            vertex(1.0, -1.0),
+                            vertex(1.0, 1.0),
+                            vertex(-1.0, 1.0),
+                        ];
+                        out.extend([p00, p10, p11, p00, p11, p01]);
+                    }
+                }
+            }
+        }
+        out
+    }
+}
+
+/// A capsule of `radius` about the segment ±`half_axis` (a sphere when it
+/// is zero) as triangles: two hemispheres of rings joined at the equator.
+fn round_triangles(radius: f64, half_axis: V3, out: &mut Vec<V3>) {
+    const SEGMENTS: usize = 24;
+    const RINGS: usize = 12;
+    let axis = normalize(half_axis).unwrap_or([0.0, 0.0, 1.0]);
+    let (t1, t2) = tangent_basis(axis);
+    // Rows from the +axis pole to the −axis pole; the equator twice, once
+    // on each end of the segment, so the cylinder between is a row of quads.
+    let mut rows: Vec<(f64, V3)> = Vec::with_capacity(2 * RINGS + 2);
+    for (i, end) in [(0..=RINGS).collect::<Vec<_>>(), (RINGS..=2 * RINGS).collect()]
+        .into_iter()
+        .zip([half_axis, scale(half_axis, -1.0)])
+    {
+        for r in i {
+            rows.push((r as f64 * std::f64::consts::PI / (2 * RINGS) as f64, end));
+        }
+    }
+    let at = |(theta, end): (f64, V3), j: usize| {
+        let phi = j as f64 * std::f64::consts::TAU / SEGMENTS as f64;
+        let (st, ct) = theta.sin_cos();
+        let dir = add(
+            add(scale(t1, st * phi.cos()), scale(t2, st * phi.sin())),
+            scale(axis, ct),
+        );
+        add(end, scale(dir, radius))
+    };
+    for w in rows.windows(2) {
+        for j in 0..SEGMENTS {
+            let (a, b) = (at(w[0], j), at(w[1], j));
+            let (c, d) = (at(w[0], j + 1), at(w[1], j + 1));
+            out.extend([a, b, c, c, b, d]);
         }
     }
 }
