@@ -221,6 +221,45 @@ pub fn scene_update(state: &v1::State, info: &v1::InstanceInfo) -> Result<(Scene
             ..Default::default()
         });
     }
+    // The scene's bodies, each where the state says it is at its time.
+    let centres = points(&state.collider_positions).unwrap_or_default();
+    for (i, body) in info.colliders.iter().enumerate() {
+        let at = centres
+            .get(i)
+            .copied()
+            .or_else(|| body.position.as_ref().map(|p| [p.x, p.y, p.z]));
+        let Some(at) = at else { continue };
+        let triangles = points(&body.triangles).ok_or("a collider's triangles are not f32 triples")?;
+        entities.push(SceneEntity {
+            timestamp: Some(stamp),
+            frame_id: "world".into(),
+            id: format!("{}/collider/{i}", state.instance),
+            metadata: vec![
+                kv("shape", body.shape.clone()),
+                kv("friction", body.friction.to_string()),
+            ],
+            triangles: vec![TriangleListPrimitive {
+                pose: Some(Pose {
+                    position: Some(Vector3 {
+                        x: at[0],
+                        y: at[1],
+                        z: at[2],
+                    }),
+                    ..pose
+                }),
+                points: to_points(&triangles),
+                color: Some(Color {
+                    r: 0.55,
+                    g: 0.45,
+                    b: 0.35,
+                    a: 1.0,
+                }),
+                colors: Vec::new(),
+                indices: Vec::new(),
+            }],
+            ..Default::default()
+        });
+    }
     Ok((
         SceneUpdate {
             deletions: Vec::new(),
@@ -538,6 +577,47 @@ mod tests {
         let stamp = u.entities[0].timestamp.unwrap();
         assert_eq!((stamp.sec(), stamp.nsec()), (1_700_000_000, 250_000_000));
         assert_eq!(u.entities[1].triangles[0].points[2].z, 1.0);
+    }
+
+    /// A moving body is drawn where the state says it is, with the
+    /// triangles the daemon gave for it.
+    #[test]
+    fn each_collider_is_drawn_at_the_position_the_state_gives() {
+        let body = crate::sim::Collider {
+            shape: crate::sim::Shape::Sphere { radius: 0.2 },
+            position: [0.5, -0.3, 0.5],
+            path: crate::sim::PinPath::Fixed,
+            friction: 0.4,
+            clearance: 0.005,
+        };
+        let info = v1::InstanceInfo {
+            instance: "c".into(),
+            kind: "cloth".into(),
+            triangles: vec![0, 1, 2],
+            colliders: vec![crate::proto::collider(&body)],
+            ..Default::default()
+        };
+        let state = v1::State {
+            instance: "c".into(),
+            positions: packed(&[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]),
+            collider_positions: packed(&[[0.5, -0.1, 0.7]]),
+            ..Default::default()
+        };
+        let (u, _) = scene_update(&state, &info).unwrap();
+        assert_eq!(u.entities.len(), 2, "the mesh and the sphere");
+        let sphere = &u.entities[1];
+        assert_eq!(sphere.id, "c/collider/0");
+        let t = &sphere.triangles[0];
+        let at = t.pose.unwrap().position.unwrap();
+        assert_eq!([at.x, at.y, at.z], [0.5, -0.1, 0.7].map(|c: f64| c as f32 as f64));
+        assert_eq!(t.points.len(), body.shape.triangles(4.0).len());
+        for p in &t.points {
+            let r = (p.x * p.x + p.y * p.y + p.z * p.z).sqrt();
+            assert!(
+                (r - 0.2).abs() < 1e-6,
+                "a vertex {r} m from the centre of a 0.2 m sphere"
+            );
+        }
     }
 
     #[test]

@@ -12,7 +12,7 @@ use std::time::UNIX_EPOCH;
 
 use crate::engine::{AppliedInput, MetricsFrame, StateFrame};
 use crate::plan::Level;
-use crate::sim::{Material, SpringCoeffs};
+use crate::sim::{Collider, Material, Shape, SpringCoeffs};
 use crate::touch::{Input, Patch};
 
 /// Schema names sent with every put and reply (`application/protobuf;<schema>`).
@@ -158,8 +158,43 @@ pub fn state_message(instance: &str, f: &StateFrame) -> v1::State {
         simulation_positions: pack_positions(&f.simulation_positions),
         normals: pack_positions(&f.normals),
         reference_positions: pack_positions(&f.reference_positions),
+        collider_positions: pack_positions(&f.collider_positions),
     }
 }
+
+/// A scene's rigid body on the wire, with the triangles clients draw.
+pub fn collider(body: &Collider) -> v1::Collider {
+    let vec3 = |v: [f64; 3]| v1::Vec3 {
+        x: v[0],
+        y: v[1],
+        z: v[2],
+    };
+    let (shape, axis, radius, half_extents) = match body.shape {
+        Shape::Plane { normal } => ("plane", Some(vec3(normal)), 0.0, None),
+        Shape::Sphere { radius } => ("sphere", None, radius, None),
+        Shape::Capsule { half_axis, radius } => ("capsule", Some(vec3(half_axis)), radius, None),
+        Shape::Cuboid { half_extents } => ("box", None, 0.0, Some(vec3(half_extents))),
+    };
+    let triangles: Vec<f32> = body
+        .shape
+        .triangles(COLLIDER_PLANE_SIZE)
+        .iter()
+        .flat_map(|v| v.map(|c| c as f32))
+        .collect();
+    v1::Collider {
+        shape: shape.to_string(),
+        position: Some(vec3(body.position)),
+        axis,
+        radius,
+        half_extents,
+        friction: body.friction,
+        clearance: body.clearance,
+        triangles: pack_positions(&triangles),
+    }
+}
+
+/// How wide a plane is drawn (m): it is infinite.
+pub const COLLIDER_PLANE_SIZE: f64 = 4.0;
 
 /// `Metrics` on the wire.
 pub fn metrics_message(instance: &str, m: &MetricsFrame) -> v1::Metrics {

@@ -12,6 +12,7 @@ mod daemon;
 mod fuzz;
 
 mod clients;
+mod colliders;
 mod input;
 mod live_error;
 mod operations;

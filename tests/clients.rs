@@ -82,7 +82,7 @@ fn artefact(name: &str) -> PathBuf {
 }
 
 /// The viewer served in this process on a free port.
-async fn start_view(endpoint: String) -> (String, tokio::sync::oneshot::Sender<()>) {
+pub async fn start_view(endpoint: String) -> (String, tokio::sync::oneshot::Sender<()>) {
     let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
     let (addr_tx, addr_rx) = tokio::sync::oneshot::channel();
     let options = ViewOptions {

@@ -26,6 +26,8 @@ pub struct StateFrame {
     /// The shadow reference at `time`, laid out like `positions` (empty
     /// without a shadow reference or outside its recording).
     pub reference_positions: Vec<f32>,
+    /// Each collider's centre at `time`, interleaved (empty without).
+    pub collider_positions: Vec<f32>,
     pub stepped: SystemTime,
     pub transition: bool,
 }

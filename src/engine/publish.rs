@@ -30,6 +30,13 @@ impl Runner {
         if let Some(sh) = self.shadow.as_mut().filter(|_| !self.touched_episode) {
             sh.reference_at(s.time, &mut reference_positions);
         }
+        let collider_positions = self
+            .sim
+            .loads()
+            .colliders
+            .iter()
+            .flat_map(|body| body.at(s.time).0.map(|c| c as f32))
+            .collect();
         StateFrame {
             frame: self.frames,
             time: s.time,
@@ -40,6 +47,7 @@ impl Runner {
             simulation_positions,
             normals,
             reference_positions,
+            collider_positions,
             stepped: SystemTime::now(),
             transition,
         }

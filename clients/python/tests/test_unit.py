@@ -258,6 +258,23 @@ class Requests(unittest.TestCase):
         self.assertEqual(lc.v_coefficients(c), ((10, 20), (50, 60)))
 
 
+class Colliders(unittest.TestCase):
+    def test_a_collider_is_described_by_its_shape(self):
+        box = v1.Collider(
+            shape="box",
+            position=v1.Vec3(x=0.8, y=-0.395, z=0.8),
+            half_extents=v1.Vec3(x=0.5, y=0.375, z=0.5),
+            friction=0.4,
+            clearance=0.005,
+        )
+        self.assertEqual(
+            cli.collider_str(box),
+            "box at (0.8, -0.395, 0.8) m, size 1 x 0.75 x 1 m, friction 0.4, clearance 5 mm",
+        )
+        ball = v1.Collider(shape="sphere", position=v1.Vec3(), radius=0.15, friction=0.5, clearance=0.004)
+        self.assertIn("radius 0.15 m", cli.collider_str(ball))
+
+
 class Keys(unittest.TestCase):
     def test_the_contracts_table(self):
         self.assertEqual(keys.state("lodcloth", "a"), "lodcloth/a/state")

@@ -367,3 +367,50 @@ fn the_drawing_of_each_body_lies_on_its_surface_and_faces_out() {
         assert!(faced * 3 >= t.len() / 2, "{shape:?}: too few proper triangles");
     }
 }
+
+/// A state made elsewhere (another level's, mapped onto this one) with a
+/// node inside a body is put right when it is set, before any step.
+#[test]
+fn a_state_set_with_a_node_inside_a_body_has_it_put_on_the_surface() {
+    let topo = cloth(5, 0.4);
+    let p = params(
+        1e-3,
+        Integrator::SymplecticEuler,
+        material((50.0, 0.01), (10.0, 0.002), (1.0, 0.0002)),
+    );
+    let ball = Collider {
+        shape: Shape::Sphere { radius: 0.1 },
+        position: [0.2, -0.2, 0.2],
+        path: PinPath::Fixed,
+        friction: 0.0,
+        clearance: 0.003,
+    };
+    let loads = Loads {
+        colliders: vec![ball],
+        ..Loads::default()
+    };
+    let mut sim = build(
+        topo.clone(),
+        lumped_masses(&topo, 0.2),
+        p,
+        loads,
+        State::at_rest(&topo),
+        StabilityCheck::Enforce,
+    );
+    let mut state = State::at_rest(&topo);
+    let (k, n) = (12, topo.n_nodes); // the middle node
+    state.pos[n + k] = -0.15; // 5 cm inside the ball, above its centre
+    state.vel[n + k] = -1.0; // and moving further in
+    sim.set_state(state).expect("fits");
+    let x = sim.state().position(k);
+    let d = ball.distance(x, 0.0);
+    assert!(
+        (d - ball.clearance).abs() < 1e-12,
+        "node {k} is {d} m from the ball after set_state"
+    );
+    assert!(
+        sim.state().vel[n + k].abs() < 1e-12,
+        "still moving into the ball: {}",
+        sim.state().vel[n + k]
+    );
+}

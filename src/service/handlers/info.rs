@@ -97,6 +97,7 @@ fn instance_info(inst: &Instance) -> v1::InstanceInfo {
         simulation_points: s.simulation_points.as_deref().cloned().unwrap_or_default(),
         cloud_points: s.cloud_points as u32,
         halted: s.halted.as_deref().unwrap_or_default().to_string(),
+        colliders: c.colliders().iter().map(proto::collider).collect(),
         rest_positions: proto::pack_positions(
             &s.topology
                 .rest_positions

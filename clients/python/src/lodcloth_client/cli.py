@@ -251,6 +251,23 @@ def cmd_info(args, client: Client) -> None:
             f"under input {percent(lv, 'predicted_error_under_input'):>8}  "
             f"dt {lv.dt:.3e} s  {'ready' if lv.ready else 'not prepared'}"
         )
+    for k, c in enumerate(i.colliders):
+        print(f"  collider {k}: {collider_str(c)}")
+
+
+def collider_str(c) -> str:
+    """One line of a scene's rigid body (``v1.Collider``)."""
+    p = c.position
+    size = {
+        "sphere": f"radius {c.radius:g} m",
+        "capsule": f"radius {c.radius:g} m, half axis ({c.axis.x:g}, {c.axis.y:g}, {c.axis.z:g}) m",
+        "box": f"size {2 * c.half_extents.x:g} x {2 * c.half_extents.y:g} x {2 * c.half_extents.z:g} m",
+        "plane": f"normal ({c.axis.x:g}, {c.axis.y:g}, {c.axis.z:g})",
+    }.get(c.shape, "")
+    return (
+        f"{c.shape} at ({p.x:g}, {p.y:g}, {p.z:g}) m, {size}, friction {c.friction:g}, "
+        f"clearance {c.clearance * 1000:g} mm"
+    )
 
 
 def cmd_control(args, client: Client) -> None:

@@ -8,7 +8,7 @@ use std::sync::Arc;
 use crate::estimate::{Method, RecordSpec};
 use crate::points::scene::SurfaceScene;
 use crate::scene::Scene;
-use crate::sim::{Integrator, SpringPrecision};
+use crate::sim::{Collider, Integrator, SpringPrecision};
 
 use super::Level;
 
@@ -83,6 +83,14 @@ impl InstancePlan {
         match self.kind {
             InstanceKind::Cloth(_) => "cloth",
             InstanceKind::Surface(_) => "surface",
+        }
+    }
+
+    /// The scene's rigid bodies (none for a surface).
+    pub fn colliders(&self) -> &[Collider] {
+        match &self.kind {
+            InstanceKind::Cloth(scene) => scene.colliders(),
+            InstanceKind::Surface(_) => &[],
         }
     }
 

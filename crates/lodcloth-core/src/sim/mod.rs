@@ -668,7 +668,8 @@ impl Simulation {
     }
 
     /// Replace the state (same node count), e.g. after a level switch or a
-    /// rollback. Clears a divergence.
+    /// rollback. Clears a divergence. Free nodes inside a collider are put
+    /// on its surface (plus clearance), as a step's contact would.
     pub fn set_state(&mut self, state: State) -> Result<(), SimError> {
         let n = self.model.topology.n_nodes;
         if state.pos.len() != 3 * n || state.vel.len() != 3 * n {
@@ -683,6 +684,20 @@ impl Simulation {
         self.cached = false;
         self.last = None;
         self.apply_pins();
+        // A state made elsewhere (another level's, mapped) may have nodes
+        // inside a body: out along the nearest surface, as contact does.
+        if !self.model.loads.colliders.is_empty() {
+            self.ws.before.copy_from_slice(&self.state.pos);
+            let t = self.state.time;
+            contact::resolve(
+                &self.model.loads.colliders,
+                (t, t),
+                &self.ws.before,
+                &mut self.state.pos,
+                &mut self.state.vel,
+                &self.model.free,
+            );
+        }
         Ok(())
     }
 

@@ -10,6 +10,7 @@ protoc's output, not to be edited by hand.
 from .lodcloth_pb2 import (  # noqa: F401 - re-exported
     DESCRIPTOR,
     Coefficients,
+    Collider,
     ControlReply,
     ControlRequest,
     EpisodeInputs,
@@ -37,6 +38,7 @@ __all__ = [
     "DESCRIPTOR",
     "PACKAGE",
     "Coefficients",
+    "Collider",
     "ControlReply",
     "ControlRequest",
     "EpisodeInputs",

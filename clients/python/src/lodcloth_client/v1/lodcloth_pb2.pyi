@@ -42,7 +42,7 @@ class Coefficients(_message.Message):
     def __init__(self, structural_k: _Optional[float] = ..., structural_c: _Optional[float] = ..., shear_k: _Optional[float] = ..., shear_c: _Optional[float] = ..., bend_k: _Optional[float] = ..., bend_c: _Optional[float] = ..., structural_v_k: _Optional[float] = ..., structural_v_c: _Optional[float] = ..., bend_v_k: _Optional[float] = ..., bend_v_c: _Optional[float] = ...) -> None: ...
 
 class State(_message.Message):
-    __slots__ = ("instance", "frame", "time", "level", "coefficient_version", "positions", "episode", "stepped_unix_nanos", "transition", "simulation_positions", "normals", "reference_positions")
+    __slots__ = ("instance", "frame", "time", "level", "coefficient_version", "positions", "episode", "stepped_unix_nanos", "transition", "simulation_positions", "normals", "reference_positions", "collider_positions")
     INSTANCE_FIELD_NUMBER: _ClassVar[int]
     FRAME_FIELD_NUMBER: _ClassVar[int]
     TIME_FIELD_NUMBER: _ClassVar[int]
@@ -55,6 +55,7 @@ class State(_message.Message):
     SIMULATION_POSITIONS_FIELD_NUMBER: _ClassVar[int]
     NORMALS_FIELD_NUMBER: _ClassVar[int]
     REFERENCE_POSITIONS_FIELD_NUMBER: _ClassVar[int]
+    COLLIDER_POSITIONS_FIELD_NUMBER: _ClassVar[int]
     instance: str
     frame: int
     time: float
@@ -67,7 +68,8 @@ class State(_message.Message):
     simulation_positions: bytes
     normals: bytes
     reference_positions: bytes
-    def __init__(self, instance: _Optional[str] = ..., frame: _Optional[int] = ..., time: _Optional[float] = ..., level: _Optional[_Union[Level, _Mapping]] = ..., coefficient_version: _Optional[int] = ..., positions: _Optional[bytes] = ..., episode: _Optional[int] = ..., stepped_unix_nanos: _Optional[int] = ..., transition: bool = ..., simulation_positions: _Optional[bytes] = ..., normals: _Optional[bytes] = ..., reference_positions: _Optional[bytes] = ...) -> None: ...
+    collider_positions: bytes
+    def __init__(self, instance: _Optional[str] = ..., frame: _Optional[int] = ..., time: _Optional[float] = ..., level: _Optional[_Union[Level, _Mapping]] = ..., coefficient_version: _Optional[int] = ..., positions: _Optional[bytes] = ..., episode: _Optional[int] = ..., stepped_unix_nanos: _Optional[int] = ..., transition: bool = ..., simulation_positions: _Optional[bytes] = ..., normals: _Optional[bytes] = ..., reference_positions: _Optional[bytes] = ..., collider_positions: _Optional[bytes] = ...) -> None: ...
 
 class Metrics(_message.Message):
     __slots__ = ("instance", "frame", "time", "level", "method", "predicted_error", "live_error", "step_cost_us", "real_time_factor", "overruns", "kinetic_energy", "potential_energy", "max_strain", "coefficient_version", "paused", "dt", "steps", "lag_resets", "divergences", "rollbacks", "halted", "inputs", "touched", "live_error_time", "predicted_error_under_input")
@@ -138,7 +140,7 @@ class LevelInfo(_message.Message):
     def __init__(self, level: _Optional[_Union[Level, _Mapping]] = ..., predicted_error: _Optional[float] = ..., dt: _Optional[float] = ..., ready: bool = ..., predicted_error_under_input: _Optional[float] = ...) -> None: ...
 
 class InstanceInfo(_message.Message):
-    __slots__ = ("instance", "scene", "description", "level", "reference", "levels", "method", "integrator", "dt", "coefficients", "coefficient_version", "triangles", "pinned", "publish_hz", "o_max", "shadow_reference", "paused", "kind", "simulation_points", "cloud_points", "rest_positions", "halted")
+    __slots__ = ("instance", "scene", "description", "level", "reference", "levels", "method", "integrator", "dt", "coefficients", "coefficient_version", "triangles", "pinned", "publish_hz", "o_max", "shadow_reference", "paused", "kind", "simulation_points", "cloud_points", "rest_positions", "halted", "colliders")
     INSTANCE_FIELD_NUMBER: _ClassVar[int]
     SCENE_FIELD_NUMBER: _ClassVar[int]
     DESCRIPTION_FIELD_NUMBER: _ClassVar[int]
@@ -161,6 +163,7 @@ class InstanceInfo(_message.Message):
     CLOUD_POINTS_FIELD_NUMBER: _ClassVar[int]
     REST_POSITIONS_FIELD_NUMBER: _ClassVar[int]
     HALTED_FIELD_NUMBER: _ClassVar[int]
+    COLLIDERS_FIELD_NUMBER: _ClassVar[int]
     instance: str
     scene: str
     description: str
@@ -183,7 +186,28 @@ class InstanceInfo(_message.Message):
     cloud_points: int
     rest_positions: bytes
     halted: str
-    def __init__(self, instance: _Optional[str] = ..., scene: _Optional[str] = ..., description: _Optional[str] = ..., level: _Optional[_Union[Level, _Mapping]] = ..., reference: _Optional[_Union[Level, _Mapping]] = ..., levels: _Optional[_Iterable[_Union[LevelInfo, _Mapping]]] = ..., method: _Optional[str] = ..., integrator: _Optional[str] = ..., dt: _Optional[float] = ..., coefficients: _Optional[_Union[Coefficients, _Mapping]] = ..., coefficient_version: _Optional[int] = ..., triangles: _Optional[_Iterable[int]] = ..., pinned: _Optional[_Iterable[int]] = ..., publish_hz: _Optional[float] = ..., o_max: _Optional[float] = ..., shadow_reference: bool = ..., paused: bool = ..., kind: _Optional[str] = ..., simulation_points: _Optional[_Iterable[int]] = ..., cloud_points: _Optional[int] = ..., rest_positions: _Optional[bytes] = ..., halted: _Optional[str] = ...) -> None: ...
+    colliders: _containers.RepeatedCompositeFieldContainer[Collider]
+    def __init__(self, instance: _Optional[str] = ..., scene: _Optional[str] = ..., description: _Optional[str] = ..., level: _Optional[_Union[Level, _Mapping]] = ..., reference: _Optional[_Union[Level, _Mapping]] = ..., levels: _Optional[_Iterable[_Union[LevelInfo, _Mapping]]] = ..., method: _Optional[str] = ..., integrator: _Optional[str] = ..., dt: _Optional[float] = ..., coefficients: _Optional[_Union[Coefficients, _Mapping]] = ..., coefficient_version: _Optional[int] = ..., triangles: _Optional[_Iterable[int]] = ..., pinned: _Optional[_Iterable[int]] = ..., publish_hz: _Optional[float] = ..., o_max: _Optional[float] = ..., shadow_reference: bool = ..., paused: bool = ..., kind: _Optional[str] = ..., simulation_points: _Optional[_Iterable[int]] = ..., cloud_points: _Optional[int] = ..., rest_positions: _Optional[bytes] = ..., halted: _Optional[str] = ..., colliders: _Optional[_Iterable[_Union[Collider, _Mapping]]] = ...) -> None: ...
+
+class Collider(_message.Message):
+    __slots__ = ("shape", "position", "axis", "radius", "half_extents", "friction", "clearance", "triangles")
+    SHAPE_FIELD_NUMBER: _ClassVar[int]
+    POSITION_FIELD_NUMBER: _ClassVar[int]
+    AXIS_FIELD_NUMBER: _ClassVar[int]
+    RADIUS_FIELD_NUMBER: _ClassVar[int]
+    HALF_EXTENTS_FIELD_NUMBER: _ClassVar[int]
+    FRICTION_FIELD_NUMBER: _ClassVar[int]
+    CLEARANCE_FIELD_NUMBER: _ClassVar[int]
+    TRIANGLES_FIELD_NUMBER: _ClassVar[int]
+    shape: str
+    position: Vec3
+    axis: Vec3
+    radius: float
+    half_extents: Vec3
+    friction: float
+    clearance: float
+    triangles: bytes
+    def __init__(self, shape: _Optional[str] = ..., position: _Optional[_Union[Vec3, _Mapping]] = ..., axis: _Optional[_Union[Vec3, _Mapping]] = ..., radius: _Optional[float] = ..., half_extents: _Optional[_Union[Vec3, _Mapping]] = ..., friction: _Optional[float] = ..., clearance: _Optional[float] = ..., triangles: _Optional[bytes] = ...) -> None: ...
 
 class InstanceSummary(_message.Message):
     __slots__ = ("instance", "scene", "level", "method", "publish_hz")
