@@ -17,17 +17,20 @@
 //!   (`tests/contact.rs` checks the sliding block's ½(g sin θ − μ g cos θ)t²).
 //!
 //! # No tunnelling
-//! A node that came from outside the inflated body this step is put back
-//! onto the tangent plane at the *first* point of its straight path (in the
-//! body's frame, so a moving body counts) that touches it, keeping its
-//! motion along that plane; not at the nearest surface point of its end
-//! position. A node fast enough to cross a thin box in one step is thus
-//! stopped on the side it came from. The signed distance of a convex body is a
-//! convex function, so along a segment it has one minimum; a golden-section
-//! search finds it and a bisection the first crossing before it. Segments
-//! that cannot reach the body (by the distance's 1-Lipschitz bound) are
-//! rejected with two distance evaluations, so a node far from every body
-//! costs about as much as one wind or load term.
+//! A node inside the inflated body at the end of a step goes out along the
+//! nearest surface, unless it came from outside and the nearest surface
+//! faces away from where it came (it went through the middle of a thin
+//! body): then, and when it ended clear on the far side of the body, it is
+//! put back onto the tangent plane at the *first* point of its straight path
+//! (in the body's frame, so a moving body counts) that touches the body,
+//! keeping its motion along that plane. A node fast enough to cross a thin
+//! box in one step is thus stopped on the side it came from. The signed
+//! distance of a convex body is convex along a segment, with one minimum: a
+//! golden-section search finds it and a bisection the first crossing before
+//! it. That search runs only for a step that moved towards the body at its
+//! start and away at its end while coming within reach of it (by the
+//! distance's 1-Lipschitz bound); resting and sliding nodes never need it,
+//! and a node far from every body costs one distance and one length.
 //!
 //! Only nodes collide: an edge between two nodes on either side of a thin
 //! edge of a box can still pass it. At the shipped scenes' cell sizes
@@ -68,7 +71,7 @@ pub enum Shape {
 impl Shape {
     /// Signed distance from the surface at `q` (negative inside) and the
     /// outward unit direction in which it grows fastest.
-    #[inline]
+    #[inline(always)]
     pub fn distance(&self, q: V3) -> (f64, V3) {
         match *self {
             Shape::Plane { normal } => (dot(q, normal), normal),
@@ -85,7 +88,7 @@ impl Shape {
             Shape::Cuboid { half_extents: e } => {
                 let d = [q[0].abs() - e[0], q[1].abs() - e[1], q[2].abs() - e[2]];
                 let sign = q.map(|x| if x < 0.0 { -1.0 } else { 1.0 });
-                if d.iter().any(|&x| x > 0.0) {
+                if d[0] > 0.0 || d[1] > 0.0 || d[2] > 0.0 {
                     let out = d.map(|x| x.max(0.0));
                     let len = norm(out);
                     (len, [0, 1, 2].map(|c| sign[c] * out[c] / len))
@@ -228,7 +231,15 @@ impl Collider {
 
 /// Resolve contact for the step from `t0` (positions `prev`) to `t1`
 /// (positions `pos`, velocities `vel`, all SoA), for free nodes only
-/// (`free[k] = 1`). Returns how many node–body contacts it resolved.
+/// (`free[k] = 1`). `near` is scratch of one byte per node. Returns how
+/// many node–body contacts it resolved.
+///
+/// Two passes per body: a branch-free one over every node (it vectorises)
+/// marks those that ended within reach of the body — closer than the
+/// clearance plus this step's length (relative to the body), since the
+/// distance is 1-Lipschitz — and the marked few are then resolved one by
+/// one.
+#[inline(always)]
 pub(crate) fn resolve(
     colliders: &[Collider],
     (t0, t1): (f64, f64),
@@ -236,75 +247,167 @@ pub(crate) fn resolve(
     pos: &mut [f64],
     vel: &mut [f64],
     free: &[f64],
+    near: &mut [u8],
 ) -> u32 {
     let n = free.len();
-    let get = |a: &[f64], k: usize| [a[k], a[n + k], a[2 * n + k]];
     let mut contacts = 0;
     for body in colliders {
         let ((c0, _), (c1, vc)) = (body.at(t0), body.at(t1));
-        let (shape, gap) = (&body.shape, body.clearance);
-        for k in 0..n {
-            if free[k] == 0.0 {
-                continue;
-            }
-            let q1 = sub(get(pos, k), c1);
-            let (d1, n1) = shape.distance(q1);
-            let q0 = sub(get(prev, k), c0);
-            let (d0, _) = shape.distance(q0);
-            let hit = if d0 >= gap && (d1 < gap || 0.5 * (d0 + d1 - norm(sub(q1, q0))) < gap) {
-                // Came from outside and touched (or passed through) the
-                // body: back onto the tangent plane where it first touched,
-                // keeping the motion along it.
-                first_touch(shape, gap, q0, q1).map(|(touch, normal)| {
-                    let q = add(q1, scale(normal, dot(sub(touch, q1), normal).max(0.0)));
-                    let (d, n) = shape.distance(q);
-                    if d < gap {
-                        add(q, scale(n, gap - d))
-                    } else {
-                        q
-                    }
+        let frame = Frame { c0, c1, vc };
+        let reach = Reach {
+            c0,
+            c1,
+            gap: body.clearance,
+            prev,
+            pos,
+            free,
+        };
+        match body.shape {
+            Shape::Plane { normal } => reach.mark(near, |q| dot(q, normal)),
+            Shape::Sphere { radius } => reach.mark(near, |q| norm(q) - radius),
+            Shape::Capsule { half_axis, radius } => {
+                let len2 = dot(half_axis, half_axis);
+                let inv = if len2 > 0.0 { 1.0 / len2 } else { 0.0 };
+                reach.mark(near, |q| {
+                    let s = (dot(q, half_axis) * inv).clamp(-1.0, 1.0);
+                    norm(sub(q, scale(half_axis, s))) - radius
                 })
-            } else if d1 < gap {
-                // Was already touching: out along the nearest surface.
-                Some(add(q1, scale(n1, gap - d1)))
-            } else {
-                None
-            };
-            let Some(mut q) = hit else { continue };
-            contacts += 1;
-            let (_, normal) = shape.distance(q);
-            let v = get(vel, k);
-            let rel = sub(v, vc);
-            let vn = dot(rel, normal);
-            let mut out = v;
-            if vn < 0.0 {
-                let tangential = sub(rel, scale(normal, vn));
-                let speed = norm(tangential);
-                let keep = if speed > 0.0 {
-                    (1.0 - body.friction * -vn / speed).max(0.0)
-                } else {
-                    0.0
-                };
-                out = add(vc, scale(tangential, keep));
-                // The step's slide along the surface shrinks with the
-                // velocity: a node held by static friction does not creep
-                // by the integrator's g·sin θ·dt² a step.
-                let moved = sub(q, q0);
-                let slide = sub(moved, scale(normal, dot(moved, normal)));
-                q = sub(q, scale(slide, 1.0 - keep));
-                let (d, n) = shape.distance(q);
-                if d < gap {
-                    q = add(q, scale(n, gap - d));
-                }
             }
-            let p = add(q, c1);
-            for c in 0..3 {
-                pos[c * n + k] = p[c];
-                vel[c * n + k] = out[c];
+            Shape::Cuboid { half_extents: e } => reach.mark(near, |q| {
+                let d = [q[0].abs() - e[0], q[1].abs() - e[1], q[2].abs() - e[2]];
+                norm(d.map(|x| x.max(0.0))) + d[0].max(d[1]).max(d[2]).min(0.0)
+            }),
+        }
+        for k in 0..n {
+            if near[k] != 0 {
+                contacts += u32::from(respond(body, &frame, k, prev, pos, vel));
             }
         }
     }
     contacts
+}
+
+/// Where a body was at the start of the step, where it is at the end, and
+/// its velocity there.
+struct Frame {
+    c0: V3,
+    c1: V3,
+    vc: V3,
+}
+
+/// What the marking pass reads.
+struct Reach<'a> {
+    c0: V3,
+    c1: V3,
+    gap: f64,
+    prev: &'a [f64],
+    pos: &'a [f64],
+    free: &'a [f64],
+}
+
+impl Reach<'_> {
+    /// `near[k] = 1` for the free nodes whose step (relative to the body)
+    /// may have come within the gap, by the signed distance `sdf`.
+    #[inline(always)]
+    fn mark(&self, near: &mut [u8], sdf: impl Fn(V3) -> f64) {
+        let n = self.free.len();
+        let (px, rest) = self.pos.split_at(n);
+        let (py, pz) = rest.split_at(n);
+        let (bx, rest) = self.prev.split_at(n);
+        let (by, bz) = rest.split_at(n);
+        let (c1, dc) = (self.c1, sub(self.c1, self.c0));
+        let (free, near) = (&self.free[..n], &mut near[..n]);
+        let (pz, bz) = (&pz[..n], &bz[..n]);
+        for k in 0..n {
+            let q1 = [px[k] - c1[0], py[k] - c1[1], pz[k] - c1[2]];
+            let step = [px[k] - bx[k] - dc[0], py[k] - by[k] - dc[1], pz[k] - bz[k] - dc[2]];
+            let reach = sdf(q1) - norm(step);
+            near[k] = u8::from(reach < self.gap) & u8::from(free[k] != 0.0);
+        }
+    }
+}
+
+/// Resolve node `k` against `body`; false when it turns out clear.
+#[inline(never)]
+fn respond(body: &Collider, frame: &Frame, k: usize, prev: &[f64], pos: &mut [f64], vel: &mut [f64]) -> bool {
+    let n = pos.len() / 3;
+    let get = |a: &[f64], k: usize| [a[k], a[n + k], a[2 * n + k]];
+    let (shape, gap) = (&body.shape, body.clearance);
+    let Frame { c0, c1, vc } = *frame;
+    let q1 = sub(get(pos, k), c1);
+    let (d1, n1) = shape.distance(q1);
+    let q0 = sub(get(prev, k), c0);
+    let hit = if d1 >= gap {
+        // Ends clear of the body. Could it have passed through on the way?
+        // Not unless it moved towards the body at the start and away at the
+        // end (the distance is convex along the step) and came within reach.
+        let step = sub(q1, q0);
+        let len = norm(step);
+        let (d0, n0) = shape.distance(q0);
+        if !(d0 >= gap && dot(n0, step) < 0.0 && dot(n1, step) > 0.0 && 0.5 * (d0 + d1 - len) < gap) {
+            return false;
+        }
+        first_touch(shape, gap, q0, q1).map(|touch| onto_tangent_plane(shape, gap, q1, touch))
+    } else {
+        let (d0, n0) = shape.distance(q0);
+        if d0 >= gap && dot(n0, n1) < 0.5 {
+            // Came from outside and ended past where the nearest surface
+            // faces the way it came (through the middle of a thin body):
+            // back where it first touched.
+            first_touch(shape, gap, q0, q1).map(|touch| onto_tangent_plane(shape, gap, q1, touch))
+        } else {
+            // Resting, sliding or just arrived: out along the nearest
+            // surface (moving along a convex body's normal keeps it).
+            Some((add(q1, scale(n1, gap - d1)), n1))
+        }
+    };
+    let Some((mut q, normal)) = hit else { return false };
+    let v = get(vel, k);
+    let rel = sub(v, vc);
+    let vn = dot(rel, normal);
+    let mut out = v;
+    if vn < 0.0 {
+        let tangential = sub(rel, scale(normal, vn));
+        let speed = norm(tangential);
+        let keep = if speed > 0.0 {
+            (1.0 - body.friction * -vn / speed).max(0.0)
+        } else {
+            0.0
+        };
+        out = add(vc, scale(tangential, keep));
+        // The step's slide along the surface shrinks with the velocity: a
+        // node held by static friction does not creep by the integrator's
+        // g·sin θ·dt² a step.
+        if keep < 1.0 {
+            let moved = sub(q, q0);
+            let slide = sub(moved, scale(normal, dot(moved, normal)));
+            q = sub(q, scale(slide, 1.0 - keep));
+            let (d, n) = shape.distance(q);
+            if d < gap {
+                q = add(q, scale(n, gap - d));
+            }
+        }
+    }
+    let p = add(q, c1);
+    for c in 0..3 {
+        pos[c * n + k] = p[c];
+        vel[c * n + k] = out[c];
+    }
+    true
+}
+
+/// `q1` moved back onto the tangent plane at `touch` (a point at the gap and
+/// its outward normal), keeping its motion along the plane, then out along
+/// the nearest surface if still within the gap (a curved body).
+/// Returns the point and the outward normal there.
+fn onto_tangent_plane(shape: &Shape, gap: f64, q1: V3, (touch, normal): (V3, V3)) -> (V3, V3) {
+    let q = add(q1, scale(normal, dot(sub(touch, q1), normal).max(0.0)));
+    let (d, n) = shape.distance(q);
+    if d < gap {
+        (add(q, scale(n, gap - d)), n)
+    } else {
+        (q, n)
+    }
 }
 
 /// Where the segment `q0 → q1` (body frame) first comes within `gap` of the
@@ -322,7 +425,7 @@ fn first_touch(shape: &Shape, gap: f64, q0: V3, q1: V3) -> Option<(V3, V3)> {
         let (mut a, mut b) = (hi - R * (hi - lo), lo + R * (hi - lo));
         let (mut fa, mut fb) = (f(a), f(b));
         let mut found = None;
-        for _ in 0..60 {
+        for _ in 0..48 {
             if fa < gap {
                 found = Some(a);
                 break;
@@ -349,7 +452,7 @@ fn first_touch(shape: &Shape, gap: f64, q0: V3, q1: V3) -> Option<(V3, V3)> {
     }
     // f(0) ≥ gap > f(low): bisect for the first crossing (f falls on [0, low]).
     let (mut a, mut b) = (0.0, low);
-    for _ in 0..60 {
+    for _ in 0..48 {
         let m = 0.5 * (a + b);
         if f(m) >= gap {
             a = m;

@@ -174,9 +174,10 @@ struct Workspace {
     stage_acc: Paged,
     implicit: Option<ImplicitWorkspace>,
     strain: Option<StrainWorkspace>,
-    /// Positions at the start of the step, for contact's swept test (empty
-    /// without colliders).
+    /// Positions at the start of the step, for contact's swept test, and
+    /// contact's marks, one per node (both empty without colliders).
     before: Vec<f64>,
+    near: Vec<u8>,
     /// Springs in f32 ([`SpringPrecision::F32`]); None in f64.
     mixed: Option<Box<Mixed>>,
 }
@@ -246,6 +247,11 @@ impl Workspace {
                 Vec::new()
             } else {
                 vec![0.0; n3]
+            },
+            near: if loads.colliders.is_empty() {
+                Vec::new()
+            } else {
+                vec![0; topology.n_nodes]
             },
             mixed: None,
         }
@@ -696,6 +702,7 @@ impl Simulation {
                 &mut self.state.pos,
                 &mut self.state.vel,
                 &self.model.free,
+                &mut self.ws.near,
             );
         }
         Ok(())
@@ -912,6 +919,7 @@ impl Simulation {
             &mut self.state.pos,
             &mut self.state.vel,
             &self.model.free,
+            &mut self.ws.near,
         );
         self.cached = false;
         self.ensure_cache(par);
