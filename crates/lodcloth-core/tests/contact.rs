@@ -12,7 +12,7 @@ use crate::common;
 use common::{build, grid, lumped_masses, material, params};
 use lodcloth::scene::Scene;
 use lodcloth::sim::{
-    Collider, Integrator, Loads, Orientation, PinPath, Shape, Simulation, StabilityCheck, State, Topology,
+    Collider, Integrator, Loads, Orientation, PinPath, Shape, SimParams, Simulation, StabilityCheck, State, Topology,
 };
 
 const G: f64 = 9.81;
@@ -29,6 +29,22 @@ fn node_axis(sim: &Simulation, axis: usize) -> impl Iterator<Item = f64> + '_ {
 fn velocity_axis(sim: &Simulation, axis: usize) -> impl Iterator<Item = f64> + '_ {
     let n = sim.topology().n_nodes;
     sim.state().vel[axis * n..(axis + 1) * n].iter().copied()
+}
+
+/// A cloth of 0.2 kg/m² with `bodies` as its only loads, from `state`.
+fn on_bodies(topo: &Arc<Topology>, p: SimParams, bodies: Vec<Collider>, state: State) -> Simulation {
+    let loads = Loads {
+        colliders: bodies,
+        ..Loads::default()
+    };
+    build(
+        topo.clone(),
+        lumped_masses(topo, 0.2),
+        p,
+        loads,
+        state,
+        StabilityCheck::Enforce,
+    )
 }
 
 fn floor(gap: f64, friction: f64, path: PinPath) -> Collider {
@@ -54,19 +70,8 @@ fn on_incline(theta: f64, mu: f64, dt: f64, steps: usize) -> (f64, f64) {
         material((50.0, 0.01), (10.0, 0.002), (1.0, 0.0002)),
     );
     p.gravity = [G * theta.sin(), -G * theta.cos(), 0.0];
-    let loads = Loads {
-        colliders: vec![floor(0.005, mu, PinPath::Fixed)],
-        ..Loads::default()
-    };
     let state = State::at_rest(&topo);
-    let mut sim = build(
-        topo.clone(),
-        lumped_masses(&topo, 0.2),
-        p,
-        loads,
-        state,
-        StabilityCheck::Enforce,
-    );
+    let mut sim = on_bodies(&topo, p, vec![floor(0.005, mu, PinPath::Fixed)], state);
     for _ in 0..steps {
         let r = sim.step();
         assert!(r.finite);
@@ -125,19 +130,8 @@ fn a_body_moving_under_the_cloth_drags_it_by_friction_until_it_rides_along() {
         start: 0.0,
         end: f64::INFINITY,
     };
-    let loads = Loads {
-        colliders: vec![floor(0.005, mu, conveyor)],
-        ..Loads::default()
-    };
     let state = State::at_rest(&topo);
-    let mut sim = build(
-        topo.clone(),
-        lumped_masses(&topo, 0.2),
-        p,
-        loads,
-        state,
-        StabilityCheck::Enforce,
-    );
+    let mut sim = on_bodies(&topo, p, vec![floor(0.005, mu, conveyor)], state);
     for step in 1..=600 {
         sim.step();
         // Kinetic friction μ g accelerates it until it matches the belt.
@@ -173,21 +167,10 @@ fn a_cloth_too_fast_to_see_a_thin_slab_in_one_step_is_stopped_on_its_side() {
             friction: 0.0,
             clearance: gap,
         };
-        let loads = Loads {
-            colliders: vec![slab],
-            ..Loads::default()
-        };
         let mut state = State::at_rest(&topo);
         let n = topo.n_nodes;
         state.vel[n..2 * n].fill(-speed);
-        let mut sim = build(
-            topo.clone(),
-            lumped_masses(&topo, 0.2),
-            p,
-            loads,
-            state,
-            StabilityCheck::Enforce,
-        );
+        let mut sim = on_bodies(&topo, p, vec![slab], state);
         let top = centre + half + gap;
         for _ in 0..20 {
             sim.step();
@@ -248,19 +231,8 @@ fn a_cloth_dropped_on_a_sphere_a_capsule_or_a_box_never_enters_it_and_rests_on_t
             friction: 0.5,
             clearance: gap,
         };
-        let loads = Loads {
-            colliders: vec![body],
-            ..Loads::default()
-        };
         let state = State::at_rest(&topo);
-        let mut sim = build(
-            topo.clone(),
-            lumped_masses(&topo, 0.2),
-            p,
-            loads,
-            state,
-            StabilityCheck::Enforce,
-        );
+        let mut sim = on_bodies(&topo, p, vec![body], state);
         let mut touched = 0;
         for _ in 0..3000 {
             let r = sim.step();
@@ -391,18 +363,7 @@ fn a_state_set_with_a_node_inside_a_body_has_it_put_on_the_surface() {
         friction: 0.0,
         clearance: 0.003,
     };
-    let loads = Loads {
-        colliders: vec![ball],
-        ..Loads::default()
-    };
-    let mut sim = build(
-        topo.clone(),
-        lumped_masses(&topo, 0.2),
-        p,
-        loads,
-        State::at_rest(&topo),
-        StabilityCheck::Enforce,
-    );
+    let mut sim = on_bodies(&topo, p, vec![ball], State::at_rest(&topo));
     let mut state = State::at_rest(&topo);
     let (k, n) = (12, topo.n_nodes); // the middle node
     state.pos[n + k] = -0.15; // 5 cm inside the ball, above its centre
