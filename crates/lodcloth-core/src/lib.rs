@@ -33,6 +33,8 @@
 //!   [`plan::Level`]) and how one of its levels is made ready: reference,
 //!   stable dt, estimate through the cache, predicted error. The daemon's
 //!   engine and the experiments both plan levels through it.
+//! - [`drape`] — the shadow area and drape coefficient of a cloth over a
+//!   support, a physical measure to compare levels by.
 //! - [`hash`] — FNV-1a, the one hash of file names, checksums and digests.
 //! - [`atomic`] — the one atomic file replacement (cache entries, snapshots).
 //! - [`names`] — the one parser of integrator, method and mass names.
@@ -42,6 +44,7 @@
 
 pub mod atomic;
 pub mod cache;
+pub mod drape;
 pub mod estimate;
 pub mod hash;
 pub mod lod;

@@ -13,6 +13,7 @@ mod cache;
 mod conservation;
 mod contact;
 mod convergence;
+mod drape;
 mod energy;
 mod equilibrium;
 mod estimation;
