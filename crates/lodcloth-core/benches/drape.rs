@@ -6,9 +6,9 @@
 //!
 //! `cargo bench -p lodcloth-core --bench drape -- [--scene FILE] [--levels 16,24,32,40] [--out DIR]`
 //!
-//! Prints a table (coefficient at 1 s, 2 s and the end; the largest
-//! difference from the reference after the first second) and writes it as
-//! CSV, one row per level, method and time.
+//! Prints a table (the coefficient at 1 s, 2 s and the end, and its largest
+//! difference from the reference's at those times) and writes it as CSV,
+//! one row per level, method and time.
 use std::path::{Path, PathBuf};
 
 use lodcloth_core::drape::{drape_coefficient, shadow_area};
@@ -92,7 +92,7 @@ fn main() {
     );
     let heads: Vec<String> = times.iter().map(|t| format!("DC at {t} s")).collect();
     println!(
-        "| level | method | {} | largest difference after 1 s |",
+        "| level | method | {} | largest |difference| |",
         heads.join(" | ")
     );
     println!("|---|---|{}---|", "---|".repeat(times.len()));
