@@ -91,10 +91,7 @@ fn main() {
         scene.name, scene.nx, scene.ny, support, cloth
     );
     let heads: Vec<String> = times.iter().map(|t| format!("DC at {t} s")).collect();
-    println!(
-        "| level | method | {} | largest |difference| |",
-        heads.join(" | ")
-    );
+    println!("| level | method | {} | largest |difference| |", heads.join(" | "));
     println!("|---|---|{}---|", "---|".repeat(times.len()));
     let row = |level: &str, method: &str, dc: &[f64], csv: &mut String| {
         let worst = dc
