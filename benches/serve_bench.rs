@@ -241,6 +241,7 @@ method = "gkd"
             simulation_positions: Vec::new(),
             normals: Vec::new(),
             reference_positions: Vec::new(),
+            collider_positions: Vec::new(),
             stepped: std::time::SystemTime::now(),
             transition: false,
         };
