@@ -76,9 +76,13 @@ impl Scene {
         }
         // A free node that starts inside a body would be thrown out of it
         // at the first step: refuse the scene instead, naming the body.
+        let mut pinned = vec![false; topology.n_nodes];
+        for p in &pins {
+            pinned[p.node as usize] = true;
+        }
         for (i, body) in self.colliders.iter().enumerate() {
             let inside: Vec<usize> = (0..topology.n_nodes)
-                .filter(|&k| !pins.iter().any(|p| p.node as usize == k))
+                .filter(|&k| !pinned[k])
                 .filter(|&k| body.distance(topology.rest_positions[k], 0.0) < 0.0)
                 .collect();
             if let Some(&k) = inside.first() {

@@ -694,16 +694,7 @@ impl Simulation {
         // inside a body: out along the nearest surface, as contact does.
         if !self.model.loads.colliders.is_empty() {
             self.ws.before.copy_from_slice(&self.state.pos);
-            let t = self.state.time;
-            contact::resolve(
-                &self.model.loads.colliders,
-                (t, t),
-                &self.ws.before,
-                &mut self.state.pos,
-                &mut self.state.vel,
-                &self.model.free,
-                &mut self.ws.near,
-            );
+            self.resolve_contact(self.state.time);
         }
         Ok(())
     }
@@ -912,15 +903,7 @@ impl Simulation {
             strain_iterations = out.iterations;
         }
         // Contact last, so no state a reader sees has a node inside a body.
-        let contacts = contact::resolve(
-            &self.model.loads.colliders,
-            (t0, self.state.time),
-            &self.ws.before,
-            &mut self.state.pos,
-            &mut self.state.vel,
-            &self.model.free,
-            &mut self.ws.near,
-        );
+        let contacts = self.resolve_contact(t0);
         self.cached = false;
         self.ensure_cache(par);
 
@@ -928,6 +911,21 @@ impl Simulation {
         report.contacts = contacts;
         self.last = Some(report);
         report
+    }
+
+    /// Contact for the move from `ws.before` at `t0` to the current state
+    /// (see [`contact`]); the contacts resolved.
+    #[inline(always)]
+    fn resolve_contact(&mut self, t0: f64) -> u32 {
+        contact::resolve(
+            &self.model.loads.colliders,
+            (t0, self.state.time),
+            &self.ws.before,
+            &mut self.state.pos,
+            &mut self.state.vel,
+            &self.model.free,
+            &mut self.ws.near,
+        )
     }
 
     /// Overwrite pinned nodes with their prescribed position and velocity at the current time.
