@@ -33,7 +33,9 @@
 //! `docs/architecture.md` walks through how a state and a switch request
 //! flow through these layers.
 
-pub use lodcloth_core::{atomic, cache, estimate, hash, lod, names, plan, points, problems, scene, sim, touch};
+pub use lodcloth_core::{
+    atomic, cache, estimate, hash, level, lod, mesh, names, plan, points, problems, scene, sim, touch,
+};
 
 /// `<package version> (<git revision>)`, e.g. `0.1.0 (d7aae52e1f3a)`: what
 /// `lodcloth --version` prints and `lodcloth_build_info` reports. The

@@ -47,22 +47,26 @@ impl WireLevel for Level {
             Level::Grid { nx, ny } => v1::Level {
                 nx: nx as u32,
                 ny: ny as u32,
-                points: 0,
+                ..Default::default()
             },
             Level::Points(n) => v1::Level {
-                nx: 0,
-                ny: 0,
                 points: n as u32,
+                ..Default::default()
+            },
+            Level::Vertices(n) => v1::Level {
+                vertices: n as u32,
+                ..Default::default()
             },
         }
     }
 
     fn from_wire(l: &v1::Level) -> Result<Level, String> {
-        match (l.points, l.nx, l.ny) {
-            (0, nx, ny) => Ok(Level::new(nx as usize, ny as usize)),
-            (n, 0, 0) => Ok(Level::Points(n as usize)),
-            (n, nx, ny) => Err(format!(
-                "level sets both a grid ({nx}x{ny}) and a point count ({n}); set one"
+        match (l.points, l.vertices, l.nx, l.ny) {
+            (0, 0, nx, ny) => Ok(Level::new(nx as usize, ny as usize)),
+            (n, 0, 0, 0) => Ok(Level::Points(n as usize)),
+            (0, n, 0, 0) => Ok(Level::Vertices(n as usize)),
+            (p, v, nx, ny) => Err(format!(
+                "level sets more than one of a grid ({nx}x{ny}), a point count ({p}) and a vertex count ({v}); set one"
             )),
         }
     }
@@ -174,6 +178,12 @@ pub fn collider(body: &Collider) -> v1::Collider {
         Shape::Sphere { radius } => ("sphere", None, radius, None),
         Shape::Capsule { half_axis, radius } => ("capsule", Some(vec3(half_axis)), radius, None),
         Shape::Cuboid { half_extents } => ("box", None, 0.0, Some(vec3(half_extents))),
+        Shape::Cylinder { radius, half_height } => (
+            "cylinder",
+            Some(vec3([0.0, half_height, 0.0])),
+            radius,
+            Some(vec3([radius, half_height, radius])),
+        ),
     };
     let triangles: Vec<f32> = body
         .shape
@@ -362,16 +372,24 @@ mod tests {
 
     #[test]
     fn levels_cross_the_wire_and_mixed_levels_are_refused() {
-        for l in [Level::new(16, 24), Level::Points(327)] {
+        for l in [Level::new(16, 24), Level::Points(327), Level::Vertices(1200)] {
             assert_eq!(Level::from_wire(&l.to_wire()), Ok(l));
         }
         let mixed = v1::Level {
             nx: 16,
             ny: 16,
             points: 300,
+            ..Default::default()
         };
         let e = Level::from_wire(&mixed).unwrap_err();
         assert!(e.contains("16x16") && e.contains("300"), "{e}");
+        let both = v1::Level {
+            points: 300,
+            vertices: 1200,
+            ..Default::default()
+        };
+        let e = Level::from_wire(&both).unwrap_err();
+        assert!(e.contains("300") && e.contains("1200"), "{e}");
     }
 
     #[test]

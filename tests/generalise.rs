@@ -9,7 +9,7 @@ use std::sync::Arc;
 use lodcloth::estimate::{FitOptions, Method, RecordSpec, Reference};
 use lodcloth::experiments::generalise::{suite, twin_floor, SuiteOptions};
 use lodcloth::experiments::lod::{lod_plan, Horizon};
-use lodcloth::plan::{Estimator, GridLevel};
+use lodcloth::plan::{Estimator, GridLevel, Level};
 use lodcloth::scene::Scene;
 
 /// A small cloth of `width × height` at `nx × ny`, top edge pinned, pulled
@@ -95,8 +95,8 @@ fn the_suite_scores_each_scene_at_its_aspect_and_carries_corrections_as_ratios()
     let rows = suite(&scenes, &options, &no_cache(), &mut |_| {}).expect("suite runs");
     assert_eq!(rows.len(), 4);
     // The level keeps each cloth's aspect ratio: 9 along the longer side.
-    assert_eq!((rows[0].nx, rows[0].ny), (9, 5));
-    assert_eq!((rows[2].nx, rows[2].ny), (9, 9));
+    assert_eq!(rows[0].level, Level::new(9, 5));
+    assert_eq!(rows[2].level, Level::new(9, 9));
     for r in &rows {
         let t = r.transferred.expect("two scenes: each has the other's correction");
         for v in [

@@ -745,7 +745,7 @@ fn check_scene_valid(s: &Scene) -> Result<(), TestCaseError> {
     prop_assert!(positive(s.width) && positive(s.height), "{} × {}", s.width, s.height);
     prop_assert!(positive(s.areal_density), "areal density {}", s.areal_density);
     prop_assert!(
-        (2..=4096).contains(&s.nx) && (2..=4096).contains(&s.ny),
+        s.mesh.is_some() || (2..=4096).contains(&s.nx) && (2..=4096).contains(&s.ny),
         "{}×{}",
         s.nx,
         s.ny
@@ -780,8 +780,11 @@ fn check_scene_valid(s: &Scene) -> Result<(), TestCaseError> {
 /// positive masses whose dt is within the predicted limit unless forced, or
 /// a refusal naming the file and the scene field behind it.
 fn check_scene_builds(s: &Scene) -> Result<(), TestCaseError> {
-    let (nx, ny) = (s.nx.min(12), s.ny.min(12));
-    match s.build_at(nx, ny) {
+    let level = match &s.mesh {
+        Some(m) => lodcloth::plan::Level::Vertices(m.reference.vertices().min(200)),
+        None => lodcloth::plan::Level::new(s.nx.min(12), s.ny.min(12)),
+    };
+    match s.build_level(level) {
         Ok(sim) => {
             prop_assert!(sim.masses().iter().all(|m| m.is_finite() && *m > 0.0));
             if s.stability == StabilityCheck::Enforce {
@@ -806,7 +809,7 @@ fn check_scene_builds(s: &Scene) -> Result<(), TestCaseError> {
                     }
                 }
                 SceneError::Sim { .. } => {
-                    let at = format!("{}×{}: ", nx, ny);
+                    let at = format!("at {level}: ");
                     let what = msg.split_once(&at).map_or("", |(_, w)| w);
                     prop_assert!(
                         starts_with_field_path(what, &SCENE_ROOTS),

@@ -352,7 +352,11 @@ async fn bad_requests_get_errors_naming_the_problem_and_publishing_goes_on() {
     wait_info(&c, "bad").await;
     let level = |nx, ny| v1::SwitchRequest {
         at_once: false,
-        target: Some(v1::switch_request::Target::Level(v1::Level { nx, ny, points: 0 })),
+        target: Some(v1::switch_request::Target::Level(v1::Level {
+            nx,
+            ny,
+            ..Default::default()
+        })),
         method: String::new(),
     };
     let max_error = |e| v1::SwitchRequest {
@@ -765,6 +769,7 @@ async fn a_surface_publishes_its_whole_cloud_and_switches_size_without_a_jump() 
             nx: 16,
             ny: 16,
             points: 100,
+            ..Default::default()
         })),
         method: String::new(),
     };

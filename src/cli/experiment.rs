@@ -1134,7 +1134,7 @@ fn suite_csv(rows: &[SuiteRow]) -> String {
             |f: fn(&lodcloth::experiments::generalise::HeldOut) -> f64| t.as_ref().map_or(String::new(), |h| f6(f(h)));
         let before = vec![
             r.scene.clone(),
-            format!("{}x{}", r.nx, r.ny),
+            r.level.to_string(),
             format!("{:.4}", r.reduction),
             r.method.to_string(),
         ];
@@ -1183,10 +1183,9 @@ fn suite_md(rows: &[SuiteRow], methods: &[Method], level: GridLevel, common: &Co
     for r in rows {
         let _ = writeln!(
             md,
-            "| {} | {}×{} | {} | {} | {} | {} | {} | {} | {} | {} | {} ({}–{}) |",
+            "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} ({}–{}) |",
             r.scene,
-            r.nx,
-            r.ny,
+            r.level,
             r.method,
             pct(r.own.mean),
             pct(r.own.p95),

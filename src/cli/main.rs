@@ -191,6 +191,10 @@ enum Command {
     /// every point), accuracy against simplification size.
     #[command(subcommand)]
     Points(points::Points),
+    /// Cloth meshes: write a generated one (disc, sheet, skirt), or read a
+    /// file as a scene would and show the level chain it makes.
+    #[command(subcommand)]
+    Mesh(mesh::Mesh),
     /// Print the header and a summary of a trajectory file.
     Inspect {
         /// Trajectory file (.lct).
@@ -214,6 +218,7 @@ enum Command {
 
 mod experiment;
 mod input;
+mod mesh;
 mod points;
 mod serve;
 mod simulate;
@@ -303,6 +308,7 @@ fn main() -> Result<()> {
         } => simulate::stability(&scene, sizes, factors, steps, bisections, &out),
         Command::Experiment(e) => experiment::run(e),
         Command::Points(p) => points::run(p),
+        Command::Mesh(m) => mesh::run(m),
         Command::Inspect { file } => simulate::inspect(&file),
         Command::Completions { shell } => {
             clap_complete::generate(shell, &mut Cli::command(), "lodcloth", &mut std::io::stdout());

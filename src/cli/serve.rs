@@ -520,7 +520,7 @@ pub fn record(c: Connect, instance: String, seconds: f64, out: PathBuf) -> Resul
             // A surface publishes its whole cloud at every level.
             let nodes = match lv {
                 Level::Points(_) => info.cloud_points as usize,
-                Level::Grid { .. } => lv.nodes(),
+                Level::Grid { .. } | Level::Vertices(_) => lv.nodes(),
             };
             let Some(pos) = unpack_positions(&s.positions) else {
                 bail!(

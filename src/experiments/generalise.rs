@@ -32,7 +32,7 @@ use std::sync::Arc;
 use rayon::prelude::*;
 
 use crate::estimate::{no_progress, ErrorReport, FitOptions, LodProblem, Method, Reference};
-use crate::plan::{default_problem, stable_problem, Estimator, GridLevel, PlanError};
+use crate::plan::{default_problem, stable_problem, Estimator, GridLevel, Level, PlanError};
 use crate::scene::{MassConvention, Scene};
 use crate::sim::{Material, SpringCoeffs};
 
@@ -97,10 +97,8 @@ pub const TWIN_PERTURBATION: f64 = 1e-6;
 pub struct SuiteRow {
     /// The scene's name.
     pub scene: String,
-    /// The level on this scene.
-    pub nx: usize,
-    /// The level on this scene.
-    pub ny: usize,
+    /// The level on this scene (a grid, or a mesh's vertex count).
+    pub level: Level,
     /// 1 − level nodes / reference nodes.
     pub reduction: f64,
     /// The estimator.
@@ -140,7 +138,14 @@ pub fn suite(
     }
     let mut problems = Vec::with_capacity(scenes.len());
     for (scene, reference) in scenes {
-        let level = options.level.resolve(scene.width, scene.height);
+        let level = options
+            .level
+            .on(
+                scene.width,
+                scene.height,
+                scene.mesh.as_ref().map(|m| m.reference.vertices()),
+            )
+            .map_err(|e| PlanError::Invalid(format!("{}: {e}", scene.name)))?;
         problems.push(default_problem(scene, reference, level)?);
     }
     // Every scene's own estimate, per method.
@@ -167,10 +172,9 @@ pub fn suite(
             let est = estimator.estimate(p, method, &fit)?;
             let own = held_out(p, est.material, train_end, options.short_window)?;
             log(format!(
-                "{} {}×{} {:<4} held-out mean {:.2}%  p95 {:.2}%  last quarter {:.2}%  short horizon {:.2}%  est {:.0} s",
+                "{} {} {:<4} held-out mean {:.2}%  p95 {:.2}%  last quarter {:.2}%  short horizon {:.2}%  est {:.0} s",
                 p.scene.name,
-                p.nx,
-                p.ny,
+                p.level,
                 method,
                 100.0 * own.mean,
                 100.0 * own.p95,
@@ -180,9 +184,8 @@ pub fn suite(
             ));
             rows.push(SuiteRow {
                 scene: p.scene.name.clone(),
-                nx: p.nx,
-                ny: p.ny,
-                reduction: 1.0 - (p.nx * p.ny) as f64 / p.reference.topology.n_nodes as f64,
+                level: p.level,
+                reduction: 1.0 - p.topology().n_nodes as f64 / p.reference.topology.n_nodes as f64,
                 method,
                 material: est.material,
                 estimate_seconds: est.seconds,
@@ -272,17 +275,11 @@ pub fn twin_floor(
     frames: Range<usize>,
     perturbation: f64,
 ) -> Result<Floor, PlanError> {
-    let grid = reference
-        .topology
-        .grid
-        .as_ref()
-        .ok_or_else(|| PlanError::Invalid(format!("{}: the chaos floor needs a grid reference", scene.name)))?;
-    let (nx, ny) = (grid.nx, grid.ny);
-    let twin = LodProblem::new(
+    // The reference itself (a grid's own resolution, or every vertex).
+    let twin = LodProblem::at(
         scene,
         reference.clone(),
-        nx,
-        ny,
+        scene.reference_level(),
         MassConvention::Lumped,
         reference.integrator,
         reference.dt,

@@ -131,8 +131,7 @@ pub fn table1_scene(
         let (dt, _) = level_dt(
             scene,
             reference,
-            nx,
-            ny,
+            (nx, ny),
             variant.mass,
             integrator,
             scene.material_at(nx, ny),
@@ -286,8 +285,7 @@ pub fn switch_test(
     coarse
         .set_state(coarse_state.clone())
         .map_err(|source| EstimateError::Sim {
-            nx: problem.nx,
-            ny: problem.ny,
+            level: problem.level,
             source,
         })?;
     let mut mapped = vec![0.0; 3 * n];
@@ -316,8 +314,7 @@ pub fn switch_test(
     let mut z = coarse_state.clone();
     z.vel.iter_mut().for_each(|v| *v = 0.0);
     zero.set_state(z).map_err(|source| EstimateError::Sim {
-        nx: problem.nx,
-        ny: problem.ny,
+        level: problem.level,
         source,
     })?;
     let error_zero_velocity = score_from(&mut zero);
@@ -332,8 +329,7 @@ pub fn switch_test(
     let ke_c = kinetic(coarse_run.masses(), &coarse_run.state().vel);
     let mut fine2 = problem.scene.build()?;
     fine2.set_state(back).map_err(|source| EstimateError::Sim {
-        nx: problem.scene.nx,
-        ny: problem.scene.ny,
+        level: problem.scene.reference_level(),
         source,
     })?;
     let back_kinetic_jump = (kinetic(fine2.masses(), &fine2.state().vel) - ke_c).abs() / ke_c.max(f64::MIN_POSITIVE);
@@ -409,8 +405,7 @@ pub fn pareto(
                     let (dt, limit) = level_dt(
                         scene,
                         reference,
-                        nx,
-                        ny,
+                        (nx, ny),
                         MassConvention::Lumped,
                         probe_integrator,
                         material,

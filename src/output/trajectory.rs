@@ -417,7 +417,7 @@ mod tests {
             level: Some(v1::Level {
                 nx: 2,
                 ny: 2,
-                points: 0,
+                ..Default::default()
             }),
             input: Some(crate::proto::input_request(&input)),
             idle: frame == 9,

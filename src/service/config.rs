@@ -791,6 +791,14 @@ fn cloth_instance(r: &RawInstance, at: &str, p: &mut Problems) -> Option<(Instan
             return None;
         }
     };
+    if let Some(mesh) = &scene.mesh {
+        p.push(format!(
+            "{at}.scene: {} is a mesh cloth ({}); the daemon serves grid cloths and surfaces so far",
+            scene.name,
+            mesh.file.display()
+        ));
+        return None;
+    }
     if let Some(reference) = r.reference {
         match reference.grid() {
             Some((nx, ny)) if side_ok(nx, ny) => {
@@ -844,8 +852,8 @@ fn surface_instance(r: &RawInstance, at: &str, p: &mut Problems) -> Option<(Inst
             Level::Points(n) => p.push(format!(
                 "{at}.levels[{j}]: {n} points is outside {MIN_SURFACE_POINTS}..={points} (the cloud has {points})"
             )),
-            Level::Grid { .. } => p.push(format!(
-                "{at}.levels[{j}]: {l} is a grid; a surface's levels are point counts, e.g. 300"
+            Level::Grid { .. } | Level::Vertices(_) => p.push(format!(
+                "{at}.levels[{j}]: {l} is not a point count; a surface's levels are point counts, e.g. 300"
             )),
         }
     }

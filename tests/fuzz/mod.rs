@@ -95,6 +95,7 @@ pub fn switch_request(rng: &mut Rng) -> v1::SwitchRequest {
             nx: number(rng),
             ny: number(rng),
             points: if rng.chance(3) { number(rng) } else { 0 },
+            vertices: if rng.chance(3) { number(rng) } else { 0 },
         })),
     };
     v1::SwitchRequest {

@@ -35,6 +35,7 @@ fn support_area(shape: &Shape) -> f64 {
             let horizontal = (half_axis[0].powi(2) + half_axis[2].powi(2)).sqrt();
             std::f64::consts::PI * radius * radius + 4.0 * horizontal * radius
         }
+        Shape::Cylinder { radius, .. } => std::f64::consts::PI * radius * radius,
         Shape::Plane { .. } => panic!("a plane supports everything: no drape coefficient"),
     }
 }

@@ -22,9 +22,14 @@
 //! - [`touch`] — live input (grabs, wind, pin moves, impulses) in material
 //!   coordinates, resolved onto a simulation at any level (`touch → {scene,
 //!   sim}`).
+//! - [`level`] — a level of detail: a grid, a point count or a mesh's
+//!   vertex count, as written in configs and on the command line.
 //! - [`lod`] — barycentric correlation between resolutions, state transfer.
 //! - [`estimate`] — coefficient estimation (same, BCD, GKD, lsq, fit),
 //!   reference recording and the error metric (Sung 2018 eq. 9).
+//! - [`mesh`] — triangle-mesh cloths: OBJ, PLY and glTF files, springs on
+//!   and across edges, level chains by quadric simplification, closest points
+//!   on a rest surface.
 //! - [`points`] — point-sampled surfaces: I/O, normals, simplification,
 //!   springs on tangent planes, MLS transfer back to every point.
 //! - [`cache`] — on-disk cache of estimated coefficients, one checksummed
@@ -47,7 +52,9 @@ pub mod cache;
 pub mod drape;
 pub mod estimate;
 pub mod hash;
+pub mod level;
 pub mod lod;
+pub mod mesh;
 pub mod names;
 pub mod plan;
 pub mod points;

@@ -33,8 +33,9 @@ use crate::sim::{GridShape, State, Topology};
 /// Errors of correlating two cloths.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum LodError {
-    /// Correlation needs the grid structure of both cloths.
-    #[error("{which} cloth is not a rectangular grid; barycentric correlation needs both grids")]
+    /// A grid can only be correlated with a grid, and a mesh needs a
+    /// source with triangles.
+    #[error("{which} cloth cannot be correlated: a grid needs a grid, a mesh needs triangles to lie on")]
     NotAGrid {
         /// Which side: "source" or "target".
         which: &'static str,
@@ -83,11 +84,55 @@ pub struct Correlation {
 }
 
 impl Correlation {
-    /// Correlate every node of `target` with a triangle of `source`.
+    /// Correlate every node of `target` with a triangle of `source`: by
+    /// material coordinates when both are grids ([`Correlation::grids`]), by
+    /// the closest point on the rest surface when both are meshes
+    /// ([`Correlation::surfaces`]).
     pub fn between(source: &Topology, target: &Topology) -> Result<Correlation, LodError> {
-        let s = source.grid.ok_or(LodError::NotAGrid { which: "source" })?;
-        let t = target.grid.ok_or(LodError::NotAGrid { which: "target" })?;
-        Correlation::grids(&s, &t)
+        match (source.grid, target.grid) {
+            (Some(s), Some(t)) => Correlation::grids(&s, &t),
+            (Some(_), None) => Err(LodError::NotAGrid { which: "target" }),
+            (None, Some(_)) => Err(LodError::NotAGrid { which: "source" }),
+            (None, None) if source.triangles.is_empty() => Err(LodError::NotAGrid { which: "source" }),
+            (None, None) => Ok(Correlation::surfaces(source, target)),
+        }
+    }
+
+    /// Correlate two meshes of one cloth (issue 23): every target node at
+    /// the closest point of the source's rest surface, as barycentric
+    /// weights on that triangle ([`crate::mesh::SurfaceIndex`]). A node that
+    /// is a source vertex gets weight 1 on it, so a mesh with itself, and a
+    /// simplified level against its reference, is exact; any other node
+    /// moves with the triangle it lies on, as a grid node does.
+    ///
+    /// # Panics
+    /// When `source` has no triangle ([`Correlation::between`] checks).
+    pub fn surfaces(source: &Topology, target: &Topology) -> Correlation {
+        let index = crate::mesh::SurfaceIndex::new(&source.rest_positions, &source.triangles);
+        let entries = target
+            .rest_positions
+            .iter()
+            .map(|&p| {
+                let hit = index.closest(p);
+                // A node on a source vertex is that vertex, whichever
+                // triangle around it the search met first.
+                match hit.weights.iter().position(|&w| w == 1.0) {
+                    Some(k) => Bary {
+                        nodes: [hit.nodes[k]; 3],
+                        weights: [1.0, 0.0, 0.0],
+                    },
+                    None => Bary {
+                        nodes: hit.nodes,
+                        weights: hit.weights,
+                    },
+                }
+            })
+            .collect();
+        Correlation {
+            grids: None,
+            n_source: source.n_nodes,
+            entries,
+        }
     }
 
     /// Correlate two grid shapes of the same cloth.

@@ -19,6 +19,7 @@ mod equilibrium;
 mod estimation;
 mod kernel;
 mod membrane;
+mod mesh;
 mod oscillator;
 mod precision;
 mod scenes;

@@ -263,6 +263,7 @@ def collider_str(c) -> str:
         "capsule": f"radius {c.radius:g} m, half axis ({c.axis.x:g}, {c.axis.y:g}, {c.axis.z:g}) m",
         "box": f"size {2 * c.half_extents.x:g} x {2 * c.half_extents.y:g} x {2 * c.half_extents.z:g} m",
         "plane": f"normal ({c.axis.x:g}, {c.axis.y:g}, {c.axis.z:g})",
+        "cylinder": f"radius {c.radius:g} m, height {2 * c.axis.y:g} m",
     }.get(c.shape, "")
     return (
         f"{c.shape} at ({p.x:g}, {p.y:g}, {p.z:g}) m, {size}, friction {c.friction:g}, "

@@ -285,7 +285,17 @@ fn touching(coarse: &Simulation, dt: f64, t: f64, frames: [&[f64]; 3]) -> Vec<bo
     }
     let topo = coarse.topology();
     let n = topo.n_nodes;
-    let cell = topo.grid.map_or(0.0, |g| g.hx().max(g.hy()));
+    // A grid's cell, or a mesh's longest edge.
+    let cell = topo.grid.map_or_else(
+        || {
+            topo.groups
+                .iter()
+                .filter(|g| g.kind() == crate::sim::SpringKind::Structural)
+                .flat_map(|g| g.rest.iter().copied())
+                .fold(0.0, f64::max)
+        },
+        |g| g.hx().max(g.hy()),
+    );
     (0..n)
         .map(|k| {
             frames.iter().zip([t - dt, t, t + dt]).any(|(x, time)| {

@@ -39,6 +39,7 @@ pub use reference::{RecordSpec, Reference, ReferenceError, Sample};
 pub use replayed::{ReplayError, ReplayedReference};
 pub use touched::{eased_drag, probes, record_touched, Probe, TouchedError, TouchedReference, TouchedScore, PROBES};
 
+use crate::level::Level;
 use crate::lod::{Correlation, LodError};
 use crate::scene::{MassConvention, Scene, SceneError};
 use crate::sim::{
@@ -136,12 +137,10 @@ pub enum EstimateError {
     #[error(transparent)]
     Scene(#[from] SceneError),
     /// The coarse simulation refused its parameters.
-    #[error("coarse cloth {nx}×{ny}: {source}")]
+    #[error("coarse cloth {level}: {source}")]
     Sim {
-        /// Coarse nodes per row.
-        nx: usize,
-        /// Coarse nodes per column.
-        ny: usize,
+        /// The coarse level.
+        level: Level,
         /// The simulation's reason.
         source: SimError,
     },
@@ -186,10 +185,9 @@ pub struct LodProblem {
     pub scene: Scene,
     /// The recorded fine run.
     pub reference: Arc<Reference>,
-    /// Coarse nodes per row.
-    pub nx: usize,
-    /// Coarse nodes per column.
-    pub ny: usize,
+    /// The coarse level: a grid of the scene's grid cloth, or a vertex
+    /// count of its mesh cloth.
+    pub level: Level,
     /// How the coarse level's node masses are made.
     pub mass: MassConvention,
     /// The coarse level's integrator.
@@ -200,17 +198,15 @@ pub struct LodProblem {
     correlation: Correlation,
     masses: Vec<f64>,
     loads: Loads,
+    /// The scene's material made on this level.
+    same: Material,
     /// Coarse steps per reference metric frame.
     steps_per_frame: u64,
 }
 
 impl LodProblem {
-    /// Set up level `nx × ny` of `scene` against `reference`.
-    ///
-    /// Masses: [`MassConvention::Lumped`] gives each coarse node its share of
-    /// the cloth's mass (total preserved); [`MassConvention::PerNode`] gives
-    /// every coarse node the reference's mean node mass, the paper's
-    /// convention (total shrinks with the node count).
+    /// Set up level `nx × ny` of `scene` against `reference` (a grid cloth;
+    /// [`LodProblem::at`] for any level).
     pub fn new(
         scene: &Scene,
         reference: Arc<Reference>,
@@ -223,12 +219,33 @@ impl LodProblem {
         if nx < 2 || ny < 2 {
             return Err(EstimateError::Resolution { nx, ny });
         }
+        LodProblem::at(scene, reference, Level::new(nx, ny), mass, integrator, dt)
+    }
+
+    /// Set up `level` of `scene` against `reference`: a grid of a grid
+    /// cloth, a vertex count of a mesh cloth ([`Scene::cloth_level`]),
+    /// correlated with the reference by material coordinates on grids and by
+    /// closest points on the rest surface on meshes ([`Correlation::between`]).
+    ///
+    /// Masses: [`MassConvention::Lumped`] gives each coarse node its share of
+    /// the cloth's mass (total preserved); [`MassConvention::PerNode`] gives
+    /// every coarse node the reference's mean node mass, the paper's
+    /// convention (total shrinks with the node count).
+    pub fn at(
+        scene: &Scene,
+        reference: Arc<Reference>,
+        level: Level,
+        mass: MassConvention,
+        integrator: Integrator,
+        dt: f64,
+    ) -> Result<LodProblem, EstimateError> {
         let interval = reference.dt * reference.spec.metric_stride as f64;
         let ratio = interval / dt;
         if !(dt > 0.0) || (ratio - ratio.round()).abs() > 1e-6 || ratio.round() < 1.0 {
             return Err(EstimateError::FrameMismatch { dt, interval });
         }
-        let topology = Arc::new(Topology::grid(scene.shape(nx, ny), scene.orientation));
+        let cloth = scene.cloth_level(level)?;
+        let topology = cloth.topology.clone();
         let correlation = Correlation::between(&reference.topology, &topology)?;
         let masses = match mass {
             MassConvention::Lumped => topology.node_areas.iter().map(|a| a * scene.areal_density).collect(),
@@ -237,12 +254,12 @@ impl LodProblem {
                 vec![m; topology.n_nodes]
             }
         };
-        let loads = scene.loads(&topology)?;
+        let loads = scene.loads_on(&topology, cloth.mesh.as_deref())?;
+        let same = scene.material_on(&cloth);
         Ok(LodProblem {
             scene: scene.clone(),
             reference,
-            nx,
-            ny,
+            level,
             mass,
             integrator,
             dt,
@@ -250,6 +267,7 @@ impl LodProblem {
             correlation,
             masses,
             loads,
+            same,
             steps_per_frame: ratio.round() as u64,
         })
     }
@@ -278,7 +296,7 @@ impl LodProblem {
     /// this level's spacing, per direction ([`Scene::material_at`]; the
     /// reference ran the same material at the scene's own resolution).
     pub fn same_material(&self) -> Material {
-        self.scene.material_at(self.nx, self.ny)
+        self.same
     }
 
     /// Coarse parameters with `material`.
@@ -303,8 +321,7 @@ impl LodProblem {
             StabilityCheck::Force,
         )
         .map_err(|source| EstimateError::Sim {
-            nx: self.nx,
-            ny: self.ny,
+            level: self.level,
             source,
         })
     }
@@ -412,8 +429,7 @@ impl LodProblem {
                 state.time = reference.frame_times[r];
                 state.step = (r as u64 + 1) * self.steps_per_frame;
                 sim.set_state(state).map_err(|source| EstimateError::Sim {
-                    nx: self.nx,
-                    ny: self.ny,
+                    level: self.level,
                     source,
                 })?;
                 start

@@ -10,6 +10,7 @@ use crate::cache::{CacheEntry, CacheError, CacheKey, CoefficientCache, Provenanc
 use crate::estimate::{
     no_progress, Details, EstimateError, FitOptions, LodProblem, Method, RecordSpec, Reference, ReferenceError,
 };
+use crate::level::Level;
 use crate::scene::{MassConvention, Scene, SceneError};
 use crate::sim::{Integrator, Material, StabilityCheck};
 
@@ -115,8 +116,8 @@ impl Estimator {
         CacheKey {
             scene: problem.scene.name.clone(),
             scene_hash: problem.scene.source_hash,
-            reference: (problem.scene.nx, problem.scene.ny),
-            target: (problem.nx, problem.ny),
+            reference: cache_pair(problem.scene.reference_level()),
+            target: cache_pair(problem.level),
             method: format!(
                 "{method}[v{ESTIMATORS_VERSION};{};train={}..{};frames={};iter={};tol={};reading={};guard={},{},{}]",
                 self.tag,
@@ -177,45 +178,49 @@ pub fn record_reference(
     Ok((Arc::new(reference), wall / simulated))
 }
 
+/// A level as the cache's key writes it: a grid's `(nx, ny)`, a mesh's
+/// `(vertices, 0)` (no grid has a side of 0).
+fn cache_pair(level: Level) -> (usize, usize) {
+    match level {
+        Level::Grid { nx, ny } => (nx, ny),
+        Level::Points(n) | Level::Vertices(n) => (n, 0),
+    }
+}
+
 /// The largest dt ≤ `margin` × the predicted stability limit of `material` at
-/// level n×n that divides the reference's metric frame interval.
+/// `level` that divides the reference's metric frame interval.
 pub fn level_dt(
     scene: &Scene,
     reference: &Arc<Reference>,
-    nx: usize,
-    ny: usize,
+    level: impl Into<Level>,
     mass: MassConvention,
     integrator: Integrator,
     material: Material,
     margin: f64,
 ) -> Result<(f64, f64), PlanError> {
     let interval = reference.dt * reference.spec.metric_stride as f64;
-    let probe = LodProblem::new(scene, reference.clone(), nx, ny, mass, integrator, interval)?;
+    let probe = LodProblem::at(scene, reference.clone(), level.into(), mass, integrator, interval)?;
     let limit = probe.simulation(material)?.dt_limit();
     let k = (interval / (margin * limit)).ceil().max(1.0);
     Ok((interval / k, limit))
 }
 
-/// Level nx×ny of `scene` as the daemon and `lod-plan` run it: lumped masses,
-/// the scene's integrator, dt at ≤ 0.75 of the `same` model's stability limit.
+/// `level` of `scene` (a grid `(nx, ny)` or any [`Level`]) as the daemon
+/// and `lod-plan` run it: lumped masses, the scene's integrator, dt at ≤
+/// 0.75 of the `same` model's stability limit.
 pub fn default_problem(
     scene: &Scene,
     reference: &Arc<Reference>,
-    (nx, ny): (usize, usize),
+    level: impl Into<Level>,
 ) -> Result<LodProblem, PlanError> {
+    let level = level.into();
     let integrator = scene.params.integrator;
     let mass = MassConvention::Lumped;
-    let (dt, _) = level_dt(
-        scene,
-        reference,
-        nx,
-        ny,
-        mass,
-        integrator,
-        scene.material_at(nx, ny),
-        0.75,
-    )?;
-    Ok(LodProblem::new(scene, reference.clone(), nx, ny, mass, integrator, dt)?)
+    let interval = reference.dt * reference.spec.metric_stride as f64;
+    // The probe's `same` material is the level's, whatever the level is.
+    let probe = LodProblem::at(scene, reference.clone(), level, mass, integrator, interval)?;
+    let (dt, _) = level_dt(scene, reference, level, mass, integrator, probe.same_material(), 0.75)?;
+    Ok(LodProblem::at(scene, reference.clone(), level, mass, integrator, dt)?)
 }
 
 /// `problem` itself when `material` runs within 0.8 of its predicted
@@ -226,22 +231,19 @@ pub fn stable_problem(problem: &LodProblem, material: Material) -> Result<(LodPr
     if problem.dt <= 0.8 * limit {
         return Ok((problem.clone(), limit));
     }
-    let (nx, ny) = (problem.nx, problem.ny);
     let (dt, limit) = level_dt(
         &problem.scene,
         &problem.reference,
-        nx,
-        ny,
+        problem.level,
         problem.mass,
         problem.integrator,
         material,
         0.8,
     )?;
-    let q = LodProblem::new(
+    let q = LodProblem::at(
         &problem.scene,
         problem.reference.clone(),
-        nx,
-        ny,
+        problem.level,
         problem.mass,
         problem.integrator,
         dt,

@@ -7,14 +7,13 @@
 
 mod estimator;
 mod instance;
-mod level;
 mod prepare;
 mod touched;
 
+pub use crate::level::{GridLevel, Level};
 pub use estimator::{
     default_problem, level_dt, notes, record_reference, stable_problem, Estimated, Estimator, PlanError,
 };
 pub use instance::{EstimationPlan, InstanceKind, InstancePlan};
-pub use level::{GridLevel, Level};
 pub use prepare::{allowed, Basis, PrepareError, Prepared, Preparer, Start};
 pub use touched::TouchedPrediction;

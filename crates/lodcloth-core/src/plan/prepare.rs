@@ -382,8 +382,7 @@ impl Preparer {
                 level_dt(
                     scene,
                     &reference,
-                    nx,
-                    ny,
+                    (nx, ny),
                     mass,
                     integrator,
                     scene.material_at(nx, ny),

@@ -2,12 +2,10 @@
 //! convention, pins and loads resolved to node indices, and the ready
 //! [`Simulation`] starting at rest.
 
-use std::sync::Arc;
-
-use super::selector::{region_load, select, Selector};
+use super::selector::{region_load, select, select_mesh, Selector};
 use super::{MassConvention, Scene, SceneError};
-use crate::problems::Problems;
-use crate::sim::{GridShape, Loads, NodeLoad, Pin, SimParams, Simulation, State, Topology};
+use crate::mesh::Simplified;
+use crate::sim::{GridShape, Loads, NodeLoad, Pin, Simulation, Topology};
 
 impl Scene {
     /// Node masses at `nx × ny` under the scene's mass convention.
@@ -15,7 +13,10 @@ impl Scene {
         match self.mass {
             MassConvention::Lumped => topology.node_areas.iter().map(|a| a * self.areal_density).collect(),
             MassConvention::PerNode => {
-                let m = self.areal_density * self.width * self.height / (self.nx * self.ny) as f64;
+                let m = match &self.mesh {
+                    Some(mesh) => self.areal_density * mesh.area / mesh.reference.vertices() as f64,
+                    None => self.areal_density * self.width * self.height / (self.nx * self.ny) as f64,
+                };
                 vec![m; topology.n_nodes]
             }
         }
@@ -28,13 +29,30 @@ impl Scene {
 
     /// Pins and loads resolved for `topology` (a grid of this scene).
     pub fn loads(&self, topology: &Topology) -> Result<Loads, SceneError> {
-        let shape = topology.grid.expect("scene topologies are grids");
+        self.loads_on(topology, None)
+    }
+
+    /// Pins and loads resolved for `topology`: a grid of this scene, or
+    /// (with `mesh`) one of its mesh levels.
+    pub fn loads_on(&self, topology: &Topology, mesh: Option<&Simplified>) -> Result<Loads, SceneError> {
+        let (label, shape) = match mesh {
+            Some(m) => (format!("{} vertices", m.mesh.vertices()), None),
+            None => {
+                let shape = topology.grid.expect("scene topologies are grids or mesh levels");
+                (format!("{}×{}", shape.nx, shape.ny), Some(shape))
+            }
+        };
+        let pick = |sel: &Selector| match (mesh, &shape) {
+            (Some(m), _) => select_mesh(sel, m),
+            (None, Some(shape)) => select(sel, shape),
+            (None, None) => unreachable!("a grid has its shape"),
+        };
         let mut problems = Vec::new();
         let mut pins = Vec::new();
         for (sel, path, name) in &self.pins {
-            let nodes = select(sel, &shape);
+            let nodes = pick(sel);
             if nodes.is_empty() {
-                problems.push(format!("{name}.nodes: selects no node at {}×{}", shape.nx, shape.ny));
+                problems.push(format!("{name}.nodes: selects no node at {label}"));
             }
             for k in nodes {
                 if pins.iter().any(|p: &Pin| p.node == k) {
@@ -51,7 +69,7 @@ impl Scene {
         for (sel, total, profile, name) in &self.forces {
             // A region is a physical patch: its consistent nodal load, the
             // same patch at every level (see `region_load`).
-            if let Some(load) = region_load(sel, &shape) {
+            if let Some(load) = shape.as_ref().and_then(|shape| region_load(sel, shape)) {
                 forces.push(NodeLoad {
                     nodes: load.iter().map(|x| x.0).collect(),
                     shares: load.iter().map(|x| x.1).collect(),
@@ -60,10 +78,10 @@ impl Scene {
                 });
                 continue;
             }
-            let nodes = select(sel, &shape);
+            let nodes = pick(sel);
             let area: f64 = nodes.iter().map(|&k| topology.node_areas[k as usize]).sum();
             if nodes.is_empty() {
-                problems.push(format!("{name}.nodes: selects no node at {}×{}", shape.nx, shape.ny));
+                problems.push(format!("{name}.nodes: selects no node at {label}"));
                 continue;
             }
             let shares = nodes.iter().map(|&k| topology.node_areas[k as usize] / area).collect();
@@ -88,11 +106,9 @@ impl Scene {
             if let Some(&k) = inside.first() {
                 let p = topology.rest_positions[k];
                 problems.push(format!(
-                    "colliders[{i}]: {} free node(s) of the rest cloth at {}×{} start inside it \
+                    "colliders[{i}]: {} free node(s) of the rest cloth at {label} start inside it \
                      (first: node {k} at [{:.4}, {:.4}, {:.4}] m)",
                     inside.len(),
-                    shape.nx,
-                    shape.ny,
                     p[0],
                     p[1],
                     p[2]
@@ -114,35 +130,14 @@ impl Scene {
         })
     }
 
-    /// Build the scene at its own resolution.
+    /// Build the scene at its own resolution (a mesh cloth: every vertex).
     pub fn build(&self) -> Result<Simulation, SceneError> {
-        self.build_at(self.nx, self.ny)
+        self.build_level(self.reference_level())
     }
 
     /// Build the scene at resolution `nx × ny`, starting at rest at t = 0,
     /// with the scene's material made at that resolution ([`Scene::material_at`]).
     pub fn build_at(&self, nx: usize, ny: usize) -> Result<Simulation, SceneError> {
-        let mut p = Problems::default();
-        p.grid_size("resolution", nx, ny);
-        if let Err(problems) = p.finish() {
-            return Err(SceneError::Invalid {
-                origin: self.origin.clone(),
-                problems,
-            });
-        }
-        let topology = Arc::new(Topology::grid(self.shape(nx, ny), self.orientation));
-        let masses = self.masses(&topology);
-        let loads = self.loads(&topology)?;
-        let state = State::at_rest(&topology);
-        let params = SimParams {
-            material: self.material_at(nx, ny),
-            ..self.params
-        };
-        Simulation::new(topology, masses, params, loads, state, self.stability).map_err(|source| SceneError::Sim {
-            origin: self.origin.clone(),
-            nx,
-            ny,
-            source,
-        })
+        self.build_level(crate::level::Level::new(nx, ny))
     }
 }

@@ -35,14 +35,12 @@ pub enum SceneError {
     },
     /// The simulation refused the built scene (e.g. an unstable dt); the
     /// message names the scene field behind the refused value.
-    #[error("scene {origin} at {nx}×{ny}: {}{source}{}", sim_field(source), sim_hint(source))]
+    #[error("scene {origin} at {level}: {}{source}{}", sim_field(source), sim_hint(source))]
     Sim {
         /// The file's path, or the name the caller gave the text.
         origin: String,
-        /// Nodes per row of the refused build.
-        nx: usize,
-        /// Nodes per column of the refused build.
-        ny: usize,
+        /// The refused build's level (`32x32`, a grid; `1200v`, a mesh).
+        level: String,
         /// The simulation's reason.
         source: SimError,
     },

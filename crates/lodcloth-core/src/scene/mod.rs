@@ -33,6 +33,7 @@
 //! - `error.rs` — [`SceneError`] and the wording of its causes.
 
 use std::path::Path;
+use std::sync::Arc;
 
 use crate::sim::{
     Collider, GridShape, Material, Membrane, Orientation, PinPath, Profile, SimParams, StabilityCheck, Wind,
@@ -40,11 +41,13 @@ use crate::sim::{
 
 mod build;
 mod error;
+mod mesh;
 mod raw;
 mod selector;
 mod validate;
 
 pub use error::SceneError;
+pub use mesh::{ClothLevel, MeshCloth};
 pub use raw::{
     MassConvention, RawAdjustment, RawCloth, RawCoeffs, RawCollider, RawForce, RawLimit, RawMaterial, RawModuli,
     RawOrientation, RawPin, RawPinPath, RawProfile, RawRegion, RawScene, RawSelector, RawShape, RawSimulation,
@@ -100,6 +103,10 @@ pub struct Scene {
     /// caches of derived results (estimated coefficients) key on it, so an
     /// edited scene never reuses them.
     pub source_hash: u64,
+    /// A mesh cloth's reference mesh, material and locks (None for a grid
+    /// cloth, whose `width`, `height`, `nx`, `ny` then describe it; for a
+    /// mesh they are unused placeholders).
+    pub mesh: Option<Arc<MeshCloth>>,
     pins: Vec<ScenePin>,
     forces: Vec<SceneForce>,
     wind: Option<Wind>,
@@ -145,11 +152,20 @@ impl Scene {
         })?;
         let mut scene = Scene::validate(raw, origin)?;
         scene.source_hash = crate::hash::fnv1a64(text.as_bytes());
+        if let Some(mesh) = &scene.mesh {
+            // An edited mesh file is another scene for every cache.
+            scene.source_hash =
+                crate::hash::fnv1a64(&[scene.source_hash.to_le_bytes(), mesh.hash.to_le_bytes()].concat());
+        }
         Ok(scene)
     }
 
     /// Grid shape at resolution `nx × ny`.
+    ///
+    /// # Panics
+    /// On a mesh cloth: a grid path reached with a mesh scene is a bug.
     pub fn shape(&self, nx: usize, ny: usize) -> GridShape {
+        assert!(self.mesh.is_none(), "scene '{}' is a mesh cloth, not a grid", self.name);
         GridShape {
             nx,
             ny,
@@ -161,6 +177,9 @@ impl Scene {
     /// The scene's material ([`Membrane`]): what its springs make on the
     /// reference resolution's cells.
     pub fn membrane(&self) -> Membrane {
+        if let Some(mesh) = &self.mesh {
+            return mesh.membrane;
+        }
         let s = self.shape(self.nx, self.ny);
         Membrane::from_springs(&self.params.material, s.hx(), s.hy())
     }

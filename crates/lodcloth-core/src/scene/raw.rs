@@ -43,31 +43,31 @@ pub struct RawScene {
     pub colliders: Vec<RawCollider>,
 }
 
-/// `[cloth]`: a width × height rectangle sampled by nx × ny nodes at the
-/// scene's own resolution, with its rest orientation and areal density.
+/// `[cloth]`: either a width × height rectangle sampled by nx × ny nodes at
+/// the scene's own resolution, with its rest orientation, or a triangle
+/// mesh from a file (`mesh`); either way with its areal density.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct RawCloth {
-    /// Width in metres (along i).
-    pub width: f64,
-    /// Height in metres (along j; row 0 is the top).
-    pub height: f64,
-    /// Nodes per row at the scene's own (reference) resolution.
-    pub nx: usize,
-    /// Nodes per column at the reference resolution.
-    pub ny: usize,
-    /// How the rest shape lies in space; default `horizontal`.
-    #[serde(default = "default_orientation")]
-    pub orientation: RawOrientation,
+    /// Width in metres (along i); a grid cloth's.
+    pub width: Option<f64>,
+    /// Height in metres (along j; row 0 is the top); a grid cloth's.
+    pub height: Option<f64>,
+    /// Nodes per row at the scene's own (reference) resolution; a grid cloth's.
+    pub nx: Option<usize>,
+    /// Nodes per column at the reference resolution; a grid cloth's.
+    pub ny: Option<usize>,
+    /// A mesh cloth's file (`.obj`, `.ply`, `.gltf`, `.glb`), relative to
+    /// the scene file; its vertices are the reference, its rest shape is
+    /// where the cloth starts.
+    pub mesh: Option<String>,
+    /// How a grid's rest shape lies in space; default `horizontal`.
+    pub orientation: Option<RawOrientation>,
     /// Areal density in kg/m².
     pub areal_density: f64,
     /// How node masses are assigned.
     #[serde(default)]
     pub mass: MassConvention,
-}
-
-fn default_orientation() -> RawOrientation {
-    RawOrientation::Horizontal
 }
 
 /// The cloth's rest orientation as written in the file (y is up); becomes an
@@ -256,6 +256,11 @@ pub struct RawSelector {
     pub nodes: Option<Vec<[usize; 2]>>,
     /// Every node.
     pub all: Option<bool>,
+    /// A mesh cloth's vertices by index in its file (after welding), the
+    /// same material points at every level.
+    pub vertices: Option<Vec<u32>>,
+    /// A mesh cloth's named vertex group (an OBJ group or object, a glTF node).
+    pub group: Option<String>,
 }
 
 /// A rectangle in material coordinates, bounds included (with 1e-9 slack):
@@ -405,6 +410,8 @@ pub enum RawShape {
     Capsule,
     /// `box`: axis-aligned, `center` and `size`.
     Box,
+    /// `cylinder`: upright (along y) with flat caps, `center`, `radius` and `height`.
+    Cylinder,
 }
 
 /// `[[colliders]]`: a rigid body the cloth's nodes cannot enter, with
@@ -414,16 +421,18 @@ pub enum RawShape {
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct RawCollider {
-    /// `plane`, `sphere`, `capsule` or `box`.
+    /// `plane`, `sphere`, `capsule`, `box` or `cylinder`.
     pub shape: RawShape,
     /// A plane's point (m).
     pub point: Option<[f64; 3]>,
     /// A plane's outward normal (any length > 0; made unit).
     pub normal: Option<[f64; 3]>,
-    /// A sphere's or box's centre (m).
+    /// A sphere's, box's or cylinder's centre (m).
     pub center: Option<[f64; 3]>,
-    /// A sphere's or capsule's radius (m, > 0).
+    /// A sphere's, capsule's or cylinder's radius (m, > 0).
     pub radius: Option<f64>,
+    /// A cylinder's height (m, > 0).
+    pub height: Option<f64>,
     /// A capsule's two axis ends (m).
     pub ends: Option<[[f64; 3]; 2]>,
     /// A box's full size along x, y, z (m, each > 0).

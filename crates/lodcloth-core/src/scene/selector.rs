@@ -6,6 +6,7 @@
 //! scene's pins and forces mean the same part of the cloth at every level of
 //! detail.
 
+use crate::mesh::Simplified;
 use crate::sim::GridShape;
 
 /// Which nodes a selector means, independent of resolution.
@@ -28,6 +29,9 @@ pub enum Selector {
     },
     /// Material coordinates of nodes picked at the reference resolution.
     Points(Vec<(f64, f64)>),
+    /// A mesh cloth's reference vertices (from `vertices` or a `group`):
+    /// at a level, the level vertices that are these reference vertices.
+    Vertices(Vec<u32>),
 }
 
 /// A side of the rectangle.
@@ -77,6 +81,8 @@ pub fn select(selector: &Selector, shape: &GridShape) -> Vec<u32> {
                             uu >= u[0] - eps && uu <= u[1] + eps && vv >= v[0] - eps && vv <= v[1] + eps
                         }
                         Selector::Points(_) => unreachable!(),
+                        // A mesh's vertices (validation keeps them off grids).
+                        Selector::Vertices(_) => false,
                     };
                     if hit {
                         out.push(shape.node(i, j) as u32);
@@ -85,6 +91,68 @@ pub fn select(selector: &Selector, shape: &GridShape) -> Vec<u32> {
             }
         }
     }
+    out
+}
+
+/// Vertices `selector` picks on a mesh level (sorted, unique), by the
+/// material coordinates (u, v) of [`crate::mesh::TriMesh::uv`]: a region
+/// tests each vertex; `Points` map to the nearest vertex; a side is the
+/// border vertices on that side of the material square (within 1e-6), a
+/// corner those on both; `Vertices` are the reference vertices the level
+/// kept (pinned ones are kept at every level).
+pub fn select_mesh(selector: &Selector, level: &Simplified) -> Vec<u32> {
+    let mesh = &level.mesh;
+    let n = mesh.vertices() as u32;
+    const SIDE: f64 = 1e-6;
+    let on = |e: Edge, uv: [f64; 2]| match e {
+        Edge::Top => uv[1] <= SIDE,
+        Edge::Bottom => uv[1] >= 1.0 - SIDE,
+        Edge::Left => uv[0] <= SIDE,
+        Edge::Right => uv[0] >= 1.0 - SIDE,
+    };
+    let mut out: Vec<u32> = match selector {
+        Selector::All => (0..n).collect(),
+        Selector::Edge(_) | Selector::Corner(..) => {
+            let border = mesh.border();
+            (0..n)
+                .filter(|&k| border[k as usize])
+                .filter(|&k| {
+                    let uv = mesh.uv[k as usize];
+                    match selector {
+                        Selector::Edge(e) => on(*e, uv),
+                        Selector::Corner(a, b) => on(*a, uv) && on(*b, uv),
+                        _ => unreachable!(),
+                    }
+                })
+                .collect()
+        }
+        Selector::Region { u, v } => {
+            let eps = 1e-9;
+            (0..n)
+                .filter(|&k| {
+                    let [uu, vv] = mesh.uv[k as usize];
+                    uu >= u[0] - eps && uu <= u[1] + eps && vv >= v[0] - eps && vv <= v[1] + eps
+                })
+                .collect()
+        }
+        Selector::Points(points) => points
+            .iter()
+            .filter_map(|&(pu, pv)| {
+                (0..n).min_by(|&a, &b| {
+                    let d = |k: u32| {
+                        let [uu, vv] = mesh.uv[k as usize];
+                        (uu - pu).powi(2) + (vv - pv).powi(2)
+                    };
+                    d(a).total_cmp(&d(b))
+                })
+            })
+            .collect(),
+        Selector::Vertices(ids) => (0..n)
+            .filter(|&k| ids.binary_search(&level.source[k as usize]).is_ok())
+            .collect(),
+    };
+    out.sort_unstable();
+    out.dedup();
     out
 }
 

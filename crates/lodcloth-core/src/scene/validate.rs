@@ -12,23 +12,38 @@ use super::raw::{
 };
 use super::selector::{Edge, Selector};
 use super::{Scene, SceneError, SceneForce, ScenePin};
+use crate::mesh::TriMesh;
 use crate::problems::Problems;
 use crate::sim::{
     CgSettings, Collider, GridShape, Material, Membrane, Moduli, Orientation, PinPath, Profile, Shape, SimParams,
     SpringCoeffs, SpringKind, StabilityCheck, StiffnessAdjustment, StrainLimit, Wind,
 };
+use std::path::{Path, PathBuf};
 
 impl Scene {
     /// Validate a parsed scene, listing every problem with its path.
     pub fn validate(raw: RawScene, origin: &str) -> Result<Scene, SceneError> {
         let mut p = Problems::default();
         let c = &raw.cloth;
-        p.cloth(c);
-        let material = p.material(&raw, reference_shape(c));
+        let mesh = p.cloth(c, origin);
+        let grid = reference_shape(c);
+        let reference = match &mesh {
+            Some((m, _)) => Reference::Mesh(m),
+            None => Reference::Grid(grid),
+        };
+        let (material, membrane) = match &mesh {
+            Some(_) => {
+                let membrane = p.mesh_membrane(&raw);
+                (
+                    Material::isotropic([SpringCoeffs { k: 0.0, c: 0.0 }; 3]),
+                    Some(membrane),
+                )
+            }
+            None => (p.material(&raw, grid), None),
+        };
         let s = &raw.simulation;
         let cg = p.simulation(s);
         let (stiffness_adjustment, strain_limit) = p.strain(&raw.strain);
-        let reference = reference_shape(c);
         let pins = p.pins(&raw.pins, &reference);
         let forces = p.forces(&raw.forces, &reference);
         let wind = raw.wind.as_ref().map(|w| p.wind(w));
@@ -40,17 +55,17 @@ impl Scene {
                 problems,
             });
         }
-        Ok(Scene {
+        let mut scene = Scene {
             origin: origin.to_string(),
             name: raw.name,
             description: raw.description,
-            width: c.width,
-            height: c.height,
-            nx: c.nx,
-            ny: c.ny,
+            width: grid.width,
+            height: grid.height,
+            nx: grid.nx,
+            ny: grid.ny,
             orientation: match c.orientation {
-                RawOrientation::Horizontal => Orientation::Horizontal,
-                RawOrientation::Vertical => Orientation::Vertical,
+                Some(RawOrientation::Vertical) => Orientation::Vertical,
+                _ => Orientation::Horizontal,
             },
             areal_density: c.areal_density,
             mass: c.mass,
@@ -71,12 +86,23 @@ impl Scene {
                 StabilityCheck::Enforce
             },
             source_hash: 0,
+            mesh: None,
             pins,
             forces,
             wind,
             colliders,
-        })
+        };
+        if let (Some((reference, (file, hash))), Some(membrane)) = (mesh, membrane) {
+            scene.attach_mesh(reference, file, hash, membrane);
+        }
+        Ok(scene)
     }
+}
+
+/// What selectors are validated against: the scene's own grid, or its mesh.
+enum Reference<'a> {
+    Grid(GridShape),
+    Mesh(&'a TriMesh),
 }
 
 /// The grid that `nodes = [[i, j], …]` selectors index: the scene's own
@@ -88,37 +114,142 @@ const MAX_COEFFICIENT: f64 = 1e12;
 
 fn reference_shape(c: &RawCloth) -> GridShape {
     GridShape {
-        nx: c.nx.max(2),
-        ny: c.ny.max(2),
-        width: c.width,
-        height: c.height,
+        nx: c.nx.unwrap_or(2).max(2),
+        ny: c.ny.unwrap_or(2).max(2),
+        width: c.width.unwrap_or(1.0),
+        height: c.height.unwrap_or(1.0),
     }
 }
 
 // Sections of the file, in the order `Scene::validate` checks them.
 impl Problems {
-    /// `[cloth]`: size, areal density and reference resolution.
-    fn cloth(&mut self, c: &RawCloth) {
-        self.positive("cloth.width", c.width);
-        self.positive("cloth.height", c.height);
+    /// `[cloth]`: a grid's size and reference resolution, or a mesh read
+    /// from its file (with the file's path and a hash of its bytes); then
+    /// the areal density.
+    fn cloth(&mut self, c: &RawCloth, origin: &str) -> Option<(TriMesh, (PathBuf, u64))> {
+        let mesh = match &c.mesh {
+            Some(file) => {
+                for (field, given) in [
+                    ("width", c.width.is_some()),
+                    ("height", c.height.is_some()),
+                    ("nx", c.nx.is_some()),
+                    ("ny", c.ny.is_some()),
+                    ("orientation", c.orientation.is_some()),
+                ] {
+                    if given {
+                        self.push(format!(
+                            "cloth.{field}: a mesh cloth has no {field} (its file gives its shape and vertices)"
+                        ));
+                    }
+                }
+                self.mesh_file(file, origin)
+            }
+            None => {
+                self.grid_cloth(c);
+                None
+            }
+        };
+        self.positive("cloth.areal_density", c.areal_density);
+        mesh
+    }
+
+    /// `cloth.mesh`: the file, relative to the scene's directory, read and
+    /// validated as a cloth mesh.
+    fn mesh_file(&mut self, file: &str, origin: &str) -> Option<(TriMesh, (PathBuf, u64))> {
+        let base = Path::new(origin).parent().unwrap_or(Path::new(""));
+        let path = base.join(file);
+        let bytes = match std::fs::read(&path) {
+            Ok(b) => b,
+            Err(e) => {
+                self.push(format!("cloth.mesh: cannot read {}: {e}", path.display()));
+                return None;
+            }
+        };
+        match crate::mesh::load(&path) {
+            Ok(m) => Some((m, (path, crate::hash::fnv1a64(&bytes)))),
+            Err(e) => {
+                self.push(format!("cloth.mesh: {e}"));
+                None
+            }
+        }
+    }
+
+    /// A grid cloth's `[cloth]`: size and reference resolution.
+    fn grid_cloth(&mut self, c: &RawCloth) {
+        for (field, given) in [
+            ("width", c.width.is_some()),
+            ("height", c.height.is_some()),
+            ("nx", c.nx.is_some()),
+            ("ny", c.ny.is_some()),
+        ] {
+            if !given {
+                self.push(format!(
+                    "cloth.{field}: missing; a grid cloth needs width, height, nx and ny (or give a mesh file as cloth.mesh)"
+                ));
+            }
+        }
+        let (Some(width), Some(height)) = (c.width, c.height) else {
+            return;
+        };
+        self.positive("cloth.width", width);
+        self.positive("cloth.height", height);
         // Springs at other levels are made from squared cell sizes: a size
         // whose square underflows or overflows gives NaN springs.
-        for (path, size) in [("cloth.width", c.width), ("cloth.height", c.height)] {
+        for (path, size) in [("cloth.width", width), ("cloth.height", height)] {
             if size.is_finite() && size > 0.0 && !(1e-4..=1e4).contains(&size) {
                 self.push(format!("{path}: must be within 1e-4 and 1e4 m, got {size} m"));
             }
         }
         // Springs are made from the material at every level's spacing, scaled
         // by the cells' aspect ratio (squared for the diagonals): keep it sane.
-        let aspect = c.width / c.height;
-        if c.width > 0.0 && c.height > 0.0 && !(1e-3..=1e3).contains(&aspect) {
+        let aspect = width / height;
+        if width > 0.0 && height > 0.0 && !(1e-3..=1e3).contains(&aspect) {
             self.push(format!(
-                "cloth.width: width / height must be within 1:1000 and 1000:1, got {} m wide and {} m high",
-                c.width, c.height
+                "cloth.width: width / height must be within 1:1000 and 1000:1, got {width} m wide and {height} m high"
             ));
         }
-        self.positive("cloth.areal_density", c.areal_density);
-        self.grid_size("cloth", c.nx, c.ny);
+        if let (Some(nx), Some(ny)) = (c.nx, c.ny) {
+            self.grid_size("cloth", nx, ny);
+        }
+    }
+
+    /// A mesh cloth's material: `[material]` only (per-spring `[springs]`
+    /// describe a grid's cells).
+    fn mesh_membrane(&mut self, raw: &RawScene) -> Membrane {
+        match (&raw.springs, &raw.material) {
+            (None, Some(m)) => self.membrane(m),
+            (Some(_), _) => {
+                self.push(
+                    "springs: a mesh cloth's material is given as [material] (membrane moduli); \
+                     [springs] are per-spring coefficients of a grid's cells"
+                        .into(),
+                );
+                self.membrane_or_zero(raw)
+            }
+            (None, None) => {
+                self.push("material: missing; a mesh cloth needs [material] (membrane moduli)".into());
+                self.membrane_or_zero(raw)
+            }
+        }
+    }
+
+    fn membrane_or_zero(&mut self, raw: &RawScene) -> Membrane {
+        match &raw.material {
+            Some(m) => self.membrane(m),
+            None => {
+                let zero = Moduli {
+                    stretch_u: 0.0,
+                    stretch_v: 0.0,
+                    shear: 0.0,
+                    bend_u: 0.0,
+                    bend_v: 0.0,
+                };
+                Membrane {
+                    stiffness: zero,
+                    damping: zero,
+                }
+            }
+        }
     }
 
     /// `[springs]` (K and C of each kind at the reference resolution) or
@@ -291,7 +422,7 @@ impl Problems {
     }
 
     /// `[[pins]]`: each pin's node set, then its path.
-    fn pins(&mut self, pins: &[RawPin], reference: &GridShape) -> Vec<ScenePin> {
+    fn pins(&mut self, pins: &[RawPin], reference: &Reference) -> Vec<ScenePin> {
         pins.iter()
             .enumerate()
             .map(|(i, pin)| {
@@ -304,7 +435,7 @@ impl Problems {
     }
 
     /// `[[forces]]`: each force's node set, total, then profile.
-    fn forces(&mut self, forces: &[RawForce], reference: &GridShape) -> Vec<SceneForce> {
+    fn forces(&mut self, forces: &[RawForce], reference: &Reference) -> Vec<SceneForce> {
         forces
             .iter()
             .enumerate()
@@ -353,12 +484,14 @@ impl Problems {
             RawShape::Sphere => "sphere",
             RawShape::Capsule => "capsule",
             RawShape::Box => "box",
+            RawShape::Cylinder => "cylinder",
         };
         let needs: &[&str] = match b.shape {
             RawShape::Plane => &["point", "normal"],
             RawShape::Sphere => &["center", "radius"],
             RawShape::Capsule => &["ends", "radius"],
             RawShape::Box => &["center", "size"],
+            RawShape::Cylinder => &["center", "radius", "height"],
         };
         let given = [
             ("point", b.point.is_some()),
@@ -367,6 +500,7 @@ impl Problems {
             ("radius", b.radius.is_some()),
             ("ends", b.ends.is_some()),
             ("size", b.size.is_some()),
+            ("height", b.height.is_some()),
         ];
         for (field, present) in given {
             match (needs.contains(&field), present) {
@@ -429,7 +563,17 @@ impl Problems {
                     },
                 )
             }
+            RawShape::Cylinder => (
+                vector("center", b.center),
+                Shape::Cylinder {
+                    radius: b.radius.unwrap_or(1.0),
+                    half_height: 0.5 * b.height.unwrap_or(1.0),
+                },
+            ),
         };
+        if let Some(h) = b.height {
+            self.positive(&format!("{path}.height"), h);
+        }
         if let Some(r) = b.radius {
             self.positive(&format!("{path}.radius"), r);
         }
@@ -525,18 +669,36 @@ impl Problems {
     /// A node set given in exactly one way, with known edge and corner names
     /// and node indices inside the `reference` grid. After a problem it
     /// stands in `Selector::All`, which is never used: the scene is refused.
-    fn selector(&mut self, path: &str, r: &RawSelector, reference: &GridShape) -> Selector {
+    fn selector(&mut self, path: &str, r: &RawSelector, reference: &Reference) -> Selector {
         let given = [
             r.edge.is_some(),
             r.corner.is_some(),
             r.region.is_some(),
             r.nodes.is_some(),
             r.all.is_some(),
+            r.vertices.is_some(),
+            r.group.is_some(),
         ];
         if given.iter().filter(|g| **g).count() != 1 {
-            self.push(format!("{path}: give exactly one of edge, corner, region, nodes, all"));
+            self.push(format!(
+                "{path}: give exactly one of edge, corner, region, nodes, all, vertices, group"
+            ));
             return Selector::All;
         }
+        let reference = match reference {
+            Reference::Grid(shape) => {
+                for (field, given) in [("vertices", r.vertices.is_some()), ("group", r.group.is_some())] {
+                    if given {
+                        self.push(format!(
+                            "{path}.{field}: a grid cloth has no {field}; use edge, corner, region, nodes or all"
+                        ));
+                        return Selector::All;
+                    }
+                }
+                shape
+            }
+            Reference::Mesh(mesh) => return self.mesh_selector(path, r, mesh),
+        };
         let edge = |s: &str| match s {
             "top" => Some(Edge::Top),
             "bottom" => Some(Edge::Bottom),
@@ -601,5 +763,63 @@ impl Problems {
             ));
         }
         Selector::All
+    }
+
+    /// A selector on a mesh cloth: vertices by index (in range) or by group
+    /// (one the file has), sides, corners and regions of the material
+    /// square, or all; `nodes = [[i, j]]` index a grid and are refused.
+    fn mesh_selector(&mut self, path: &str, r: &RawSelector, mesh: &TriMesh) -> Selector {
+        if r.nodes.is_some() {
+            self.push(format!(
+                "{path}.nodes: [i, j] index a grid; on a mesh cloth use vertices = [..], group, region, edge or corner"
+            ));
+            return Selector::All;
+        }
+        if let Some(ids) = &r.vertices {
+            if ids.is_empty() {
+                self.push(format!("{path}.vertices: empty list"));
+            }
+            let n = mesh.vertices();
+            for (k, &i) in ids.iter().enumerate() {
+                if i as usize >= n {
+                    self.push(format!(
+                        "{path}.vertices[{k}]: vertex {i} is outside the mesh's {n} vertices"
+                    ));
+                }
+            }
+            let mut ids = ids.clone();
+            ids.sort_unstable();
+            ids.dedup();
+            return Selector::Vertices(ids);
+        }
+        if let Some(name) = &r.group {
+            return match mesh.groups.get(name) {
+                Some(ids) if !ids.is_empty() => Selector::Vertices(ids.clone()),
+                _ => {
+                    let known: Vec<&str> = mesh.groups.keys().map(String::as_str).collect();
+                    self.push(format!(
+                        "{path}.group: the mesh has no group {name:?} with vertices (its groups: {})",
+                        if known.is_empty() {
+                            "none".to_string()
+                        } else {
+                            known.join(", ")
+                        }
+                    ));
+                    Selector::All
+                }
+            };
+        }
+        let grid = GridShape {
+            nx: 2,
+            ny: 2,
+            width: 1.0,
+            height: 1.0,
+        };
+        let plain = RawSelector {
+            vertices: None,
+            group: None,
+            ..r.clone()
+        };
+        self.selector(path, &plain, &Reference::Grid(grid))
     }
 }

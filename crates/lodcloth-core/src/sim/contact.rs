@@ -66,6 +66,14 @@ pub enum Shape {
         /// Half its size along x, y, z (m), each > 0.
         half_extents: V3,
     },
+    /// A solid upright (y-axis) cylinder with flat caps: a Cusick tester's
+    /// support disc, a table's round top, a post.
+    Cylinder {
+        /// m, > 0.
+        radius: f64,
+        /// Half its height (m), > 0.
+        half_height: f64,
+    },
 }
 
 impl Shape {
@@ -100,6 +108,26 @@ impl Shape {
                     (d[c], n)
                 }
             }
+            Shape::Cylinder { radius, half_height } => {
+                let rho = (q[0] * q[0] + q[2] * q[2]).sqrt();
+                let radial = if rho > 0.0 {
+                    [q[0] / rho, 0.0, q[2] / rho]
+                } else {
+                    [1.0, 0.0, 0.0]
+                };
+                let up = [0.0, if q[1] < 0.0 { -1.0 } else { 1.0 }, 0.0];
+                let (dr, dy) = (rho - radius, q[1].abs() - half_height);
+                if dr > 0.0 && dy > 0.0 {
+                    // Beyond the rim: from the nearest point of the rim circle.
+                    let len = (dr * dr + dy * dy).sqrt();
+                    (len, add(scale(radial, dr / len), scale(up, dy / len)))
+                } else if dr > dy {
+                    // Outside the side, or inside and nearer the side.
+                    (dr, radial)
+                } else {
+                    (dy, up)
+                }
+            }
         }
     }
 }
@@ -126,6 +154,20 @@ impl Shape {
             }
             Shape::Sphere { radius } => round_triangles(radius, [0.0, 0.0, 0.0], &mut out),
             Shape::Capsule { half_axis, radius } => round_triangles(radius, half_axis, &mut out),
+            Shape::Cylinder { radius, half_height } => {
+                const SEGMENTS: usize = 48;
+                let rim = |j: usize, y: f64| {
+                    let phi = j as f64 * std::f64::consts::TAU / SEGMENTS as f64;
+                    [radius * phi.cos(), y, radius * phi.sin()]
+                };
+                let (top, bottom) = ([0.0, half_height, 0.0], [0.0, -half_height, 0.0]);
+                for j in 0..SEGMENTS {
+                    let (a, b) = (rim(j, half_height), rim(j + 1, half_height));
+                    let (c, d) = (rim(j, -half_height), rim(j + 1, -half_height));
+                    // Caps seen from outside, then the side's quad.
+                    out.extend([top, b, a, bottom, c, d, a, b, c, c, b, d]);
+                }
+            }
             Shape::Cuboid { half_extents: e } => {
                 for axis in 0..3 {
                     let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
@@ -276,6 +318,10 @@ pub(crate) fn resolve(
             Shape::Cuboid { half_extents: e } => reach.mark(near, |q| {
                 let d = [q[0].abs() - e[0], q[1].abs() - e[1], q[2].abs() - e[2]];
                 norm(d.map(|x| x.max(0.0))) + d[0].max(d[1]).max(d[2]).min(0.0)
+            }),
+            Shape::Cylinder { radius, half_height } => reach.mark(near, |q| {
+                let d = [(q[0] * q[0] + q[2] * q[2]).sqrt() - radius, q[1].abs() - half_height];
+                (d[0].max(0.0).powi(2) + d[1].max(0.0).powi(2)).sqrt() + d[0].max(d[1]).min(0.0)
             }),
         }
         for k in 0..n {

@@ -1392,6 +1392,13 @@ fn validate_collider(i: usize, body: &Collider) -> Result<(), SimError> {
                 return Err(invalid(name("half_extents"), e, "each must be finite and > 0"));
             }
         }
+        Shape::Cylinder { radius, half_height } => {
+            for (field, x) in [("radius", radius), ("half_height", half_height)] {
+                if !(x.is_finite() && x > 0.0) {
+                    return Err(invalid(name(field), x, "must be finite and > 0"));
+                }
+            }
+        }
     }
     Ok(())
 }

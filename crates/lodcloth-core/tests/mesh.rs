@@ -1,0 +1,436 @@
+//! Triangle-mesh cloths against independent truth: areas of the generated
+//! sheet and disc (W·H, the outer ring's polygon), the membrane's biaxial
+//! energy ½ε²·A·(C₁₁ + C₂₂ + 2C₁₂) stored by every level of a chain (with
+//! the springs' energy summed independently), the triangular lattice's
+//! isotropy, simplification that keeps vertex counts, pins and the outline,
+//! and the correlation between levels (exact on shared vertices, affine maps
+//! reproduced on the surface). Validation names what is wrong.
+
+use std::collections::BTreeMap;
+
+use crate::common::scalar_elastic_energy;
+use lodcloth::lod::Correlation;
+use lodcloth::mesh::{self, generate, MeshError, TriMesh};
+use lodcloth::sim::{Membrane, Moduli, SpringCoeffs, State, Topology};
+
+/// A cotton-like membrane: stretch 400 / 300 N/m with a fifth carried by
+/// bend springs, shear 60 N/m; damping a thousandth of it.
+fn membrane() -> Membrane {
+    let m = Moduli {
+        stretch_u: 400.0,
+        stretch_v: 300.0,
+        shear: 60.0,
+        bend_u: 80.0,
+        bend_v: 60.0,
+    };
+    let scale = |m: Moduli, s: f64| Moduli {
+        stretch_u: m.stretch_u * s,
+        stretch_v: m.stretch_v * s,
+        shear: m.shear * s,
+        bend_u: m.bend_u * s,
+        bend_v: m.bend_v * s,
+    };
+    Membrane {
+        stiffness: m,
+        damping: scale(m, 1e-3),
+    }
+}
+
+/// `topology`'s rest state with every position mapped by `f`.
+fn deformed(topology: &Topology, f: impl Fn([f64; 3]) -> [f64; 3]) -> State {
+    let mut s = State::at_rest(topology);
+    let n = topology.n_nodes;
+    for (k, p) in topology.rest_positions.iter().enumerate() {
+        let q = f(*p);
+        for c in 0..3 {
+            s.pos[c * n + k] = q[c];
+        }
+    }
+    s
+}
+
+/// Vertices of `mesh` on its border.
+fn border_count(mesh: &TriMesh) -> usize {
+    mesh.border().iter().filter(|&&b| b).count()
+}
+
+#[test]
+fn generated_meshes_have_their_exact_areas_and_lumped_areas_sum_to_them() {
+    let sheet = generate::sheet(1.2, 0.8, 0.05);
+    assert!((sheet.area() - 0.96).abs() < 1e-12, "sheet area {}", sheet.area());
+    let lumped: f64 = sheet.vertex_areas().iter().sum();
+    assert!((lumped - 0.96).abs() < 1e-12);
+    // The disc's outer ring is a regular 6k-gon of the disc's radius.
+    let (r, edge) = (0.15, 0.01);
+    let disc = generate::disc(r, 0.3, edge);
+    let sides = 6.0 * (r / edge).round();
+    let polygon = 0.5 * sides * r * r * (std::f64::consts::TAU / sides).sin();
+    assert!(
+        (disc.area() - polygon).abs() < 1e-12 * polygon,
+        "{} vs {polygon}",
+        disc.area()
+    );
+    assert_eq!(border_count(&disc), sides as usize);
+    // Near-equilateral: every edge within a factor of the asked length.
+    for (m, asked) in [(&sheet, 0.05), (&disc, edge)] {
+        for ((a, b), _) in m.edges() {
+            let l = crate::common::dist(m.positions[a as usize], m.positions[b as usize]);
+            assert!(l > 0.45 * asked && l < 1.6 * asked, "edge {l} m, asked {asked} m");
+        }
+    }
+    // A skirt is an open tube: two borders (waist and hem), its waist a group.
+    let skirt = generate::skirt(0.15, 0.3, 0.5, 1.0, 0.03);
+    let waist = &skirt.groups["waist"];
+    assert!(waist
+        .iter()
+        .all(|&k| (skirt.positions[k as usize][1] - 1.0).abs() < 1e-12));
+    assert_eq!(border_count(&skirt), 2 * waist.len());
+}
+
+/// Every spring of a cloth stretches by ε under a uniform biaxial strain ε,
+/// so the energy is ½ε²·A·(C₁₁ + C₂₂ + 2C₁₂) for the membrane the
+/// material stands for (C₁₂ = C₆₆, central springs).
+#[test]
+fn every_level_of_a_chain_stores_the_membranes_biaxial_energy() {
+    let m = membrane();
+    let expected_per_area =
+        |eps: f64| 0.5 * eps * eps * (m.stiffness.stretch_u + m.stiffness.stretch_v + 2.0 * m.stiffness.shear);
+    let reference = generate::disc(0.15, 0.0, 0.006);
+    let locked = vec![false; reference.vertices()];
+    let n = reference.vertices();
+    for target in [n, n * 2 / 5, n / 8] {
+        let level = mesh::simplify(&reference, target, &locked, "disc").expect("simplifies");
+        let topo = mesh::mesh_topology(&level.mesh);
+        let material = mesh::mesh_material(&m, &topo);
+        let eps = 1e-3;
+        let state = deformed(&topo, |p| p.map(|x| x * (1.0 + eps)));
+        let energy = scalar_elastic_energy(&topo, &material, &state);
+        let want = expected_per_area(eps) * level.mesh.area();
+        assert!(
+            (energy - want).abs() < 1e-9 * want,
+            "{} vertices: energy {energy:e} J, membrane {want:e} J",
+            level.mesh.vertices()
+        );
+        // The bend springs carry the membrane's bend share of the energy.
+        let mut only_bend = material;
+        only_bend.springs[0] = SpringCoeffs { k: 0.0, c: 0.0 };
+        only_bend.springs[1] = SpringCoeffs { k: 0.0, c: 0.0 };
+        let share = scalar_elastic_energy(&topo, &only_bend, &state) / energy;
+        let beta = (m.stiffness.bend_u + m.stiffness.bend_v) / (m.stiffness.stretch_u + m.stiffness.stretch_v);
+        assert!((share - beta).abs() < 1e-9, "bend share {share} vs {beta}");
+    }
+}
+
+/// Elastic energy of the springs with both ends inside the middle of the
+/// sheet ([0.25, 0.75]² in x–z): the lattice without its border, where
+/// half-cells and missing across-edge springs make any finite sheet stiffer
+/// along its sides.
+fn interior_energy(topo: &Topology, material: &lodcloth::sim::Material, state: &State) -> f64 {
+    let inside = |k: u32| {
+        let p = topo.rest_positions[k as usize];
+        (0.25..=0.75).contains(&p[0]) && (0.25..=0.75).contains(&p[2])
+    };
+    let mut e = 0.0;
+    for g in &topo.groups {
+        let k = material.get(g.class).k;
+        for s in 0..g.len() {
+            if inside(g.a[s]) && inside(g.b[s]) {
+                let l = crate::common::dist(state.position(g.a[s] as usize), state.position(g.b[s] as usize));
+                e += 0.5 * k * (l - g.rest[s]).powi(2);
+            }
+        }
+    }
+    e
+}
+
+/// A triangular lattice of central springs is isotropic: a uniaxial strain
+/// stores the same energy in every direction (module docs of
+/// `mesh::springs`), and λ = μ: biaxial strain stores 8/3 of uniaxial
+/// (½(2C₁₁ + 2C₁₂)ε² against ½C₁₁ε² with C₁₂ = C₁₁/3).
+#[test]
+fn an_equilateral_mesh_is_isotropic_with_shear_a_third_of_stretch() {
+    // 231 rows of exactly equilateral triangles (a sheet whose height is
+    // not a whole number of rows squeezes them: at 1 m by 2 cm, 1.9 %
+    // anisotropy); fine enough that cropping the middle (which cuts the
+    // lattice's three directions unequally, 0.8 % at 2 cm) stays small.
+    let sheet = generate::sheet(1.0, 231.0 * 0.005 * 3f64.sqrt() / 2.0, 0.005);
+    let topo = mesh::mesh_topology(&sheet);
+    let material = mesh::mesh_material(&membrane(), &topo);
+    let eps = 1e-4;
+    let uniaxial = |theta: f64| {
+        let (c, s) = (theta.cos(), theta.sin());
+        let state = deformed(&topo, |p| {
+            // x' = x + ε (x·d) d in the x–z plane, d = (cos θ, sin θ).
+            let along = p[0] * c + p[2] * s;
+            [p[0] + eps * along * c, p[1], p[2] + eps * along * s]
+        });
+        (
+            interior_energy(&topo, &material, &state),
+            scalar_elastic_energy(&topo, &material, &state),
+        )
+    };
+    let energies: Vec<(f64, f64)> = (0..12)
+        .map(|k| uniaxial(k as f64 * std::f64::consts::PI / 12.0))
+        .collect();
+    let spread = |pick: fn(&(f64, f64)) -> f64| {
+        let (lo, hi) = energies
+            .iter()
+            .map(pick)
+            .fold((f64::INFINITY, 0.0f64), |(lo, hi), e| (lo.min(e), hi.max(e)));
+        hi / lo - 1.0
+    };
+    let (inner, whole) = (spread(|e| e.0), spread(|e| e.1));
+    eprintln!(
+        "uniaxial energy over 12 directions varies {:.3} % inside the sheet, {:.3} % over the whole sheet",
+        100.0 * inner,
+        100.0 * whole
+    );
+    assert!(
+        inner < 0.005,
+        "the lattice varies {:.3} % with direction",
+        100.0 * inner
+    );
+    let biaxial = interior_energy(&topo, &material, &deformed(&topo, |p| p.map(|x| x * (1.0 + eps))));
+    let mean = energies.iter().map(|e| e.0).sum::<f64>() / energies.len() as f64;
+    assert!(
+        (biaxial / mean - 8.0 / 3.0).abs() < 0.01,
+        "biaxial/uniaxial {}",
+        biaxial / mean
+    );
+}
+
+#[test]
+fn simplification_keeps_the_vertex_count_the_pins_and_the_outline() {
+    let reference = generate::disc(0.15, 0.0, 0.005);
+    let n = reference.vertices();
+    // Pin a ring of vertices around the centre (radius ≤ 3 cm).
+    let locked: Vec<bool> = reference
+        .positions
+        .iter()
+        .map(|p| (p[0] * p[0] + p[2] * p[2]).sqrt() <= 0.03 + 1e-9)
+        .collect();
+    let pinned: Vec<u32> = (0..n as u32).filter(|&k| locked[k as usize]).collect();
+    for target in [n * 2 / 5, n / 10] {
+        let level = mesh::simplify(&reference, target, &locked, "disc").expect("simplifies");
+        let got = level.mesh.vertices();
+        assert!(
+            (got as f64 - target as f64).abs() <= mesh::VERTEX_TOLERANCE * target as f64,
+            "asked {target}, got {got}"
+        );
+        // Level vertices are reference vertices, at their rest positions.
+        for (k, &s) in level.source.iter().enumerate() {
+            assert_eq!(level.mesh.positions[k], reference.positions[s as usize]);
+            assert_eq!(level.mesh.uv[k], reference.uv[s as usize]);
+        }
+        for p in &pinned {
+            assert!(level.source.binary_search(p).is_ok(), "pinned vertex {p} collapsed");
+        }
+        // The outline: border vertices stay on the rim, and the area within
+        // the chord sag of the coarser rim.
+        let border = level.mesh.border();
+        for (k, &b) in border.iter().enumerate() {
+            if b {
+                let p = level.mesh.positions[k];
+                assert!(
+                    ((p[0] * p[0] + p[2] * p[2]).sqrt() - 0.15).abs() < 1e-9,
+                    "border vertex off the rim"
+                );
+            }
+        }
+        // The level covers exactly the polygon of its rim vertices (no hole,
+        // no overlap), and that polygon loses under 1 % to its chords.
+        let mut angles: Vec<f64> = (0..got)
+            .filter(|&k| border[k])
+            .map(|k| level.mesh.positions[k][2].atan2(level.mesh.positions[k][0]))
+            .collect();
+        angles.sort_by(f64::total_cmp);
+        let polygon: f64 = (0..angles.len())
+            .map(|i| {
+                let next = if i + 1 < angles.len() {
+                    angles[i + 1]
+                } else {
+                    angles[0] + std::f64::consts::TAU
+                };
+                0.5 * 0.15 * 0.15 * (next - angles[i]).sin()
+            })
+            .sum();
+        assert!(
+            (level.mesh.area() - polygon).abs() < 1e-12,
+            "{got} vertices: area {} vs its rim's polygon {polygon}",
+            level.mesh.area()
+        );
+        let loss = 1.0 - level.mesh.area() / reference.area();
+        assert!(
+            (0.0..0.01).contains(&loss),
+            "{got} vertices: area lost {:.3} %",
+            100.0 * loss
+        );
+    }
+    // Asking for fewer vertices than the pins is refused, naming why.
+    let err = mesh::simplify(&reference, pinned.len() - 1, &locked, "disc").unwrap_err();
+    assert!(err.to_string().contains("pinned"), "{err}");
+}
+
+#[test]
+fn correlation_of_levels_is_exact_on_shared_vertices_and_affine_on_the_surface() {
+    let reference = generate::sheet(1.0, 0.6, 0.02);
+    let locked = vec![false; reference.vertices()];
+    let level = mesh::simplify(&reference, reference.vertices() / 4, &locked, "sheet").expect("simplifies");
+    let fine = mesh::mesh_topology(&reference);
+    let coarse = mesh::mesh_topology(&level.mesh);
+    // fine → coarse: every coarse vertex is a fine vertex, weight 1.
+    let down = Correlation::between(&fine, &coarse).expect("meshes correlate");
+    for (k, e) in down.entries().iter().enumerate() {
+        assert_eq!(e.nodes[0], level.source[k]);
+        assert_eq!(e.weights, [1.0, 0.0, 0.0]);
+    }
+    // coarse → fine: an affine deformation of the coarse cloth maps onto
+    // the same affine deformation of the fine one (the sheet is flat and
+    // the outline kept, so every fine vertex lies on a coarse triangle).
+    let up = Correlation::between(&coarse, &fine).expect("meshes correlate");
+    let affine = |p: [f64; 3]| {
+        [
+            0.3 + 1.1 * p[0] - 0.2 * p[2],
+            0.5 * p[0] + 0.7 * p[2] - 0.1,
+            2.0 + 0.4 * p[0] + 0.9 * p[2],
+        ]
+    };
+    let moved = deformed(&coarse, affine);
+    let mut mapped = vec![0.0; 3 * fine.n_nodes];
+    up.map(&moved.pos, &mut mapped);
+    let n = fine.n_nodes;
+    let mut worst = 0.0f64;
+    for (k, p) in fine.rest_positions.iter().enumerate() {
+        let want = affine(*p);
+        for c in 0..3 {
+            worst = worst.max((mapped[c * n + k] - want[c]).abs());
+        }
+    }
+    assert!(worst < 1e-12, "affine map off by {worst:e} m");
+    for e in up.entries() {
+        assert!(e.weights.iter().all(|&w| w >= 0.0) && (e.weights.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+    }
+}
+
+#[test]
+fn a_mesh_that_is_no_cloth_is_refused_naming_what_is_wrong() {
+    let p = vec![
+        [0.0, 0.0, 0.0],
+        [1.0, 0.0, 0.0],
+        [0.0, 0.0, 1.0],
+        [1.0, 0.0, 1.0],
+        [0.5, 1.0, 0.5],
+    ];
+    let err =
+        |tris: Vec<[u32; 3]>, pos: Vec<[f64; 3]>| match TriMesh::validated(pos, None, tris, BTreeMap::new(), "m.obj") {
+            Err(MeshError::Invalid { problems, .. }) => problems.join("\n"),
+            other => panic!("expected a refusal, got {other:?}"),
+        };
+    let three_sheets = err(vec![[0, 1, 2], [1, 0, 3], [0, 1, 4]], p.clone());
+    assert!(
+        three_sheets.contains("edge 0–1 is shared by 3 triangles"),
+        "{three_sheets}"
+    );
+    let out_of_range = err(vec![[0, 1, 9]], p.clone());
+    assert!(
+        out_of_range.contains("triangle 0: vertex 9 out of range (5 vertices)"),
+        "{out_of_range}"
+    );
+    let flat = err(vec![[0, 1, 2], [0, 1, 1]], p.clone());
+    assert!(flat.contains("triangle 1: repeats a vertex"), "{flat}");
+    let line = err(vec![[0, 1, 2], [0, 1, 4], [0, 1, 3]], {
+        let mut q = p.clone();
+        q[4] = [0.5, 0.0, 0.0]; // on edge 0–1: no area
+        q
+    });
+    assert!(line.contains("has no area"), "{line}");
+    let mut nan = p;
+    nan[2][1] = f64::NAN;
+    let nan = err(vec![[0, 1, 2]], nan);
+    assert!(nan.contains("vertex 2: position"), "{nan}");
+    // An unused vertex is dropped, not refused; groups follow.
+    let mut groups = BTreeMap::new();
+    groups.insert("corner".to_string(), vec![3, 4]);
+    let ok = TriMesh::validated(
+        vec![
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [9.0, 9.0, 9.0],
+            [0.0, 0.0, 1.0],
+            [1.0, 0.0, 1.0],
+        ],
+        None,
+        vec![[0, 1, 3], [1, 4, 3]],
+        groups,
+        "m.obj",
+    )
+    .expect("valid");
+    assert_eq!(ok.vertices(), 4);
+    assert_eq!(ok.groups["corner"], vec![2, 3]);
+}
+
+/// What `to_obj` writes, `load` reads back: the same vertices, triangles
+/// and material coordinates (OBJ's v points up, material v down: the two
+/// flips cancel).
+#[test]
+fn a_generated_mesh_round_trips_through_an_obj_file() {
+    let skirt = generate::skirt(0.15, 0.3, 0.5, 1.0, 0.04);
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join("skirt.obj");
+    std::fs::write(&path, generate::to_obj(&skirt, "a skirt")).expect("written");
+    let read = mesh::load(&path).expect("reads");
+    // tobj numbers vertices as faces first use them: match by position.
+    let key = |p: [f64; 3]| p.map(f64::to_bits);
+    let written: std::collections::HashMap<_, usize> =
+        skirt.positions.iter().enumerate().map(|(k, &p)| (key(p), k)).collect();
+    assert_eq!(read.vertices(), skirt.vertices());
+    let to_written: Vec<usize> = read
+        .positions
+        .iter()
+        .map(|&p| {
+            *written
+                .get(&key(p))
+                .expect("every vertex read back at its exact position")
+        })
+        .collect();
+    for (k, &w) in to_written.iter().enumerate() {
+        let (a, b) = (read.uv[k], skirt.uv[w]);
+        assert!(
+            (a[0] - b[0]).abs() < 1e-12 && (a[1] - b[1]).abs() < 1e-12,
+            "{a:?} vs {b:?}"
+        );
+    }
+    let mut tris_read: Vec<[usize; 3]> = read
+        .triangles
+        .iter()
+        .map(|t| {
+            let mut t = t.map(|i| to_written[i as usize]);
+            let r = t.iter().position(|&x| x == *t.iter().min().expect("3")).expect("min");
+            t.rotate_left(r); // same winding, canonical start
+            t
+        })
+        .collect();
+    let mut tris_written: Vec<[usize; 3]> = skirt
+        .triangles
+        .iter()
+        .map(|t| {
+            let mut t = t.map(|i| i as usize);
+            let r = t.iter().position(|&x| x == *t.iter().min().expect("3")).expect("min");
+            t.rotate_left(r);
+            t
+        })
+        .collect();
+    tris_read.sort_unstable();
+    tris_written.sort_unstable();
+    assert!(
+        tris_read == tris_written,
+        "triangles or their winding differ after the round trip"
+    );
+    // The waist is the top edge in material coordinates.
+    let mut top: Vec<u32> = (0..read.vertices())
+        .filter(|&k| read.uv[k][1] == 0.0)
+        .map(|k| to_written[k] as u32)
+        .collect();
+    top.sort_unstable();
+    assert_eq!(top, skirt.groups["waist"]);
+}
