@@ -112,8 +112,18 @@ impl Common {
         }
     }
 
+    /// `--scenes` (default the paper's), grid cloths only: these
+    /// experiments name levels by grid sides.
     fn scenes(&self) -> Result<Vec<Scene>> {
-        self.scenes_or(&PAPER_SCENES)
+        let scenes = self.scenes_or(&PAPER_SCENES)?;
+        if let Some(s) = scenes.iter().find(|s| s.mesh.is_some()) {
+            bail!(
+                "{}: a mesh cloth; this experiment runs grid cloths (`experiment generalise --level 40%` \
+                 and the drape bench take mesh cloths)",
+                s.origin
+            );
+        }
+        Ok(scenes)
     }
 
     /// `--scenes`, or `default` when none is given.
@@ -127,6 +137,12 @@ impl Common {
             .iter()
             .map(|p| {
                 let mut s = Scene::load(p).with_context(|| format!("loading scene {}", p.display()))?;
+                if let (Some(level), Some(_)) = (self.reference, &s.mesh) {
+                    bail!(
+                        "{}: --reference {level}: a mesh cloth's reference is its file's every vertex",
+                        s.origin
+                    );
+                }
                 if let Some(level) = self.reference {
                     let (nx, ny) = level.resolve(s.width, s.height);
                     s.set_resolution(nx, ny);
@@ -413,6 +429,11 @@ pub fn run(experiment: Experiment) -> Result<()> {
                 None => None,
                 Some(l) => {
                     let s = lodcloth::scene::Scene::load(&scene)?;
+                    anyhow::ensure!(
+                        s.mesh.is_none(),
+                        "{}: a mesh cloth; `touched` runs grid cloths",
+                        s.origin
+                    );
                     let (nx, ny) = l.resolve(s.width, s.height);
                     Some((nx, ny))
                 }
@@ -463,10 +484,9 @@ fn reference_for(scene: &Scene, spec: RecordSpec) -> Result<(Arc<Reference>, f64
     let t = Instant::now();
     let (reference, cost) = record_reference(scene, spec, &mut log_line)?;
     info!(
-        "{}: reference {}×{} recorded in {:.1} s ({:.2} wall s per simulated s, {} MB held, O_max {:.3} m)",
+        "{}: reference {} recorded in {:.1} s ({:.2} wall s per simulated s, {} MB held, O_max {:.3} m)",
         scene.name,
-        scene.nx,
-        scene.ny,
+        scene.reference_level(),
         t.elapsed().as_secs_f64(),
         cost,
         reference.memory_bytes() / 1_000_000,

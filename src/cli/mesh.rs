@@ -156,6 +156,8 @@ fn info(file: PathBuf, levels: &[usize]) -> Result<()> {
     let mesh = mesh::load(&file)?;
     describe(&file, &mesh);
     let fine = mesh::mesh_topology(&mesh);
+    let (shortest, longest) = edge_range(&fine);
+    println!("edges {shortest:.2e}–{longest:.2e} m");
     let none = vec![false; mesh.vertices()];
     for &n in levels {
         let start = Instant::now();
@@ -177,14 +179,17 @@ fn info(file: PathBuf, levels: &[usize]) -> Result<()> {
             })
             .fold(0.0, f64::max);
         let total = start.elapsed().as_secs_f64();
+        let (shortest, longest) = edge_range(&coarse);
         println!(
             "level {n}v: {} vertices ({:.0} % of the reference), {} triangles, area {:.3} % of the reference, \
-             geometric error {:.2e} of the extent, reference vertices off its surface by ≤ {:.2e} m; \
+             edges {:.2e}–{:.2e} m, geometric error {:.2e} of the extent, reference vertices off its surface by ≤ {:.2e} m; \
              simplified in {:.1} ms, springs and correlation in {:.1} ms",
             level.mesh.vertices(),
             100.0 * level.mesh.vertices() as f64 / mesh.vertices() as f64,
             level.mesh.triangles.len(),
             100.0 * level.mesh.area() / mesh.area(),
+            shortest,
+            longest,
             level.error,
             worst,
             1e3 * simplified,
@@ -192,6 +197,17 @@ fn info(file: PathBuf, levels: &[usize]) -> Result<()> {
         );
     }
     Ok(())
+}
+
+/// The shortest and longest stretch spring (edge) of a mesh topology (m):
+/// the shortest, with its vertices' masses, sets the stable step.
+fn edge_range(topology: &lodcloth::sim::Topology) -> (f64, f64) {
+    topology
+        .groups
+        .iter()
+        .filter(|g| g.kind() == lodcloth::sim::SpringKind::Structural)
+        .flat_map(|g| g.rest.iter().copied())
+        .fold((f64::INFINITY, 0.0), |(lo, hi), l| (lo.min(l), hi.max(l)))
 }
 
 fn describe(file: &std::path::Path, mesh: &TriMesh) {

@@ -167,10 +167,24 @@ pub(crate) fn simulate(a: SimulateArgs) -> Result<()> {
     Ok(())
 }
 
+/// A grid cloth's scene: `simulate` and `stability` name levels by grid
+/// sides, and a mesh cloth is refused with what runs it.
+pub(crate) fn grid_scene(path: &Path) -> Result<Scene> {
+    let scene = Scene::load(path)?;
+    anyhow::ensure!(
+        scene.mesh.is_none(),
+        "{}: a mesh cloth; `simulate` and `stability` run grid cloths so far \
+         (`lodcloth experiment generalise --scenes {} --level 40%` runs a mesh cloth's levels)",
+        scene.origin,
+        path.display()
+    );
+    Ok(scene)
+}
+
 /// The scene file with the command line's integrator, dt, duration and
 /// stability overrides.
 fn with_overrides(a: &SimulateArgs) -> Result<Scene> {
-    let mut scene = Scene::load(&a.scene)?;
+    let mut scene = grid_scene(&a.scene)?;
     if let Some(i) = a.integrator {
         scene.params.integrator = i;
     }
@@ -261,7 +275,7 @@ pub(crate) fn stability(
     bisections: u32,
     out: &Path,
 ) -> Result<()> {
-    let scene = Scene::load(scene_path)?;
+    let scene = grid_scene(scene_path)?;
     if sizes.iter().any(|&n| n < 2) {
         bail!("--sizes: every size must be at least 2");
     }

@@ -136,22 +136,26 @@ class Levels(unittest.TestCase):
         self.assertEqual(lc.parse_level("85pts"), v1.Level(points=85))
         self.assertEqual(lc.parse_level(300), v1.Level(points=300))
         self.assertEqual(lc.parse_level((8, 4)), v1.Level(nx=8, ny=4))
+        self.assertEqual(lc.parse_level("504v"), v1.Level(vertices=504))
         lvl = v1.Level(nx=3, ny=3)
         self.assertIs(lc.parse_level(lvl), lvl)
 
     def test_parse_refuses_nonsense(self):
-        for bad in ["", "x", "16x", "axb", "0x16", "-3", "0", "1x2x3", "12.5", True, (1,), 2.0]:
+        for bad in ["", "x", "16x", "axb", "0x16", "-3", "0", "1x2x3", "12.5", "v", "0v", True, (1,), 2.0]:
             with self.subTest(bad=bad), self.assertRaises(ValueError):
                 lc.parse_level(bad)
 
     def test_make_level_is_one_kind(self):
         with self.assertRaises(ValueError):
             lc.make_level(nx=4, ny=4, points=10)
+        with self.assertRaises(ValueError):
+            lc.make_level(points=10, vertices=10)
 
     def test_format(self):
         self.assertEqual(lc.level_str(v1.Level(nx=16, ny=8)), "16x8")
         self.assertEqual(lc.level_str(v1.Level(points=85)), "85pts")
-        for text in ["16x16", "85pts"]:
+        self.assertEqual(lc.level_str(v1.Level(vertices=504)), "504v")
+        for text in ["16x16", "85pts", "504v"]:
             self.assertEqual(lc.level_str(lc.parse_level(text)), text)
 
 

@@ -4,7 +4,10 @@
 //! `lodcloth_core::drape`). The support is the scene's first collider
 //! seen from above (a box's top, a sphere's or capsule's widest section).
 //!
-//! `cargo bench -p lodcloth-core --bench drape -- [--scene FILE] [--levels 16,24,32,40] [--out DIR]`
+//! `cargo bench -p lodcloth-core --bench drape -- [--scene FILE] [--levels 16,24,32,40] [--methods same,bcd] [--out DIR]`
+//!
+//! Levels as the experiments take them: N or NXxNY on a grid cloth, Nv or
+//! P% on a mesh cloth (default 60%,40%,25%,15%).
 //!
 //! Prints a table (the coefficient at 1 s, 2 s and the end, and its largest
 //! difference from the reference's at those times) and writes it as CSV,
@@ -13,6 +16,7 @@ use std::path::{Path, PathBuf};
 
 use lodcloth_core::drape::{drape_coefficient, shadow_area};
 use lodcloth_core::estimate::{no_progress, FitOptions, Method, RecordSpec};
+use lodcloth_core::level::{GridLevel, Level};
 use lodcloth_core::plan::{default_problem, record_reference};
 use lodcloth_core::scene::Scene;
 use lodcloth_core::sim::{Shape, Simulation};
@@ -60,18 +64,33 @@ fn main() {
     let root = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../.."));
     let file =
         arg(&args, "--scene").map_or_else(|| root.join("config/scenes/tablecloth-over-table.toml"), PathBuf::from);
-    let levels: Vec<usize> = arg(&args, "--levels")
-        .unwrap_or("16,24,32,40")
-        .split(',')
-        .map(|s| s.parse().expect("--levels: nodes per side"))
-        .collect();
     let out = arg(&args, "--out").map_or_else(|| root.join("out/drape"), PathBuf::from);
     let scene = Scene::load(&file).expect("scene");
+    let mesh_vertices = scene.mesh.as_ref().map(|m| m.reference.vertices());
+    let levels: Vec<Level> = arg(&args, "--levels")
+        .unwrap_or(if mesh_vertices.is_some() {
+            "60%,40%,25%,15%"
+        } else {
+            "16,24,32,40"
+        })
+        .split(',')
+        .map(|s| {
+            let l: GridLevel = s.parse().expect("--levels: N, NXxNY, Nv or P%");
+            l.on(scene.width, scene.height, mesh_vertices)
+                .expect("a level of this scene")
+        })
+        .collect();
+    let methods: Vec<Method> = arg(&args, "--methods")
+        .unwrap_or("same,bcd")
+        .split(',')
+        .map(|s| Method::from_name(s).expect("--methods: same, bcd, gkd, lsq, fit"))
+        .collect();
     let body = scene
         .colliders()
         .first()
         .expect("a scene with a support (its first collider)");
-    let (cloth, support) = (scene.width * scene.height, support_area(&body.shape));
+    let cloth = scene.mesh.as_ref().map_or(scene.width * scene.height, |m| m.area);
+    let support = support_area(&body.shape);
     let times: Vec<f64> = [1.0, 2.0, scene.duration]
         .into_iter()
         .filter(|&t| t <= scene.duration)
@@ -81,15 +100,19 @@ fn main() {
         ..RecordSpec::PAPER
     };
     eprintln!(
-        "recording the {}×{} reference over {} s …",
-        scene.nx, scene.ny, scene.duration
+        "recording the {} reference over {} s …",
+        scene.reference_level(),
+        scene.duration
     );
     let (reference, _) = record_reference(&scene, spec, &mut |line| eprintln!("{line}")).expect("reference");
     let reference_dc = over_time(scene.build().expect("builds"), &times, cloth, support);
     let mut csv = String::from("level,method,time_s,drape_coefficient,reference,difference\n");
     println!(
-        "scene {} (reference {}×{}), support {:.3} m², cloth {:.3} m², shadow pixels {PIXEL} m",
-        scene.name, scene.nx, scene.ny, support, cloth
+        "scene {} (reference {}), support {:.4} m², cloth {:.4} m², shadow pixels {PIXEL} m",
+        scene.name,
+        scene.reference_level(),
+        support,
+        cloth
     );
     let heads: Vec<String> = times.iter().map(|t| format!("DC at {t} s")).collect();
     println!("| level | method | {} | largest |difference| |", heads.join(" | "));
@@ -107,24 +130,20 @@ fn main() {
         println!("| {level} | {method} | {} | {worst:.4} |", cells.join(" | "));
     };
     row(
-        &format!("{}×{}", scene.nx, scene.ny),
+        &scene.reference_level().to_string(),
         "reference",
         &reference_dc,
         &mut csv,
     );
-    for n in levels {
-        let problem = default_problem(&scene, &reference, (n, n)).expect("a level");
-        for method in [Method::Same, Method::Bcd] {
+    for level in levels {
+        let problem = default_problem(&scene, &reference, level).expect("a level");
+        let label = format!("{level} ({} nodes)", problem.topology().n_nodes);
+        for &method in &methods {
             let est = problem
                 .estimate(method, &FitOptions::default(), &mut no_progress)
                 .expect("estimates");
             let sim = problem.simulation(est.material).expect("builds");
-            row(
-                &format!("{n}×{n}"),
-                method.name(),
-                &over_time(sim, &times, cloth, support),
-                &mut csv,
-            );
+            row(&label, method.name(), &over_time(sim, &times, cloth, support), &mut csv);
         }
     }
     std::fs::create_dir_all(&out).expect("output directory");

@@ -8,7 +8,6 @@ use anyhow::{bail, Context, Result};
 
 use lodcloth::experiments::drag::replayed_error;
 use lodcloth::output::{line_chart_svg, CsvTable, Replay, Series, TrajectoryReader, PALETTE};
-use lodcloth::scene::Scene;
 
 /// Score `recording`'s states against `scene` at `reference` (default: the
 /// scene's own grid) replaying the recording's inputs of `episode`.
@@ -20,7 +19,7 @@ pub(super) fn touched_cmd(
     episode: Option<u64>,
     out: Option<PathBuf>,
 ) -> Result<()> {
-    let mut scene = Scene::load(scene_path)?;
+    let mut scene = crate::simulate::grid_scene(scene_path)?;
     if let Some(dt) = dt {
         if !(dt.is_finite() && dt > 0.0) {
             bail!("--dt must be positive, got {dt}");

@@ -131,16 +131,16 @@ def refusal(payload: bytes, encoding: Optional[str], key: str = "") -> Optional[
     return RefusedError(key or "?", err.code, code_name(err.code), err.message, err)
 
 
-def make_level(nx: int = 0, ny: int = 0, points: int = 0) -> "v1.Level":
-    """A ``Level``: a grid of ``nx`` x ``ny`` nodes, or a surface on ``points``
-    points (exactly one of the two)."""
-    if points < 0 or nx < 0 or ny < 0:
+def make_level(nx: int = 0, ny: int = 0, points: int = 0, vertices: int = 0) -> "v1.Level":
+    """A ``Level``: a grid of ``nx`` x ``ny`` nodes, a surface on ``points``
+    points, or a mesh cloth simplified to ``vertices`` vertices (exactly one)."""
+    if points < 0 or nx < 0 or ny < 0 or vertices < 0:
         raise ValueError("level sizes must not be negative")
-    if points and (nx or ny):
-        raise ValueError("a level is a grid (nx, ny) or a surface (points), not both")
-    if not points and (nx < 1 or ny < 1):
-        raise ValueError("a level needs positive sizes: nx >= 1 and ny >= 1, or points >= 1")
-    return v1.Level(nx=nx, ny=ny, points=points)
+    if sum(1 for given in (points, vertices, nx or ny) if given) > 1:
+        raise ValueError("a level is a grid (nx, ny), a surface (points) or a mesh (vertices), not several")
+    if not points and not vertices and (nx < 1 or ny < 1):
+        raise ValueError("a level needs positive sizes: nx >= 1 and ny >= 1, points >= 1 or vertices >= 1")
+    return v1.Level(nx=nx, ny=ny, points=points, vertices=vertices)
 
 
 def parse_level(level: LevelLike) -> "v1.Level":
@@ -164,6 +164,8 @@ def parse_level(level: LevelLike) -> "v1.Level":
         if "x" in text:
             nx_text, ny_text = text.split("x")
             sizes = {"nx": int(nx_text), "ny": int(ny_text)}
+        elif text.endswith("v"):
+            sizes = {"vertices": int(text[:-1])}
         else:
             sizes = {"points": int(text[: -len("pts")] if text.endswith("pts") else text)}
     except ValueError:
@@ -177,7 +179,10 @@ def parse_level(level: LevelLike) -> "v1.Level":
 
 
 def level_str(level: "v1.Level") -> str:
-    """A grid cloth as ``NXxNY``, a point-sampled surface as ``Npts``."""
+    """A grid cloth as ``NXxNY``, a point-sampled surface as ``Npts``, a
+    mesh cloth as ``Nv``."""
+    if level.vertices:
+        return f"{level.vertices}v"
     return f"{level.points}pts" if level.points else f"{level.nx}x{level.ny}"
 
 
@@ -208,7 +213,8 @@ def positions(state: "v1.State") -> List[Vec3]:
     except ValueError as e:
         raise DecodeError(f"state of {state.instance or '?'} (frame {state.frame})", str(e)) from None
     lvl = state.level
-    if not lvl.points and len(pts) != lvl.nx * lvl.ny:
+    # A mesh level has about its asked vertex count (the simplifier's tolerance).
+    if not lvl.points and not lvl.vertices and len(pts) != lvl.nx * lvl.ny:
         raise DecodeError(
             f"state of {state.instance or '?'} (frame {state.frame})",
             f"{len(pts)} nodes for level {level_str(lvl)}",

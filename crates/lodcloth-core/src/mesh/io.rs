@@ -199,11 +199,11 @@ fn read_obj(path: &Path) -> Result<Builder<'_>, MeshError> {
             let uv = if with_uv {
                 m.texcoords
                     .get(2 * k..2 * k + 2)
-                    .map(|t| [f64::from(t[0]), f64::from(t[1])])
+                    .map(|t| [t[0], t[1]])
             } else {
                 None
             };
-            ids.push(mesh.vertex([f64::from(p[0]), f64::from(p[1]), f64::from(p[2])], uv)?);
+            ids.push(mesh.vertex([p[0], p[1], p[2]], uv)?);
         }
         for (t, tri) in m.indices.chunks_exact(3).enumerate() {
             let mut welded = [0u32; 3];

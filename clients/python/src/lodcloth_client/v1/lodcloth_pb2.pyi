@@ -8,14 +8,16 @@ from typing import ClassVar as _ClassVar, Optional as _Optional, Union as _Union
 DESCRIPTOR: _descriptor.FileDescriptor
 
 class Level(_message.Message):
-    __slots__ = ("nx", "ny", "points")
+    __slots__ = ("nx", "ny", "points", "vertices")
     NX_FIELD_NUMBER: _ClassVar[int]
     NY_FIELD_NUMBER: _ClassVar[int]
     POINTS_FIELD_NUMBER: _ClassVar[int]
+    VERTICES_FIELD_NUMBER: _ClassVar[int]
     nx: int
     ny: int
     points: int
-    def __init__(self, nx: _Optional[int] = ..., ny: _Optional[int] = ..., points: _Optional[int] = ...) -> None: ...
+    vertices: int
+    def __init__(self, nx: _Optional[int] = ..., ny: _Optional[int] = ..., points: _Optional[int] = ..., vertices: _Optional[int] = ...) -> None: ...
 
 class Coefficients(_message.Message):
     __slots__ = ("structural_k", "structural_c", "shear_k", "shear_c", "bend_k", "bend_c", "structural_v_k", "structural_v_c", "bend_v_k", "bend_v_c")
