@@ -95,9 +95,9 @@ fn chain(name: &str, reference: &TriMesh, locked: &[bool]) {
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     let vertices: usize = arg(&args, "--vertices").map_or(20_000, |v| v.parse().expect("--vertices N"));
-    // A disc of radius R with edge a has about 3.6·(R/a)² vertices.
+    // A disc of K = R/a rings has 1 + 3K(K + 1) ≈ 3(R/a)² vertices.
     let radius = 0.15;
-    let edge = radius * (3.63 / vertices as f64).sqrt();
+    let edge = radius * (3.0 / vertices as f64).sqrt();
     let disc = generate::disc(radius, 0.0, edge);
     let pinned: Vec<bool> = disc
         .positions
