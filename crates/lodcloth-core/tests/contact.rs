@@ -193,7 +193,7 @@ fn a_cloth_too_fast_to_see_a_thin_slab_in_one_step_is_stopped_on_its_side() {
 /// A cloth dropped on each body never comes closer than the clearance and
 /// settles with its middle on the body's top.
 #[test]
-fn a_cloth_dropped_on_a_sphere_a_capsule_or_a_box_never_enters_it_and_rests_on_top() {
+fn a_cloth_dropped_on_a_sphere_a_capsule_a_box_or_a_cylinder_never_enters_it_and_rests_on_top() {
     let size = 1.0;
     let gap = 0.004;
     let mid = [0.5 * size, -0.3, 0.5 * size];
@@ -211,6 +211,14 @@ fn a_cloth_dropped_on_a_sphere_a_capsule_or_a_box_never_enters_it_and_rests_on_t
             "box",
             Shape::Cuboid {
                 half_extents: [0.25, 0.1, 0.25],
+            },
+            0.1,
+        ),
+        (
+            "cylinder",
+            Shape::Cylinder {
+                radius: 0.25,
+                half_height: 0.1,
             },
             0.1,
         ),
@@ -316,6 +324,10 @@ fn the_drawing_of_each_body_lies_on_its_surface_and_faces_out() {
         },
         Shape::Cuboid {
             half_extents: [0.5, 0.1, 0.25],
+        },
+        Shape::Cylinder {
+            radius: 0.09,
+            half_height: 0.01,
         },
     ];
     for shape in shapes {

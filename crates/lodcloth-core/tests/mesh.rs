@@ -434,3 +434,122 @@ fn a_generated_mesh_round_trips_through_an_obj_file() {
     top.sort_unstable();
     assert_eq!(top, skirt.groups["waist"]);
 }
+
+/// A mesh scene in a temporary directory: `mesh.obj` (a 1 × 0.6 m sheet
+/// with UVs, 2 cm edges) and `scene.toml` with `extra` appended.
+fn mesh_scene(extra: &str, cloth_extra: &str) -> (tempfile::TempDir, std::path::PathBuf) {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let sheet = generate::sheet(1.0, 0.6, 0.04);
+    std::fs::write(dir.path().join("mesh.obj"), generate::to_obj(&sheet, "sheet")).expect("mesh");
+    let text = format!(
+        "name = \"m\"\n[cloth]\nmesh = \"mesh.obj\"\nareal_density = 0.2\n{cloth_extra}\n\
+         [material]\nstiffness = {{ stretch_u = 300.0, stretch_v = 300.0, shear = 40.0, bend_u = 20.0, bend_v = 20.0 }}\n\
+         damping_time = 1e-4\n[simulation]\nintegrator = \"symplectic_euler\"\ndt = 2e-4\nduration = 0.2\n{extra}\n"
+    );
+    let path = dir.path().join("scene.toml");
+    std::fs::write(&path, text).expect("scene");
+    (dir, path)
+}
+
+/// Pins by side and by vertex hold the same reference vertices at every
+/// level (they are locked in the chain); the reference level against its
+/// own recording scores zero (the correlation of a mesh with itself is the
+/// identity; up to the f32 of recorded frames); a coarser level estimates
+/// finite coefficients with BCD.
+#[test]
+fn a_mesh_scene_pins_the_same_vertices_at_every_level_and_its_reference_scores_zero() {
+    use lodcloth::estimate::{no_progress, FitOptions, LodProblem, Method, RecordSpec, Reference};
+    use lodcloth::level::Level;
+    use lodcloth::scene::{MassConvention, Scene};
+    let (_dir, path) = mesh_scene(
+        "[[pins]]\nnodes = { edge = \"top\" }\n[[pins]]\nnodes = { vertices = [100] }",
+        "",
+    );
+    let scene = Scene::load(&path).expect("a valid mesh scene");
+    let all = scene.mesh.as_ref().expect("a mesh cloth").reference.vertices();
+    assert_eq!(scene.reference_level(), Level::Vertices(all));
+    let reference_pins = {
+        let sim = scene.build().expect("builds");
+        let mut p: Vec<[f64; 3]> = sim.loads().pins.iter().map(|p| p.anchor).collect();
+        p.sort_by(|a, b| a.partial_cmp(b).expect("finite"));
+        p
+    };
+    assert!(reference_pins.len() > 10);
+    for level in [Level::Vertices(all * 2 / 5), Level::Vertices(all / 8)] {
+        let sim = scene.build_level(level).expect("builds");
+        let mut p: Vec<[f64; 3]> = sim.loads().pins.iter().map(|p| p.anchor).collect();
+        p.sort_by(|a, b| a.partial_cmp(b).expect("finite"));
+        assert_eq!(p, reference_pins, "pins at {level}");
+    }
+    let spec = RecordSpec {
+        frames: scene.steps(),
+        ..RecordSpec::PAPER
+    };
+    let reference =
+        std::sync::Arc::new(Reference::record(scene.build().expect("builds"), spec, &mut |_, _| {}).expect("records"));
+    let own = LodProblem::at(
+        &scene,
+        reference.clone(),
+        scene.reference_level(),
+        MassConvention::Lumped,
+        scene.params.integrator,
+        scene.params.dt,
+    )
+    .expect("the reference level");
+    let frames = own.frames();
+    let err = own
+        .score(own.same_material(), 0..frames, &mut no_progress)
+        .expect("scores");
+    // The recording keeps positions in f32: zero up to their rounding.
+    assert!(err.mean < 1e-6, "the reference against itself: {}", err.mean);
+    let coarse = LodProblem::at(
+        &scene,
+        reference,
+        Level::Vertices(all * 2 / 5),
+        MassConvention::Lumped,
+        scene.params.integrator,
+        scene.params.dt,
+    )
+    .expect("a coarse level");
+    let est = coarse
+        .estimate(Method::Bcd, &FitOptions::default(), &mut no_progress)
+        .expect("BCD");
+    assert!(
+        est.material.springs.iter().all(|s| s.k.is_finite() && s.c.is_finite()),
+        "{:?}",
+        est.material
+    );
+}
+
+#[test]
+fn a_mesh_scene_that_mixes_in_grid_fields_or_names_what_the_mesh_lacks_is_refused_naming_them() {
+    use lodcloth::scene::{Scene, SceneError};
+    let problems = |extra: &str, cloth_extra: &str| {
+        let (_dir, path) = mesh_scene(extra, cloth_extra);
+        match Scene::load(&path) {
+            Err(SceneError::Invalid { problems, .. }) => problems.join("\n"),
+            other => panic!("expected a refusal, got {other:?}"),
+        }
+    };
+    let p = problems("[[pins]]\nnodes = { nodes = [[0, 0]] }", "width = 1.0\nnx = 10");
+    assert!(p.contains("cloth.width: a mesh cloth has no width"), "{p}");
+    assert!(p.contains("cloth.nx: a mesh cloth has no nx"), "{p}");
+    assert!(p.contains("pins[0].nodes.nodes: [i, j] index a grid"), "{p}");
+    let p = problems("[[pins]]\nnodes = { group = \"waist\" }", "");
+    assert!(
+        p.contains("pins[0].nodes.group: the mesh has no group \"waist\""),
+        "{p}"
+    );
+    let p = problems("[[pins]]\nnodes = { vertices = [99999] }", "");
+    assert!(
+        p.contains("pins[0].nodes.vertices[0]: vertex 99999 is outside the mesh's"),
+        "{p}"
+    );
+    let (dir, path) = mesh_scene("", "");
+    std::fs::remove_file(dir.path().join("mesh.obj")).expect("removed");
+    let err = Scene::load(&path).expect_err("a missing mesh file").to_string();
+    assert!(
+        err.contains("cloth.mesh: cannot read") && err.contains("mesh.obj"),
+        "{err}"
+    );
+}

@@ -197,9 +197,7 @@ fn read_obj(path: &Path) -> Result<Builder<'_>, MeshError> {
         let mut ids = Vec::with_capacity(m.positions.len() / 3);
         for (k, p) in m.positions.chunks_exact(3).enumerate() {
             let uv = if with_uv {
-                m.texcoords
-                    .get(2 * k..2 * k + 2)
-                    .map(|t| [t[0], t[1]])
+                m.texcoords.get(2 * k..2 * k + 2).map(|t| [t[0], t[1]])
             } else {
                 None
             };
