@@ -91,10 +91,11 @@ fn main() {
         .expect("a scene with a support (its first collider)");
     let cloth = scene.mesh.as_ref().map_or(scene.width * scene.height, |m| m.area);
     let support = support_area(&body.shape);
-    let times: Vec<f64> = [1.0, 2.0, scene.duration]
+    let mut times: Vec<f64> = [1.0, 2.0, scene.duration]
         .into_iter()
         .filter(|&t| t <= scene.duration)
         .collect();
+    times.dedup();
     let spec = RecordSpec {
         frames: scene.steps(),
         ..RecordSpec::PAPER
