@@ -65,9 +65,21 @@ impl WireLevel for Level {
             (0, 0, nx, ny) => Ok(Level::new(nx as usize, ny as usize)),
             (n, 0, 0, 0) => Ok(Level::Points(n as usize)),
             (0, n, 0, 0) => Ok(Level::Vertices(n as usize)),
-            (p, v, nx, ny) => Err(format!(
-                "level sets more than one of a grid ({nx}x{ny}), a point count ({p}) and a vertex count ({v}); set one"
-            )),
+            (p, v, nx, ny) => {
+                let mut set = Vec::new();
+                if nx != 0 || ny != 0 {
+                    set.push(format!("a grid ({nx}x{ny})"));
+                }
+                if p != 0 {
+                    set.push(format!("a point count ({p})"));
+                }
+                if v != 0 {
+                    set.push(format!("a vertex count ({v})"));
+                }
+                let last = set.pop().unwrap_or_default();
+                let both = if set.len() == 1 { "both " } else { "all of " };
+                Err(format!("level sets {both}{} and {last}; set one", set.join(", ")))
+            }
         }
     }
 }

@@ -688,16 +688,18 @@ fn starts_with_field_path(problem: &str, roots: &[&str]) -> bool {
     })
 }
 
-const SCENE_ROOTS: [&str; 9] = [
+const SCENE_ROOTS: [&str; 11] = [
     "name",
     "description",
     "cloth",
     "springs",
+    "material",
     "simulation",
     "strain",
     "pins",
     "forces",
     "wind",
+    "colliders",
 ];
 const CONFIG_ROOTS: [&str; 8] = [
     "prefix",

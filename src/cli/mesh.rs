@@ -147,6 +147,9 @@ fn make(shape: Shape, out: PathBuf) -> Result<()> {
         mesh.triangles.len(),
         mesh.area()
     );
+    if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
     std::fs::write(&out, generate::to_obj(&mesh, &comment)).with_context(|| format!("writing {}", out.display()))?;
     println!("{}: {}", out.display(), comment.replace('\n', "; "));
     Ok(())

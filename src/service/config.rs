@@ -779,6 +779,9 @@ fn cloth_instance(r: &RawInstance, at: &str, p: &mut Problems) -> Option<(Instan
             Some(_) => p.push(format!(
                 "{at}.levels[{j}]: {l} is outside {MIN_SIDE}..={MAX_SIDE} nodes per side"
             )),
+            None if matches!(l, Level::Vertices(_)) => p.push(format!(
+                "{at}.levels[{j}]: {l} is a mesh's vertex count; the daemon serves grid cloths, whose levels are NXxNY"
+            )),
             None => p.push(format!(
                 "{at}.levels[{j}]: {l} is a point count; a cloth's levels are grids NXxNY (or set kind = \"surface\")"
             )),
@@ -852,8 +855,11 @@ fn surface_instance(r: &RawInstance, at: &str, p: &mut Problems) -> Option<(Inst
             Level::Points(n) => p.push(format!(
                 "{at}.levels[{j}]: {n} points is outside {MIN_SURFACE_POINTS}..={points} (the cloud has {points})"
             )),
-            Level::Grid { .. } | Level::Vertices(_) => p.push(format!(
-                "{at}.levels[{j}]: {l} is not a point count; a surface's levels are point counts, e.g. 300"
+            Level::Grid { .. } => p.push(format!(
+                "{at}.levels[{j}]: {l} is a grid; a surface's levels are point counts, e.g. 300"
+            )),
+            Level::Vertices(_) => p.push(format!(
+                "{at}.levels[{j}]: {l} is a mesh's vertex count; a surface's levels are point counts, e.g. 300"
             )),
         }
     }

@@ -57,6 +57,7 @@ pub mod lod;
 pub mod mesh;
 pub mod names;
 pub mod plan;
+mod ply;
 pub mod points;
 pub mod problems;
 pub mod scene;

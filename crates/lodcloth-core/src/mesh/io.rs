@@ -448,57 +448,16 @@ const PLY_UV: [(&str, &str); 4] = [
 /// The face property listing corners, in order of preference.
 const PLY_FACE: [&str; 2] = ["vertex_indices", "vertex_index"];
 
-/// One PLY vertex as read: every property of [`PLY_VERTEX`] as f64.
-#[derive(Debug, Default, Clone, Copy)]
-struct PlyVertex {
-    v: [f64; 11],
+/// The PLY vertex properties a mesh keeps: [`PLY_VERTEX`].
+#[derive(Debug, Clone, Copy, Default)]
+struct MeshVertex;
+
+impl crate::ply::Names for MeshVertex {
+    const NAMES: &'static [&'static str] = &PLY_VERTEX;
 }
 
-impl PlyVertex {
-    fn put(&mut self, name: &str, value: f64) -> PropertyAccessResult {
-        match PLY_VERTEX.iter().position(|n| *n == name) {
-            Some(k) => {
-                self.v[k] = value;
-                PropertyAccessResult::Set
-            }
-            None => PropertyAccessResult::Ignored,
-        }
-    }
-
-    fn get(&self, name: &str) -> f64 {
-        PLY_VERTEX.iter().position(|n| *n == name).map_or(0.0, |k| self.v[k])
-    }
-}
-
-impl PropertyAccess for PlyVertex {
-    fn new() -> Self {
-        PlyVertex::default()
-    }
-    fn set_char(&mut self, name: &str, value: i8) -> PropertyAccessResult {
-        self.put(name, value.into())
-    }
-    fn set_uchar(&mut self, name: &str, value: u8) -> PropertyAccessResult {
-        self.put(name, value.into())
-    }
-    fn set_short(&mut self, name: &str, value: i16) -> PropertyAccessResult {
-        self.put(name, value.into())
-    }
-    fn set_ushort(&mut self, name: &str, value: u16) -> PropertyAccessResult {
-        self.put(name, value.into())
-    }
-    fn set_int(&mut self, name: &str, value: i32) -> PropertyAccessResult {
-        self.put(name, value.into())
-    }
-    fn set_uint(&mut self, name: &str, value: u32) -> PropertyAccessResult {
-        self.put(name, value.into())
-    }
-    fn set_float(&mut self, name: &str, value: f32) -> PropertyAccessResult {
-        self.put(name, value.into())
-    }
-    fn set_double(&mut self, name: &str, value: f64) -> PropertyAccessResult {
-        self.put(name, value)
-    }
-}
+/// One PLY vertex as read.
+type PlyVertex = crate::ply::Scalars<MeshVertex>;
 
 /// One PLY face as read: its corner list under each name of [`PLY_FACE`].
 #[derive(Debug, Default, Clone)]
@@ -553,36 +512,13 @@ fn is_integer(t: &ScalarType) -> bool {
 fn read_ply(path: &Path) -> Result<Builder<'_>, MeshError> {
     let file = std::fs::File::open(path).map_err(io_err(path))?;
     let mut reader = Reader::new(BufReader::new(file));
-    let header = Parser::<PlyVertex>::new().read_header(&mut reader).map_err(|e| {
-        let at = reader.line();
-        let message = match (e.line(), e.kind()) {
-            (Some(_), _) => format!("PLY header: {e}"),
-            // No format line, or no version in it: the whole header is at fault.
-            (None, std::io::ErrorKind::InvalidInput) => {
-                format!("PLY header, lines 1 to {}: {e}", at.saturating_sub(1).max(1))
-            }
-            // Invalid UTF-8 or an empty file: the line being read.
-            (None, _) => format!("PLY header: Line {at}: {e}"),
-        };
-        format_err(path, message)
-    })?;
+    let header = crate::ply::read_header::<PlyVertex, _>(&mut reader).map_err(|m| format_err(path, m))?;
     let Some(vertex_def) = header.elements.get("vertex") else {
         return Err(format_err(path, "PLY file has no `vertex` element"));
     };
     let props = &vertex_def.properties;
     let scalar = |name: &str| matches!(props.get(name).map(|p| &p.data_type), Some(PropertyType::Scalar(_)));
-    for name in ["x", "y", "z"] {
-        match props.get(name).map(|p| &p.data_type) {
-            None => return Err(format_err(path, format!("PLY vertex element has no `{name}` property"))),
-            Some(PropertyType::List(..)) => {
-                return Err(format_err(
-                    path,
-                    format!("PLY vertex property `{name}` is a list, expected a scalar"),
-                ))
-            }
-            Some(PropertyType::Scalar(_)) => {}
-        }
-    }
+    crate::ply::check_xyz(props).map_err(|m| format_err(path, m))?;
     for (u, v) in PLY_UV {
         match (props.contains_key(u), props.contains_key(v)) {
             (true, false) => {
@@ -677,7 +613,7 @@ fn read_ply(path: &Path) -> Result<Builder<'_>, MeshError> {
     let mut mesh = Builder::new(path);
     let mut ids = Vec::with_capacity(vertices.len());
     for v in &vertices {
-        let uv = uv_names.map(|(u, w)| [v.get(u), v.get(w)]);
+        let uv = uv_names.map(|(u, w)| [v.get(u).unwrap_or(0.0), v.get(w).unwrap_or(0.0)]);
         ids.push(mesh.vertex([v.v[0], v.v[1], v.v[2]], uv)?);
     }
     for (f, face) in faces.iter().enumerate() {

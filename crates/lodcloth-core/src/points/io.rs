@@ -7,9 +7,7 @@ use std::io::{BufRead, BufReader, Write};
 use std::path::{Path, PathBuf};
 
 use ply_rs_bw::parser::{Parser, Reader};
-use ply_rs_bw::ply::{
-    Addable, ElementDef, Encoding, Ply, PropertyAccess, PropertyAccessResult, PropertyDef, PropertyType, ScalarType,
-};
+use ply_rs_bw::ply::{Addable, ElementDef, Encoding, Ply, PropertyDef, PropertyType, ScalarType};
 use ply_rs_bw::writer::Writer;
 
 use super::PointCloud;
@@ -84,67 +82,19 @@ fn extension(path: &Path) -> Option<String> {
     path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase())
 }
 
-/// One PLY vertex as read: which of the six coordinates were set.
-#[derive(Debug, Default, Clone, Copy)]
-struct Vertex {
-    v: [f64; 6],
-    set: u8,
-}
-
+/// The PLY vertex properties a cloud keeps, in slot order.
 const NAMES: [&str; 6] = ["x", "y", "z", "nx", "ny", "nz"];
 
-impl Vertex {
-    fn put(&mut self, name: &str, value: f64) -> PropertyAccessResult {
-        match NAMES.iter().position(|n| *n == name) {
-            Some(k) => {
-                self.v[k] = value;
-                self.set |= 1 << k;
-                PropertyAccessResult::Set
-            }
-            None => PropertyAccessResult::Ignored,
-        }
-    }
+/// Marks [`NAMES`] for [`crate::ply::Scalars`].
+#[derive(Debug, Clone, Copy, Default)]
+struct CloudVertex;
 
-    fn get(&self, name: &str) -> Option<f64> {
-        NAMES.iter().position(|n| *n == name).map(|k| self.v[k])
-    }
+impl crate::ply::Names for CloudVertex {
+    const NAMES: &'static [&'static str] = &NAMES;
 }
 
-impl PropertyAccess for Vertex {
-    fn new() -> Self {
-        Vertex::default()
-    }
-    fn set_char(&mut self, name: &str, value: i8) -> PropertyAccessResult {
-        self.put(name, value.into())
-    }
-    fn set_uchar(&mut self, name: &str, value: u8) -> PropertyAccessResult {
-        self.put(name, value.into())
-    }
-    fn set_short(&mut self, name: &str, value: i16) -> PropertyAccessResult {
-        self.put(name, value.into())
-    }
-    fn set_ushort(&mut self, name: &str, value: u16) -> PropertyAccessResult {
-        self.put(name, value.into())
-    }
-    fn set_int(&mut self, name: &str, value: i32) -> PropertyAccessResult {
-        self.put(name, value.into())
-    }
-    fn set_uint(&mut self, name: &str, value: u32) -> PropertyAccessResult {
-        self.put(name, value.into())
-    }
-    fn set_float(&mut self, name: &str, value: f32) -> PropertyAccessResult {
-        self.put(name, value.into())
-    }
-    fn set_double(&mut self, name: &str, value: f64) -> PropertyAccessResult {
-        self.put(name, value)
-    }
-    fn get_double(&self, name: &str) -> Option<f64> {
-        self.get(name)
-    }
-    fn get_float(&self, name: &str) -> Option<f32> {
-        self.get(name).map(|v| v as f32)
-    }
-}
+/// One PLY vertex as read or written.
+type Vertex = crate::ply::Scalars<CloudVertex>;
 
 /// The unit vector along a finite file normal; None when it is zero. Scaled
 /// by its largest component first, so that neither a huge normal (whose
@@ -164,35 +114,12 @@ pub fn read_ply(path: &Path) -> Result<PointCloud, PointsIoError> {
     let file = std::fs::File::open(path).map_err(io_err(path))?;
     let mut reader = Reader::new(BufReader::new(file));
     let parser = Parser::<Vertex>::new();
-    let header = parser.read_header(&mut reader).map_err(|e| {
-        let at = reader.line();
-        let message = match (e.line(), e.kind()) {
-            (Some(_), _) => format!("PLY header: {e}"),
-            // No format line, or no version in it: the whole header is at fault.
-            (None, std::io::ErrorKind::InvalidInput) => {
-                format!("PLY header, lines 1 to {}: {e}", at.saturating_sub(1).max(1))
-            }
-            // Invalid UTF-8 or an empty file: the line being read.
-            (None, _) => format!("PLY header: Line {at}: {e}"),
-        };
-        invalid(path, message)
-    })?;
+    let header = crate::ply::read_header::<Vertex, _>(&mut reader).map_err(|m| invalid(path, m))?;
     let Some(vertex_def) = header.elements.get("vertex") else {
         return Err(invalid(path, "PLY file has no `vertex` element"));
     };
     let props = &vertex_def.properties;
-    for name in ["x", "y", "z"] {
-        match props.get(name).map(|p| &p.data_type) {
-            None => return Err(invalid(path, format!("PLY vertex element has no `{name}` property"))),
-            Some(PropertyType::List(..)) => {
-                return Err(invalid(
-                    path,
-                    format!("PLY vertex property `{name}` is a list, expected a scalar"),
-                ))
-            }
-            Some(PropertyType::Scalar(_)) => {}
-        }
-    }
+    crate::ply::check_xyz(props).map_err(|m| invalid(path, m))?;
     let normal_props = ["nx", "ny", "nz"].iter().filter(|n| props.contains_key(**n)).count();
     if normal_props != 0 && normal_props != 3 {
         return Err(invalid(path, "PLY vertex has some but not all of nx, ny, nz"));
@@ -256,10 +183,7 @@ pub fn write_ply(path: &Path, cloud: &PointCloud, encoding: Encoding) -> Result<
         .enumerate()
         .map(|(i, p)| {
             let n = cloud.normals.as_ref().map_or([0.0; 3], |n| n[i]);
-            Vertex {
-                v: [p[0], p[1], p[2], n[0], n[1], n[2]],
-                set: 0,
-            }
+            Vertex::of(&[p[0], p[1], p[2], n[0], n[1], n[2]])
         })
         .collect();
     ply.payload.insert("vertex".to_string(), vertices);
