@@ -14,6 +14,12 @@
 FROM rust:1.95.0-slim-bookworm AS builder
 WORKDIR /build
 
+# meshoptimizer (the `meshopt` crate, mesh cloths' level chains) is C++:
+# the slim image has gcc but no g++.
+RUN apt-get update \
+    && apt-get install -y --no-install-recommends g++=4:12.2.0-3 \
+    && rm -rf /var/lib/apt/lists/*
+
 # The toolchain of rust-toolchain.toml, in a layer of its own that source
 # changes do not invalidate.
 COPY rust-toolchain.toml ./
@@ -44,8 +50,8 @@ RUN --mount=type=cache,target=/usr/local/cargo/registry,sharing=locked \
     && install -D -m 0755 target/release/lodcloth /out/lodcloth
 
 # ---- runtime ------------------------------------------------------------------
-# The binary needs only glibc, libm and libgcc_s, all in the base image: no
-# packages are installed.
+# The binary needs only glibc, libm, libgcc_s and libstdc++ (meshoptimizer),
+# all in the base image (apt itself needs libstdc++): no packages are installed.
 FROM debian:bookworm-slim AS runtime
 
 ARG VERSION=0.1.0
