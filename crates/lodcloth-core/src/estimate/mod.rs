@@ -204,6 +204,16 @@ pub struct LodProblem {
     steps_per_frame: u64,
 }
 
+/// Coarse steps of `dt` per metric frame of `reference`, when `dt` divides it.
+fn steps_per_frame(reference: &Reference, dt: f64) -> Result<u64, EstimateError> {
+    let interval = reference.dt * reference.spec.metric_stride as f64;
+    let ratio = interval / dt;
+    if !(dt > 0.0) || (ratio - ratio.round()).abs() > 1e-6 || ratio.round() < 1.0 {
+        return Err(EstimateError::FrameMismatch { dt, interval });
+    }
+    Ok(ratio.round() as u64)
+}
+
 impl LodProblem {
     /// Set up level `nx × ny` of `scene` against `reference` (a grid cloth;
     /// [`LodProblem::at`] for any level).
@@ -239,11 +249,7 @@ impl LodProblem {
         integrator: Integrator,
         dt: f64,
     ) -> Result<LodProblem, EstimateError> {
-        let interval = reference.dt * reference.spec.metric_stride as f64;
-        let ratio = interval / dt;
-        if !(dt > 0.0) || (ratio - ratio.round()).abs() > 1e-6 || ratio.round() < 1.0 {
-            return Err(EstimateError::FrameMismatch { dt, interval });
-        }
+        let steps_per_frame = steps_per_frame(&reference, dt)?;
         let cloth = scene.cloth_level(level)?;
         let topology = cloth.topology.clone();
         let correlation = Correlation::between(&reference.topology, &topology)?;
@@ -268,7 +274,18 @@ impl LodProblem {
             masses,
             loads,
             same,
-            steps_per_frame: ratio.round() as u64,
+            steps_per_frame,
+        })
+    }
+
+    /// The same level at time step `dt`: what [`LodProblem::at`] would
+    /// make, without building the level's mesh, springs and correlation again.
+    pub fn with_dt(&self, dt: f64) -> Result<LodProblem, EstimateError> {
+        let steps_per_frame = steps_per_frame(&self.reference, dt)?;
+        Ok(LodProblem {
+            dt,
+            steps_per_frame,
+            ..self.clone()
         })
     }
 

@@ -217,10 +217,12 @@ pub fn default_problem(
     let integrator = scene.params.integrator;
     let mass = MassConvention::Lumped;
     let interval = reference.dt * reference.spec.metric_stride as f64;
-    // The probe's `same` material is the level's, whatever the level is.
+    // One build of the level: probed at the frame interval with its `same`
+    // material, then given the largest dt ≤ 0.75 of that limit dividing it.
     let probe = LodProblem::at(scene, reference.clone(), level, mass, integrator, interval)?;
-    let (dt, _) = level_dt(scene, reference, level, mass, integrator, probe.same_material(), 0.75)?;
-    Ok(LodProblem::at(scene, reference.clone(), level, mass, integrator, dt)?)
+    let limit = probe.simulation(probe.same_material())?.dt_limit();
+    let dt = interval / (interval / (0.75 * limit)).ceil().max(1.0);
+    Ok(probe.with_dt(dt)?)
 }
 
 /// `problem` itself when `material` runs within 0.8 of its predicted
@@ -231,24 +233,10 @@ pub fn stable_problem(problem: &LodProblem, material: Material) -> Result<(LodPr
     if problem.dt <= 0.8 * limit {
         return Ok((problem.clone(), limit));
     }
-    let (dt, limit) = level_dt(
-        &problem.scene,
-        &problem.reference,
-        problem.level,
-        problem.mass,
-        problem.integrator,
-        material,
-        0.8,
-    )?;
-    let q = LodProblem::at(
-        &problem.scene,
-        problem.reference.clone(),
-        problem.level,
-        problem.mass,
-        problem.integrator,
-        dt,
-    )?;
-    Ok((q, limit))
+    // The limit does not depend on dt: the same level at a dividing dt.
+    let interval = problem.reference.dt * problem.reference.spec.metric_stride as f64;
+    let dt = interval / (interval / (0.8 * limit)).ceil().max(1.0);
+    Ok((problem.with_dt(dt)?, limit))
 }
 
 /// One-line diagnostics of an estimate.
