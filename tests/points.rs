@@ -465,6 +465,7 @@ fn tether_is_a_harmonic_oscillator() {
         groups: Vec::new(),
         triangles: Vec::new(),
         grid: None,
+        mesh: None,
     });
     let (m, k) = (0.2f64, 50.0f64);
     let omega = (k / m).sqrt();

@@ -15,6 +15,9 @@
 //! Pure: no clock, no I/O. Times are the simulation's own.
 
 use crate::scene::{patch_weights, Scene, Selector};
+use std::sync::Arc;
+
+use crate::mesh::Simplified;
 use crate::sim::{Grab, GridShape, PinShift, Profile, SimError, Simulation, Wind};
 
 /// A part of the cloth: the square of half-side `radius` metres about the
@@ -177,6 +180,21 @@ impl Patch {
             .into_iter()
             .unzip()
     }
+
+    /// Nodes and weights of this patch on a mesh level: the rest surface
+    /// within `radius` of the material point ([`crate::mesh::patch_weights`]).
+    pub fn mesh_weights(&self, level: &Simplified) -> (Vec<u32>, Vec<f64>) {
+        crate::mesh::patch_weights(&level.mesh, self.u, self.v, self.radius)
+            .into_iter()
+            .unzip()
+    }
+
+    fn weights_on(&self, cloth: &Cloth) -> (Vec<u32>, Vec<f64>) {
+        match cloth {
+            Cloth::Grid(shape) => self.weights(shape),
+            Cloth::Mesh(level) => self.mesh_weights(level),
+        }
+    }
 }
 
 fn check_point(name: [&'static str; 3], p: [f64; 3]) -> Result<(), TouchError> {
@@ -306,7 +324,7 @@ impl Touch {
     /// changes when it is refused.
     pub fn apply(&mut self, input: &Input, sim: &mut Simulation) -> Result<(), TouchError> {
         input.check()?;
-        let shape = grid(sim)?;
+        let cloth = cloth(sim)?;
         let t = sim.state().time;
         match *input {
             Input::Grab {
@@ -319,7 +337,7 @@ impl Touch {
                 let target = match target {
                     Some(t) => t,
                     None => {
-                        let (nodes, weights) = at.weights(&shape);
+                        let (nodes, weights) = at.weights_on(&cloth);
                         let here = Grab {
                             nodes,
                             weights,
@@ -350,7 +368,7 @@ impl Touch {
                     }
                     None => grabs.push(spec),
                 }
-                let resolved: Vec<Grab> = grabs.iter().map(|g| resolve_grab(g, &shape)).collect();
+                let resolved: Vec<Grab> = grabs.iter().map(|g| resolve_grab(g, &cloth)).collect();
                 if !sim.grab_headroom(&resolved).stable() {
                     let others: Vec<Grab> = grabs
                         .iter()
@@ -358,7 +376,7 @@ impl Touch {
                         .filter(|(g, _)| g.id != id)
                         .map(|(_, r)| r.clone())
                         .collect();
-                    let mine = resolve_grab(&spec, &shape);
+                    let mine = resolve_grab(&spec, &cloth);
                     return Err(TouchError::Unstable {
                         stiffness,
                         max: sim.max_grab_stiffness(&mine, &others),
@@ -409,7 +427,7 @@ impl Touch {
                     start: t,
                     end: t + seconds,
                 };
-                let on = pins_of(set, &shape, sim);
+                let on = pins_of(set, &cloth, sim);
                 sim.shift_pins(&on, shift)?;
                 if self.pin_shifts.len() != self.pin_sets.len() {
                     self.pin_shifts = vec![PinShift::default(); self.pin_sets.len()];
@@ -444,7 +462,7 @@ impl Touch {
                 self.wind = None;
             }
             Input::Impulse { at, impulse } => {
-                let (nodes, weights) = at.weights(&shape);
+                let (nodes, weights) = at.weights_on(&cloth);
                 let masses = sim.masses();
                 let pinned = sim.loads().pins.iter().map(|p| p.node).collect::<Vec<_>>();
                 let speed = nodes
@@ -486,13 +504,13 @@ impl Touch {
     /// there, so a drag survives the switch; each softened grab is returned.
     /// One that no stiffness holds stably is let go, and the error names it.
     pub fn resolve(&mut self, sim: &mut Simulation) -> Result<Vec<Softened>, TouchError> {
-        let shape = grid(sim)?;
+        let cloth = cloth(sim)?;
         let mut kept: Vec<GrabSpec> = Vec::new();
         let mut resolved: Vec<Grab> = Vec::new();
         let mut softened = Vec::new();
         let mut refused = None;
         for g in &self.grabs {
-            let mut r = resolve_grab(g, &shape);
+            let mut r = resolve_grab(g, &cloth);
             resolved.push(r.clone());
             if sim.grab_headroom(&resolved).stable() {
                 kept.push(*g);
@@ -528,7 +546,7 @@ impl Touch {
         }
         for (i, shift) in self.pin_shifts.iter().enumerate() {
             if *shift != PinShift::default() {
-                let on = pins_of(&self.pin_sets[i], &shape, sim);
+                let on = pins_of(&self.pin_sets[i], &cloth, sim);
                 sim.shift_pins(&on, *shift)?;
             }
         }
@@ -583,16 +601,27 @@ impl Touch {
     }
 }
 
-fn grid(sim: &Simulation) -> Result<GridShape, TouchError> {
-    sim.topology().grid.ok_or_else(|| TouchError::Field {
-        field: "instance",
-        value: f64::NAN,
-        reason: "live input acts on grid cloths; this instance is not one".into(),
-    })
+/// What input resolves on: a grid's shape or a mesh level.
+enum Cloth {
+    Grid(GridShape),
+    Mesh(Arc<Simplified>),
 }
 
-fn resolve_grab(g: &GrabSpec, shape: &GridShape) -> Grab {
-    let (nodes, weights) = g.at.weights(shape);
+fn cloth(sim: &Simulation) -> Result<Cloth, TouchError> {
+    let topology = sim.topology();
+    match (topology.grid, &topology.mesh) {
+        (Some(shape), _) => Ok(Cloth::Grid(shape)),
+        (None, Some(level)) => Ok(Cloth::Mesh(level.clone())),
+        (None, None) => Err(TouchError::Field {
+            field: "instance",
+            value: f64::NAN,
+            reason: "live input acts on grid and mesh cloths; this instance is neither".into(),
+        }),
+    }
+}
+
+fn resolve_grab(g: &GrabSpec, cloth: &Cloth) -> Grab {
+    let (nodes, weights) = g.at.weights_on(cloth);
     Grab {
         nodes,
         weights,
@@ -603,8 +632,11 @@ fn resolve_grab(g: &GrabSpec, shape: &GridShape) -> Grab {
 }
 
 /// Indices into the simulation's pins of the nodes `set` selects.
-fn pins_of(set: &Selector, shape: &GridShape, sim: &Simulation) -> Vec<usize> {
-    let nodes = crate::scene::select_nodes(set, shape);
+fn pins_of(set: &Selector, cloth: &Cloth, sim: &Simulation) -> Vec<usize> {
+    let nodes = match cloth {
+        Cloth::Grid(shape) => crate::scene::select_nodes(set, shape),
+        Cloth::Mesh(level) => crate::scene::select_mesh(set, level),
+    };
     sim.loads()
         .pins
         .iter()

@@ -587,3 +587,204 @@ fn the_standard_drags_take_the_free_points_farthest_from_the_pins_and_carry_them
         );
     }
 }
+
+/// The free cloth as a mesh cloth (issue 23): a 1.2 × 0.8 m near-equilateral
+/// sheet of 4 cm edges in the x–z plane, UVs its material coordinates, the
+/// same density, zero gravity and drag; `pins` appended to the scene.
+fn free_mesh(pins: &str) -> (tempfile::TempDir, Scene) {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let sheet = lodcloth::mesh::generate::sheet(1.2, 0.8, 0.04);
+    std::fs::write(
+        dir.path().join("sheet.obj"),
+        lodcloth::mesh::generate::to_obj(&sheet, "sheet"),
+    )
+    .expect("mesh");
+    let text = format!(
+        "name = \"free-mesh\"\n[cloth]\nmesh = \"sheet.obj\"\nareal_density = 0.2\n\
+         [material]\nstiffness = {{ stretch_u = 300.0, stretch_v = 300.0, shear = 40.0, bend_u = 0.02, bend_v = 0.02 }}\n\
+         damping_time = 1e-4\n[simulation]\nintegrator = \"symplectic_euler\"\ndt = 1e-4\nduration = 10.0\n\
+         gravity = [0.0, 0.0, 0.0]\ndrag = 2.0\n{pins}\n"
+    );
+    let path = dir.path().join("scene.toml");
+    std::fs::write(&path, text).expect("scene");
+    let scene = Scene::load(&path).expect("a valid mesh scene");
+    (dir, scene)
+}
+
+/// The reference mesh and two simplified levels of `scene`.
+fn mesh_levels(scene: &Scene) -> [lodcloth::level::Level; 3] {
+    let n = scene.mesh.as_ref().expect("a mesh cloth").reference.vertices();
+    [n, n * 2 / 5, n / 6].map(lodcloth::level::Level::Vertices)
+}
+
+/// Σ wₖ rₖ of a patch's nodes on the rest shape.
+fn rest_point(sim: &Simulation, nodes: &[u32], weights: &[f64]) -> [f64; 3] {
+    let r = &sim.topology().rest_positions;
+    [0, 1, 2].map(|d| nodes.iter().zip(weights).map(|(&k, &w)| w * r[k as usize][d]).sum())
+}
+
+/// On a mesh a point acts exactly where its material coordinates are (the
+/// sheet's rest shape is affine in them, and barycentric weights reproduce
+/// affine maps); a patch is the rest surface within its radius, its weights
+/// sum to 1 and its first moment is its centre at every level, to the
+/// resolution of its subdivision.
+#[test]
+fn a_patch_on_a_mesh_acts_at_its_material_point_at_every_level() {
+    let (_dir, scene) = free_mesh("");
+    for level in mesh_levels(&scene) {
+        let sim = scene.build_level(level).expect("builds");
+        let mesh = sim.topology().mesh.clone().expect("a mesh level");
+        for patch in [
+            Patch {
+                u: 0.77,
+                v: 0.11,
+                radius: 0.0,
+            },
+            Patch {
+                u: 0.3,
+                v: 0.6,
+                radius: 0.1,
+            },
+            Patch {
+                u: 0.5,
+                v: 0.5,
+                radius: 0.03,
+            },
+        ] {
+            let (nodes, weights) = patch.mesh_weights(&mesh);
+            let total: f64 = weights.iter().sum();
+            assert!((total - 1.0).abs() < 1e-12, "{level} {patch:?}: weights sum to {total}");
+            assert!(weights.iter().all(|&w| w > 0.0), "{level} {patch:?}: {weights:?}");
+            let at = rest_point(&sim, &nodes, &weights);
+            let want = [patch.u * 1.2, 0.0, patch.v * 0.8];
+            let off = (0..3).map(|d| (at[d] - want[d]).powi(2)).sum::<f64>().sqrt();
+            // A point: exact. A disc: its pieces are r/12 across, and the
+            // ring they straddle moves the centroid by a small part of that.
+            let tolerance = if patch.radius == 0.0 {
+                1e-12
+            } else {
+                patch.radius / 100.0
+            };
+            assert!(
+                off < tolerance,
+                "{level} {patch:?}: acts at {at:?}, {off} m from {want:?}"
+            );
+            if patch.radius > 0.0 {
+                // Every node of the patch is within the radius plus one
+                // triangle of the centre, and more than three carry it.
+                assert!(nodes.len() > 3, "{level} {patch:?}: {} nodes", nodes.len());
+            }
+        }
+    }
+}
+
+#[test]
+fn an_impulse_on_a_mesh_gives_the_cloth_exactly_its_momentum_at_every_level() {
+    let (_dir, scene) = free_mesh("");
+    let j = [0.01, 0.02, -0.005];
+    for level in mesh_levels(&scene) {
+        let mut sim = scene.build_level(level).expect("builds");
+        Touch::new(&scene)
+            .apply(
+                &Input::Impulse {
+                    at: Patch {
+                        u: 0.3,
+                        v: 0.6,
+                        radius: 0.1,
+                    },
+                    impulse: j,
+                },
+                &mut sim,
+            )
+            .expect("a modest impulse is accepted");
+        let p = momentum(&sim);
+        assert!((0..3).all(|c| (p[c] - j[c]).abs() < 1e-12), "{level}: momentum {p:?}");
+    }
+}
+
+/// A grab on a mesh level holds its patch on the target at rest (the only
+/// force but drag), and a switch to another level puts the same grab on the
+/// same material point.
+#[test]
+fn a_grabbed_mesh_cloth_comes_to_rest_on_the_target_and_the_grab_survives_a_switch() {
+    let (_dir, scene) = free_mesh("");
+    let [_, fine_level, coarse_level] = mesh_levels(&scene);
+    let mut sim = scene.build_level(coarse_level).expect("builds");
+    let mut touch = Touch::new(&scene);
+    let at = Patch {
+        u: 0.25,
+        v: 0.75,
+        radius: 0.08,
+    };
+    let target = [0.25 * 1.2 + 0.1, 0.2, 0.75 * 0.8 - 0.05];
+    touch
+        .apply(
+            &Input::Grab {
+                id: 7,
+                at,
+                target: Some(target),
+                stiffness: 5.0,
+                damping: 0.05,
+            },
+            &mut sim,
+        )
+        .expect("a soft grab is stable");
+    for _ in 0..80_000 {
+        assert!(sim.step().finite);
+    }
+    let grab = sim.grabs()[0].clone();
+    let (x, _) = grab.patch(&sim.state().pos, &sim.state().vel);
+    let off = (0..3).map(|c| (x[c] - target[c]).powi(2)).sum::<f64>().sqrt();
+    assert!(off < 1e-4, "after 8 s the patch is {off} m from its target ({x:?})");
+    let rest = rest_point(&sim, &grab.nodes, &grab.weights);
+    let moved = (0..3).map(|c| (x[c] - rest[c]).powi(2)).sum::<f64>().sqrt();
+    assert!(moved > 0.2, "the patch moved only {moved} m");
+
+    let mut fine = scene.build_level(fine_level).expect("builds");
+    touch.resolve(&mut fine).expect("the grab is stable on the finer level");
+    let g = &fine.grabs()[0];
+    assert_eq!((g.target, g.stiffness), (target, 5.0));
+    let there = rest_point(&fine, &g.nodes, &g.weights);
+    let apart = (0..3).map(|c| (there[c] - rest[c]).powi(2)).sum::<f64>().sqrt();
+    assert!(
+        apart < at.radius / 50.0,
+        "the same material point: {there:?} vs {rest:?}"
+    );
+}
+
+/// A pin set of a mesh scene moves as a whole: every pinned vertex of the
+/// set follows the move (and the scene's other set stays).
+#[test]
+fn a_pin_move_on_a_mesh_takes_its_set_and_only_its_set() {
+    let (_dir, scene) = free_mesh("[[pins]]\nnodes = { edge = \"top\" }\n[[pins]]\nnodes = { vertices = [40] }");
+    let mut sim = scene.build_level(mesh_levels(&scene)[1]).expect("builds");
+    let before = sim.state().clone();
+    let offset = [0.0, 0.1, -0.02];
+    Touch::new(&scene)
+        .apply(
+            &Input::MovePin {
+                pin: 0,
+                offset,
+                seconds: 0.1,
+            },
+            &mut sim,
+        )
+        .expect("pin set 0 exists");
+    for _ in 0..1_500 {
+        sim.step();
+    }
+    let (mut moved, mut kept) = (0, 0);
+    for p in &sim.loads().pins {
+        let k = p.node as usize;
+        let (a, b) = (before.position(k), sim.state().position(k));
+        let d: Vec<f64> = (0..3).map(|c| b[c] - a[c]).collect();
+        if (0..3).all(|c| (d[c] - offset[c]).abs() < 1e-9) {
+            moved += 1;
+        } else {
+            assert!(d.iter().all(|x| x.abs() < 1e-12), "pin {k} moved by {d:?}");
+            kept += 1;
+        }
+    }
+    assert_eq!(kept, 1, "the vertex pin stays");
+    assert!(moved > 10, "the top edge moved: {moved} pins");
+}

@@ -13,6 +13,8 @@
 //! - `generate.rs` — sheets, discs and skirts made in code, OBJ text.
 //! - `locate.rs` — closest points on a rest surface: the barycentric
 //!   correlation of any vertex set with a mesh's triangles.
+//! - `patch.rs` — material points and patches on a level, where live
+//!   input acts ([`patch_weights`]).
 
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -20,11 +22,13 @@ use std::path::PathBuf;
 pub mod generate;
 mod io;
 mod locate;
+mod patch;
 mod simplify;
 mod springs;
 
 pub use io::load;
 pub use locate::{locate, SurfaceIndex};
+pub use patch::{material_point, patch_weights};
 pub use simplify::{simplify, Simplified, VERTEX_TOLERANCE};
 pub use springs::{mesh_material, mesh_topology};
 

@@ -83,6 +83,7 @@ pub fn mesh_topology(mesh: &TriMesh) -> Topology {
         ],
         triangles: mesh.triangles.clone(),
         grid: None,
+        mesh: None,
     }
 }
 

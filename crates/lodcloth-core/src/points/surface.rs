@@ -141,6 +141,7 @@ impl Surface {
             groups,
             triangles,
             grid: None,
+            mesh: None,
         };
         Ok(Surface { topology, rings })
     }

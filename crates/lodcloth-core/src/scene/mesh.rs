@@ -109,10 +109,15 @@ impl Scene {
             (Some(m), Level::Vertices(n)) => {
                 let simplified = mesh::simplify(&m.reference, n, &m.locked, &m.file.display().to_string())
                     .map_err(|e| invalid(format!("level {level}: {e}")))?;
+                let simplified = Arc::new(simplified);
+                let topology = Topology {
+                    mesh: Some(simplified.clone()),
+                    ..mesh::mesh_topology(&simplified.mesh)
+                };
                 Ok(ClothLevel {
                     level,
-                    topology: Arc::new(mesh::mesh_topology(&simplified.mesh)),
-                    mesh: Some(Arc::new(simplified)),
+                    topology: Arc::new(topology),
+                    mesh: Some(simplified),
                 })
             }
             (Some(_), other) => Err(invalid(format!(

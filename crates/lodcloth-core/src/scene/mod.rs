@@ -53,7 +53,7 @@ pub use raw::{
     RawOrientation, RawPin, RawPinPath, RawProfile, RawRegion, RawScene, RawSelector, RawShape, RawSimulation,
     RawSprings, RawStrain, RawWind,
 };
-pub use selector::{patch_weights, select as select_nodes, Edge, Selector};
+pub use selector::{patch_weights, select as select_nodes, select_mesh, Edge, Selector};
 
 /// A validated pin: its node set, its path, and its field path (`pins[i]`)
 /// for messages at a resolution where it selects no node.

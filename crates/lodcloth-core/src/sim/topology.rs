@@ -155,6 +155,10 @@ pub struct Topology {
     pub triangles: Vec<[u32; 3]>,
     /// Present for rectangular grids.
     pub grid: Option<GridShape>,
+    /// Present for a mesh cloth's levels: the level's mesh (material
+    /// coordinates, groups) and the reference vertex each node is, so live
+    /// input and pin sets resolve on it as they do on a grid.
+    pub mesh: Option<std::sync::Arc<crate::mesh::Simplified>>,
 }
 
 impl Topology {
@@ -226,6 +230,7 @@ impl Topology {
             groups,
             triangles,
             grid: Some(shape),
+            mesh: None,
         }
     }
 

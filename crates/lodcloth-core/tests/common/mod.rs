@@ -122,6 +122,7 @@ pub fn pairs_topology(rest_positions: Vec<[f64; 3]>, pairs: &[(u32, u32)], kind:
         groups: vec![SpringGroup::from_pairs(SpringClass::along_u(kind), pairs, rest)],
         triangles: Vec::new(),
         grid: None,
+        mesh: None,
     }
 }
 
@@ -143,6 +144,7 @@ pub fn as_gather_topology(topology: &Topology) -> Topology {
         groups,
         triangles: topology.triangles.clone(),
         grid: None,
+        mesh: None,
     }
 }
 
