@@ -770,8 +770,27 @@ fn instance(p: &mut Problems, all: &[RawInstance], i: usize, default_publish_hz:
     })
 }
 
-/// The cloth side of an instance: grid levels within the reference.
+/// The cloth side of an instance: grid levels within the reference of a
+/// grid scene, vertex counts within the mesh of a mesh scene.
 fn cloth_instance(r: &RawInstance, at: &str, p: &mut Problems) -> Option<(InstanceKind, Integrator)> {
+    let mut scene = match Scene::load(&r.scene) {
+        Ok(s) => s,
+        Err(err) => {
+            p.push(format!("{at}.scene: {err}"));
+            return None;
+        }
+    };
+    match scene.mesh.clone() {
+        Some(mesh) => mesh_levels(r, at, p, &scene, &mesh.file),
+        None => grid_levels(r, at, p, &mut scene)?,
+    }
+    let integrator = scene.params.integrator;
+    Some((InstanceKind::Cloth(Box::new(scene)), integrator))
+}
+
+/// A grid scene's levels: grids of MIN_SIDE..=MAX_SIDE nodes per side, no
+/// finer than the reference (the scene's, or `reference`, set on `scene`).
+fn grid_levels(r: &RawInstance, at: &str, p: &mut Problems, scene: &mut Scene) -> Option<()> {
     let side_ok = |nx: usize, ny: usize| (MIN_SIDE..=MAX_SIDE).contains(&nx) && (MIN_SIDE..=MAX_SIDE).contains(&ny);
     for (j, l) in r.levels.iter().enumerate() {
         match l.grid() {
@@ -780,27 +799,13 @@ fn cloth_instance(r: &RawInstance, at: &str, p: &mut Problems) -> Option<(Instan
                 "{at}.levels[{j}]: {l} is outside {MIN_SIDE}..={MAX_SIDE} nodes per side"
             )),
             None if matches!(l, Level::Vertices(_)) => p.push(format!(
-                "{at}.levels[{j}]: {l} is a mesh's vertex count; the daemon serves grid cloths, whose levels are NXxNY"
+                "{at}.levels[{j}]: {l} is a mesh's vertex count; {} is a grid cloth, whose levels are NXxNY",
+                scene.name
             )),
             None => p.push(format!(
                 "{at}.levels[{j}]: {l} is a point count; a cloth's levels are grids NXxNY (or set kind = \"surface\")"
             )),
         }
-    }
-    let mut scene = match Scene::load(&r.scene) {
-        Ok(s) => s,
-        Err(err) => {
-            p.push(format!("{at}.scene: {err}"));
-            return None;
-        }
-    };
-    if let Some(mesh) = &scene.mesh {
-        p.push(format!(
-            "{at}.scene: {} is a mesh cloth ({}); the daemon serves grid cloths and surfaces so far",
-            scene.name,
-            mesh.file.display()
-        ));
-        return None;
     }
     if let Some(reference) = r.reference {
         match reference.grid() {
@@ -825,8 +830,43 @@ fn cloth_instance(r: &RawInstance, at: &str, p: &mut Problems) -> Option<(Instan
             }
         }
     }
-    let integrator = scene.params.integrator;
-    Some((InstanceKind::Cloth(Box::new(scene)), integrator))
+    Some(())
+}
+
+/// A mesh scene's levels: vertex counts the mesh's chain can make (at most
+/// its own count, which is the reference; at least its pinned vertices),
+/// each simplified once here so a bad count is named at start-up, not at a
+/// switch.
+fn mesh_levels(r: &RawInstance, at: &str, p: &mut Problems, scene: &Scene, file: &std::path::Path) {
+    let all = scene.reference_level();
+    if r.reference.is_some() {
+        p.push(format!(
+            "{at}.reference: {} is a mesh cloth ({}), whose reference is every vertex ({all}); remove this field",
+            scene.name,
+            file.display()
+        ));
+    }
+    for (j, l) in r.levels.iter().enumerate() {
+        match *l {
+            Level::Vertices(n) if Level::Vertices(n) == all || n < all.nodes() => {
+                if let Err(e) = scene.cloth_level(*l) {
+                    p.push(format!("{at}.levels[{j}]: {e}"));
+                }
+            }
+            Level::Vertices(_) => p.push(format!(
+                "{at}.levels[{j}]: {l} is more than the {} vertices of {}; its reference is {all}",
+                all.nodes(),
+                file.display()
+            )),
+            _ => p.push(format!(
+                "{at}.levels[{j}]: {l} is not a vertex count; {} is a mesh cloth ({}), whose levels are vertex counts \
+                 such as {all} (every vertex) or {}v",
+                scene.name,
+                file.display(),
+                all.nodes() * 2 / 5
+            )),
+        }
+    }
 }
 
 /// The surface side of an instance: point-count levels within the cloud.

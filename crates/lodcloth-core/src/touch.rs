@@ -18,7 +18,7 @@ use crate::scene::{patch_weights, Scene, Selector};
 use std::sync::Arc;
 
 use crate::mesh::Simplified;
-use crate::sim::{Grab, GridShape, PinShift, Profile, SimError, Simulation, Wind};
+use crate::sim::{Grab, GridShape, PinShift, Profile, SimError, Simulation, Topology, Wind};
 
 /// A part of the cloth: the square of half-side `radius` metres about the
 /// material point (u, v) (a point when `radius` is 0).
@@ -187,6 +187,16 @@ impl Patch {
         crate::mesh::patch_weights(&level.mesh, self.u, self.v, self.radius)
             .into_iter()
             .unzip()
+    }
+
+    /// Nodes and weights of this patch on a cloth of `topology`: a grid's
+    /// or a mesh level's; `None` for anything else (a point surface).
+    pub fn on(&self, topology: &Topology) -> Option<(Vec<u32>, Vec<f64>)> {
+        match (topology.grid, &topology.mesh) {
+            (Some(shape), _) => Some(self.weights(&shape)),
+            (None, Some(level)) => Some(self.mesh_weights(level)),
+            (None, None) => None,
+        }
     }
 
     fn weights_on(&self, cloth: &Cloth) -> (Vec<u32>, Vec<f64>) {

@@ -788,3 +788,84 @@ fn a_pin_move_on_a_mesh_takes_its_set_and_only_its_set() {
     assert_eq!(kept, 1, "the vertex pin stays");
     assert!(moved > 10, "the top edge moved: {moved} pins");
 }
+
+/// The standard drags on a mesh cloth follow the grid's rule: on the same
+/// flat sheet pinned along its top they take the three bottom points, the
+/// hand holds the cloth's weight at 5 % of √A, and each carries its patch
+/// 0.3 √A up against gravity, then 0.3 √A across towards the middle in u.
+#[test]
+fn the_standard_drags_on_a_mesh_follow_the_grids_rule() {
+    use lodcloth::estimate::{probes, RecordSpec, Reference};
+    let (_dir, scene) = free_mesh("[[pins]]\nnodes = { edge = \"top\" }");
+    let mut scene = scene;
+    scene.params.gravity = [0.0, -9.81, 0.0];
+    let spec = RecordSpec {
+        frames: 1000,
+        metric_stride: 20,
+        estimate_stride: 20,
+        difference_span: 1,
+    };
+    let reference = Reference::record(scene.build().expect("builds"), spec, &mut |_, _| {}).expect("records");
+    let drags = probes(&scene, &reference).expect("three drags");
+    let mut names: Vec<&str> = drags
+        .iter()
+        .map(|p| p.name.split(',').next().expect("a name"))
+        .collect();
+    names.sort_unstable();
+    assert_eq!(names, ["u=0 v=1", "u=0.5 v=1", "u=1 v=1"]);
+    let area = scene.mesh.as_ref().expect("a mesh").area;
+    assert!((area - 1.2 * 0.8).abs() < 1e-9, "the sheet's area {area}");
+    let size = area.sqrt();
+    let stiffness = area * 0.2 * 9.81 / (0.05 * size);
+    let span = *reference.frame_times.last().expect("frames");
+    let per_leg = (0.2 * span * 60.0).round() as usize;
+    for p in &drags {
+        let events = p.script.events();
+        let (t0, Input::Grab { stiffness: k, at, .. }) = events[0] else {
+            panic!("{}: starts with a grab", p.name)
+        };
+        assert!((k - stiffness).abs() <= 1e-9 * stiffness, "{}: {k} N/m", p.name);
+        assert!(
+            (at.radius - 0.05 * size).abs() < 1e-12,
+            "{}: radius {}",
+            p.name,
+            at.radius
+        );
+        let moves: Vec<[f64; 3]> = events
+            .iter()
+            .filter_map(|(_, i)| match i {
+                Input::Move { target, .. } => Some(*target),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(moves.len(), 2 * per_leg, "{}", p.name);
+        let f0 = reference
+            .frame_times
+            .iter()
+            .position(|&t| t == t0)
+            .expect("t0 is a frame time");
+        let (nodes, weights) = at.on(&reference.topology).expect("a mesh");
+        let n = reference.topology.n_nodes;
+        let frame = &reference.frames[f0];
+        let start = [0, 1, 2].map(|c| {
+            nodes
+                .iter()
+                .zip(&weights)
+                .map(|(&k, &wk)| wk * f64::from(frame[c * n + k as usize]))
+                .sum::<f64>()
+        });
+        let towards_middle = if at.u < 0.25 { 1.0 } else { -1.0 };
+        let (up, across) = (moves[per_leg - 1], moves[2 * per_leg - 1]);
+        let close = |a: [f64; 3], b: [f64; 3]| (0..3).all(|c| (a[c] - b[c]).abs() < 1e-9);
+        assert!(
+            close(up, [start[0], start[1] + 0.3 * size, start[2]]),
+            "{}: leg 1 ends at {up:?}, from {start:?}",
+            p.name
+        );
+        assert!(
+            close(across, [up[0] + towards_middle * 0.3 * size, up[1], up[2]]),
+            "{}: leg 2 ends at {across:?}, from {up:?}",
+            p.name
+        );
+    }
+}

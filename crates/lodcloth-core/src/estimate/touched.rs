@@ -33,11 +33,21 @@
 //!   takes it softened to [`SOFTEN_AT_SWITCH`] of its largest stable
 //!   stiffness, as the daemon softens a grab at a switch.
 //!
+//! - **On a mesh cloth** the same rule, read on its surface: a material
+//!   point is located on the triangles in (u, v) (one outside the material,
+//!   a disc's corner, is the nearest point of its border); distances are
+//!   straight lines between rest positions; the cloth's side and √(W·H)
+//!   are both √A (its area); the hand holds a disc of radius 5 % of √A;
+//!   "out of the rest plane" is the rest surface's normal at the point and
+//!   "across towards the middle in u" is the way to (½, v) on the tangent
+//!   plane (at u = ½, against the surface's u direction, as on a grid).
+//!   On a flat sheet it takes the points and legs the grid does.
+//!
 //! Pure: no I/O, no clock. The daemon runs it in the background after a
 //! level is live; it is never on a switch's path.
 
 use crate::scene::Scene;
-use crate::sim::{GridShape, Material, Simulation};
+use crate::sim::{Material, Simulation, Topology};
 use crate::touch::{Input, Patch, Script, Touch, TouchError, SOFTEN_AT_SWITCH};
 
 use super::{ErrorAccumulator, ErrorReport, LodProblem, Reference};
@@ -117,39 +127,87 @@ pub struct TouchedScore {
 /// The standard drags of `scene` (its reference resolution) against the
 /// recorded `reference` (rule: the module's docs).
 pub fn probes(scene: &Scene, reference: &Reference) -> Result<Vec<Probe>, TouchedError> {
-    let shape = reference
-        .topology
-        .grid
-        .ok_or_else(|| TouchedError::Build("the reference is not a grid".into()))?;
     let sim = scene.build().map_err(|e| TouchedError::Build(e.to_string()))?;
-    let (w, h) = (scene.width, scene.height);
-    let side = w.min(h);
-    let size = (w * h).sqrt();
-    let pins: Vec<(f64, f64)> = sim
-        .loads()
-        .pins
-        .iter()
-        .map(|p| {
-            let k = p.node as usize;
-            let (u, v) = shape.uv(k % shape.nx, k / shape.nx);
-            (u * w, v * h)
-        })
-        .collect();
+    let layout = match (reference.topology.grid, &reference.topology.mesh) {
+        (Some(shape), _) => grid_layout(scene, reference, &shape, &sim),
+        (None, Some(mesh)) => mesh_layout(scene, &mesh.mesh, &sim),
+        (None, None) => return Err(TouchedError::Build("the reference is neither a grid nor a mesh".into())),
+    }?;
+
+    // Timing, on the recording's frames.
+    let span = *reference
+        .frame_times
+        .last()
+        .ok_or_else(|| TouchedError::Build("an empty recording".into()))?;
+    let f0 = nearest(&reference.frame_times, 0.2 * span);
+    let t0 = reference.frame_times[f0];
+    let (leg, hold, hz) = (0.2 * span, 0.1 * span, 60.0);
+    let reach = 0.3 * layout.size;
+
+    // The hand.
+    let g = scene.params.gravity;
+    let g_norm = dot(g, g).sqrt();
+    let weight = layout.mass * if g_norm > 0.0 { g_norm } else { 9.81 };
+    let stiffness = weight / (0.05 * layout.size);
+    let radius = layout.radius;
+    let damping = 2.0 * (stiffness * layout.patch_mass).sqrt();
+
+    let mut out = Vec::with_capacity(layout.drags.len());
+    for ((u, v), out_of_plane, across) in layout.drags {
+        let patch = Patch { u, v, radius };
+        let start = patch_position(&reference.topology, &patch, &reference.frames[f0])?;
+        let grab = Input::Grab {
+            id: 1,
+            at: patch,
+            target: None,
+            stiffness,
+            damping,
+        };
+        let legs = [out_of_plane, across].map(|d| d.map(|x| reach * x));
+        let events = eased_drag(grab, t0, start, &legs, leg, hold, hz);
+        let name = format!("u={u} v={v}, {stiffness:.3} N/m");
+        let script = Script::new(events).map_err(|e| TouchedError::Input {
+            probe: name.clone(),
+            time: t0,
+            reason: e.to_string(),
+        })?;
+        out.push(Probe { name, script });
+    }
+    Ok(out)
+}
+
+/// Where the standard drags take a cloth and how big its hand is.
+struct Layout {
+    /// Each drag: its material point, the unit direction of its first leg
+    /// (out of the rest surface) and of its second (across it, towards the
+    /// middle in u).
+    drags: Vec<((f64, f64), [f64; 3], [f64; 3])>,
+    /// The cloth's size √(area) (m): the legs' and the hand's stretch scale.
+    size: f64,
+    /// The cloth's mass (kg).
+    mass: f64,
+    /// The hand's patch radius (m) and the mass under it (kg).
+    radius: f64,
+    patch_mass: f64,
+}
+
+/// The candidates u, v ∈ {0, ½, 1}, farthest first from the pins and from
+/// those taken (`distance` between material points, `from_pins` of one, in
+/// metres on the rest shape); none within `exclusion` of a pin.
+fn take_candidates(
+    distance: impl Fn((f64, f64), (f64, f64)) -> f64,
+    from_pins: impl Fn((f64, f64)) -> f64,
+    exclusion: f64,
+) -> Result<Vec<(f64, f64)>, TouchedError> {
     let candidates: Vec<(f64, f64)> = [0.0, 0.5, 1.0]
         .iter()
         .flat_map(|&v| [0.0, 0.5, 1.0].map(|u| (u, v)))
         .collect();
-    let distance = |a: (f64, f64), b: (f64, f64)| ((a.0 - b.0) * w).hypot((a.1 - b.1) * h);
-    let from_pins = |c: (f64, f64)| {
-        pins.iter()
-            .map(|&p| (c.0 * w - p.0).hypot(c.1 * h - p.1))
-            .fold(f64::INFINITY, f64::min)
-    };
     let mut taken: Vec<(f64, f64)> = Vec::new();
     while taken.len() < PROBES {
         let mut best: Option<((f64, f64), f64)> = None;
         for &c in &candidates {
-            if taken.contains(&c) || from_pins(c) < 0.25 * side {
+            if taken.contains(&c) || from_pins(c) < exclusion {
                 continue;
             }
             let d = taken.iter().map(|&t| distance(c, t)).fold(from_pins(c), f64::min);
@@ -163,6 +221,37 @@ pub fn probes(scene: &Scene, reference: &Reference) -> Result<Vec<Probe>, Touche
             None => break,
         }
     }
+    Ok(taken)
+}
+
+/// A grid: distances in material metres (u·W, v·H); the rest plane's
+/// tangents through the middle; a square hand of half-side 5 % of the
+/// shorter side.
+fn grid_layout(
+    scene: &Scene,
+    reference: &Reference,
+    shape: &crate::sim::GridShape,
+    sim: &Simulation,
+) -> Result<Layout, TouchedError> {
+    let (w, h) = (scene.width, scene.height);
+    let side = w.min(h);
+    let pins: Vec<(f64, f64)> = sim
+        .loads()
+        .pins
+        .iter()
+        .map(|p| {
+            let k = p.node as usize;
+            let (u, v) = shape.uv(k % shape.nx, k / shape.nx);
+            (u * w, v * h)
+        })
+        .collect();
+    let distance = |a: (f64, f64), b: (f64, f64)| ((a.0 - b.0) * w).hypot((a.1 - b.1) * h);
+    let from_pins = |c: (f64, f64)| {
+        pins.iter()
+            .map(|&p| (c.0 * w - p.0).hypot(c.1 * h - p.1))
+            .fold(f64::INFINITY, f64::min)
+    };
+    let taken = take_candidates(distance, from_pins, 0.25 * side)?;
 
     // The rest frame: tangents along u and v through the middle, the normal.
     let rest = &reference.rest;
@@ -173,54 +262,95 @@ pub fn probes(scene: &Scene, reference: &Reference) -> Result<Vec<Probe>, Touche
     };
     let e_u = unit(sub(at(shape.nx - 1, shape.ny / 2), at(0, shape.ny / 2)));
     let e_v = unit(sub(at(shape.nx / 2, shape.ny - 1), at(shape.nx / 2, 0)));
-    let mut normal = unit(cross(e_u, e_v));
-    let g = scene.params.gravity;
-    let g_norm = dot(g, g).sqrt();
-    if dot(normal, g) > 1e-9 * g_norm {
-        normal = normal.map(|x| -x);
-    }
-
-    // Timing, on the recording's frames.
-    let span = *reference
-        .frame_times
-        .last()
-        .ok_or_else(|| TouchedError::Build("an empty recording".into()))?;
-    let f0 = nearest(&reference.frame_times, 0.2 * span);
-    let t0 = reference.frame_times[f0];
-    let (leg, hold, hz) = (0.2 * span, 0.1 * span, 60.0);
-    let reach = 0.3 * size;
-
-    // The hand.
-    let mass = w * h * scene.areal_density;
-    let weight = mass * if g_norm > 0.0 { g_norm } else { 9.81 };
-    let stiffness = weight / (0.05 * size);
+    let normal = against_gravity(unit(cross(e_u, e_v)), scene.params.gravity);
     let radius = 0.05 * side;
-    let patch_mass = scene.areal_density * (2.0 * radius).powi(2);
-    let damping = 2.0 * (stiffness * patch_mass).sqrt();
+    Ok(Layout {
+        drags: taken
+            .into_iter()
+            .map(|(u, v)| ((u, v), normal, if u >= 0.5 { e_u.map(|x| -x) } else { e_u }))
+            .collect(),
+        size: (w * h).sqrt(),
+        mass: w * h * scene.areal_density,
+        radius,
+        patch_mass: scene.areal_density * (2.0 * radius).powi(2),
+    })
+}
 
-    let mut out = Vec::with_capacity(taken.len());
-    for (u, v) in taken {
-        let patch = Patch { u, v, radius };
-        let start = patch_position(&shape, &patch, &reference.frames[f0]);
-        let across = if u >= 0.5 { e_u.map(|x| -x) } else { e_u };
-        let grab = Input::Grab {
-            id: 1,
-            at: patch,
-            target: None,
-            stiffness,
-            damping,
-        };
-        let legs = [normal, across].map(|d| d.map(|x| reach * x));
-        let events = eased_drag(grab, t0, start, &legs, leg, hold, hz);
-        let name = format!("u={u} v={v}, {stiffness:.3} N/m");
-        let script = Script::new(events).map_err(|e| TouchedError::Input {
-            probe: name.clone(),
-            time: t0,
-            reason: e.to_string(),
-        })?;
-        out.push(Probe { name, script });
+/// A mesh: material points located on its triangles in (u, v)
+/// ([`crate::mesh::material_point`]; one outside the material, such as a
+/// disc's corner, is the nearest point of its border), distances straight
+/// lines between their rest positions; at each drag's point the rest
+/// surface's normal and, across it, the way towards (½, v) (or against
+/// the surface's u direction where that way is not defined); the cloth's
+/// size √A; a round hand of radius 5 % of √A.
+fn mesh_layout(scene: &Scene, mesh: &crate::mesh::TriMesh, sim: &Simulation) -> Result<Layout, TouchedError> {
+    let rest = &mesh.positions;
+    let located = |(u, v): (f64, f64)| crate::mesh::material_point(mesh, u, v);
+    let rest_at = |c: (f64, f64)| {
+        let (nodes, w) = located(c);
+        (0..3).fold([0.0; 3], |x, k| {
+            let p = rest[nodes[k] as usize];
+            [x[0] + w[k] * p[0], x[1] + w[k] * p[1], x[2] + w[k] * p[2]]
+        })
+    };
+    let length = |a: [f64; 3]| dot(a, a).sqrt();
+    let area = mesh.area();
+    let size = area.sqrt();
+    let pins: Vec<[f64; 3]> = sim.loads().pins.iter().map(|p| rest[p.node as usize]).collect();
+    let distance = |a: (f64, f64), b: (f64, f64)| length(sub(rest_at(a), rest_at(b)));
+    let from_pins = |c: (f64, f64)| {
+        let x = rest_at(c);
+        pins.iter().map(|&p| length(sub(x, p))).fold(f64::INFINITY, f64::min)
+    };
+    let taken = take_candidates(distance, from_pins, 0.25 * size)?;
+    let drags = taken
+        .into_iter()
+        .map(|c| {
+            let (nodes, _) = located(c);
+            let [a, b, d] = nodes.map(|k| rest[k as usize]);
+            let normal = against_gravity(unit(cross(sub(b, a), sub(d, a))), scene.params.gravity);
+            let tangential = |x: [f64; 3]| {
+                let along = dot(x, normal);
+                [
+                    x[0] - along * normal[0],
+                    x[1] - along * normal[1],
+                    x[2] - along * normal[2],
+                ]
+            };
+            let towards = tangential(sub(rest_at((0.5, c.1)), rest_at(c)));
+            let across = if length(towards) > 1e-6 * size {
+                unit(towards)
+            } else {
+                // ∂x/∂u on the triangle, against it (towards smaller u
+                // from the middle, as the grid's −e_u at u = ½).
+                let [ua, ub, ud] = nodes.map(|k| mesh.uv[k as usize]);
+                let (du1, dv1, du2, dv2) = (ub[0] - ua[0], ub[1] - ua[1], ud[0] - ua[0], ud[1] - ua[1]);
+                let det = du1 * dv2 - du2 * dv1;
+                let (e1, e2) = (sub(b, a), sub(d, a));
+                let x_u = [0, 1, 2].map(|i| (dv2 * e1[i] - dv1 * e2[i]) / det);
+                unit(tangential(x_u)).map(|x| -x)
+            };
+            (c, normal, across)
+        })
+        .collect();
+    let radius = 0.05 * size;
+    Ok(Layout {
+        drags,
+        size,
+        mass: area * scene.areal_density,
+        radius,
+        patch_mass: scene.areal_density * std::f64::consts::PI * radius * radius,
+    })
+}
+
+/// `normal` turned to point against gravity `g` (kept when it lies in the
+/// plane).
+fn against_gravity(normal: [f64; 3], g: [f64; 3]) -> [f64; 3] {
+    if dot(normal, g) > 1e-9 * dot(g, g).sqrt() {
+        normal.map(|x| -x)
+    } else {
+        normal
     }
-    Ok(out)
 }
 
 /// A hand closing on a patch at `t0` (`grab`, which names the patch, the
@@ -407,9 +537,11 @@ impl<'a> Hand<'a> {
     }
 }
 
-/// Σ wᵢ xᵢ over `patch` on a grid of `shape`, from SoA f32 positions.
-fn patch_position(shape: &GridShape, patch: &Patch, pos: &[f32]) -> [f64; 3] {
-    let (nodes, weights) = patch.weights(shape);
+/// Σ wᵢ xᵢ over `patch` on the cloth of `topology`, from SoA f32 positions.
+fn patch_position(topology: &Topology, patch: &Patch, pos: &[f32]) -> Result<[f64; 3], TouchedError> {
+    let (nodes, weights) = patch
+        .on(topology)
+        .ok_or_else(|| TouchedError::Build("the reference is neither a grid nor a mesh".into()))?;
     let n = pos.len() / 3;
     let mut x = [0.0; 3];
     for (&k, &wk) in nodes.iter().zip(&weights) {
@@ -417,7 +549,7 @@ fn patch_position(shape: &GridShape, patch: &Patch, pos: &[f32]) -> [f64; 3] {
             *xc += wk * f64::from(pos[c * n + k as usize]);
         }
     }
-    x
+    Ok(x)
 }
 
 fn nearest(times: &[f64], t: f64) -> usize {

@@ -73,7 +73,7 @@ impl InstancePlan {
     /// The reference level: the cloth scene's grid, or every point of the surface.
     pub fn reference(&self) -> Level {
         match &self.kind {
-            InstanceKind::Cloth(scene) => Level::new(scene.nx, scene.ny),
+            InstanceKind::Cloth(scene) => scene.reference_level(),
             InstanceKind::Surface(scene) => Level::Points(scene.points()),
         }
     }

@@ -10,7 +10,7 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 
-use super::estimator::{level_dt, record_reference, stable_problem, Estimator, PlanError};
+use super::estimator::{record_reference, stable_problem, Estimator, PlanError};
 use super::{EstimationPlan, InstanceKind, InstancePlan, Level};
 use crate::cache::{CacheEntry, CacheError, CacheKey, CoefficientCache, Provenance};
 use crate::estimate::inverse::{self, Distribution};
@@ -20,7 +20,7 @@ use crate::points::estimate::{self as surface_fit, SurfaceFitOptions, SurfaceRef
 use crate::points::model::PointModel;
 use crate::points::scene::SurfaceScene;
 use crate::scene::{MassConvention, Scene};
-use crate::sim::{Material, SimError, Simulation, StabilityCheck, State, Topology};
+use crate::sim::{Material, SimError, Simulation, StabilityCheck, State};
 
 use crate::points::cloud::CloudMap;
 
@@ -280,15 +280,8 @@ impl Preparer {
             return Ok(Some(p));
         }
         let prepared = match (&self.plan.kind, level) {
-            (InstanceKind::Cloth(scene), Level::Grid { nx, ny }) => {
-                match self.prepare_cloth(
-                    &Self::cloth_scene(scene, &self.plan),
-                    level,
-                    nx,
-                    ny,
-                    method,
-                    cached_only,
-                )? {
+            (InstanceKind::Cloth(scene), Level::Grid { .. } | Level::Vertices(_)) => {
+                match self.prepare_cloth(&Self::cloth_scene(scene, &self.plan), level, method, cached_only)? {
                     Some(p) => p,
                     None => return Ok(None),
                 }
@@ -362,8 +355,6 @@ impl Preparer {
         &self,
         scene: &Scene,
         level: Level,
-        nx: usize,
-        ny: usize,
         method: Method,
         cached_only: bool,
     ) -> Result<Option<Prepared>, PrepareError> {
@@ -376,24 +367,33 @@ impl Preparer {
         };
         let mass = MassConvention::Lumped;
         let integrator = self.plan.integrator;
-        let dt = match self.plan.dt {
-            Some(dt) => dt,
+        // One build of the level (a mesh level is simplified and correlated
+        // once): at the configured dt, or probed at the reference's frame
+        // interval with its `same` material and given the largest dt ≤ 0.75
+        // of that limit dividing the interval.
+        let interval = reference.dt * reference.spec.metric_stride as f64;
+        let problem = LodProblem::at(
+            scene,
+            reference.clone(),
+            level,
+            mass,
+            integrator,
+            self.plan.dt.unwrap_or(interval),
+        )
+        .map_err(|e| failed(e.into()))?;
+        let problem = match self.plan.dt {
+            Some(_) => problem,
             None => {
-                level_dt(
-                    scene,
-                    &reference,
-                    (nx, ny),
-                    mass,
-                    integrator,
-                    scene.material_at(nx, ny),
-                    0.75,
-                )
-                .map_err(failed)?
-                .0
+                let limit = problem
+                    .simulation(problem.same_material())
+                    .map_err(|e| failed(e.into()))?
+                    .dt_limit();
+                problem
+                    .with_dt(interval / (interval / (0.75 * limit)).ceil().max(1.0))
+                    .map_err(|e| failed(e.into()))?
             }
         };
-        let problem =
-            LodProblem::new(scene, reference.clone(), nx, ny, mass, integrator, dt).map_err(|e| failed(e.into()))?;
+        let dt = problem.dt;
         let frames = problem.frames();
         let fit = FitOptions {
             train: Some(0..frames),
@@ -777,9 +777,9 @@ impl Preparer {
             message,
         };
         match (&self.plan.kind, level) {
-            (InstanceKind::Cloth(scene), Level::Grid { nx, ny }) => {
+            (InstanceKind::Cloth(scene), Level::Grid { .. } | Level::Vertices(_)) => {
                 let scene = Self::cloth_scene(scene, &self.plan);
-                let (sim, dt) = self.quick_cloth(&scene, nx, ny).map_err(failed)?;
+                let (sim, dt) = self.cloth_at(&scene, level, None, self.plan.dt).map_err(failed)?;
                 Ok(Start {
                     sim: self.live(sim),
                     dt,
@@ -815,7 +815,7 @@ impl Preparer {
         material: Material,
         dt: f64,
     ) -> Option<Result<Simulation, PrepareError>> {
-        let (InstanceKind::Cloth(scene), Level::Grid { nx, ny }) = (&self.plan.kind, level) else {
+        let (InstanceKind::Cloth(scene), Level::Grid { .. } | Level::Vertices(_)) = (&self.plan.kind, level) else {
             return None;
         };
         let failed = |message: String| PrepareError::Failed {
@@ -828,7 +828,7 @@ impl Preparer {
         }
         let scene = Self::cloth_scene(scene, &self.plan);
         Some(
-            self.cloth_at(&scene, nx, ny, material, Some(dt))
+            self.cloth_at(&scene, level, Some(material), Some(dt))
                 .map(|(sim, _)| self.live(sim))
                 .map_err(failed),
         )
@@ -847,26 +847,25 @@ impl Preparer {
         sim
     }
 
-    /// The quick start: the scene's own coefficients at the configured dt.
-    fn quick_cloth(&self, scene: &Scene, nx: usize, ny: usize) -> Result<(Simulation, f64), String> {
-        self.cloth_at(scene, nx, ny, scene.material_at(nx, ny), self.plan.dt)
-    }
-
-    /// A cloth level at rest with lumped masses and `material`; at `dt`, or
-    /// when `None` at the largest step ≤ 0.75 × the predicted limit that
-    /// divides the metric frame interval the reference will have (so the
-    /// estimated model later lines up with it).
+    /// A cloth level at rest with lumped masses and `material` (`None`: the
+    /// scene's own at that level, what `same` estimates); at `dt`, or when
+    /// `None` at the largest step ≤ 0.75 × the predicted limit that divides
+    /// the metric frame interval the reference will have (so the estimated
+    /// model later lines up with it).
     fn cloth_at(
         &self,
         scene: &Scene,
-        nx: usize,
-        ny: usize,
-        material: Material,
+        level: Level,
+        material: Option<Material>,
         dt: Option<f64>,
     ) -> Result<(Simulation, f64), String> {
-        let topology = Arc::new(Topology::grid(scene.shape(nx, ny), scene.orientation));
+        let cloth = scene.cloth_level(level).map_err(|e| e.to_string())?;
+        let topology = cloth.topology.clone();
         let masses: Vec<f64> = topology.node_areas.iter().map(|a| a * scene.areal_density).collect();
-        let loads = scene.loads(&topology).map_err(|e| e.to_string())?;
+        let loads = scene
+            .loads_on(&topology, cloth.mesh.as_deref())
+            .map_err(|e| e.to_string())?;
+        let material = material.unwrap_or_else(|| scene.material_on(&cloth));
         let interval = scene.params.dt * self.estimation.spec.metric_stride as f64;
         let params = crate::sim::SimParams {
             material,
