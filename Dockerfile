@@ -76,6 +76,7 @@ COPY --from=builder /out/lodcloth /usr/local/bin/lodcloth
 # Scene paths in the config are relative to this working directory. Owned by
 # root: the daemon only reads them.
 COPY config/scenes/ config/scenes/
+COPY config/meshes/ config/meshes/
 COPY config/surfaces/ config/surfaces/
 COPY config/docker.toml config/docker.toml
 # The secure deployment (README "Reliability and security"): certificates are

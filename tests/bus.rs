@@ -15,6 +15,7 @@ mod clients;
 mod colliders;
 mod input;
 mod live_error;
+mod meshes;
 mod operations;
 mod robustness;
 mod security;

@@ -223,7 +223,7 @@ async fn the_page_draws_the_cloth_coloured_by_error_and_switches_level_from_a_cl
 /// The camera the page draws with ([`Browser::eval`] of
 /// `window.lodclothCamera()`): puts world points on the screen here, in the
 /// test, so the daemon's positions can be compared with the mouse.
-struct Camera {
+pub(crate) struct Camera {
     /// Column-major model-view-projection matrix.
     mvp: [f64; 16],
     /// The canvas's client rectangle (CSS px).
@@ -231,7 +231,7 @@ struct Camera {
 }
 
 impl Camera {
-    async fn of(browser: &mut Browser) -> Camera {
+    pub(crate) async fn of(browser: &mut Browser) -> Camera {
         let c = browser.eval("window.lodclothCamera()").await;
         let num = |v: &Value| v.as_f64().expect("a number");
         let m = c["mvp"].as_array().expect("mvp");
@@ -248,7 +248,7 @@ impl Camera {
     }
 
     /// The client pixel of world point `p`.
-    fn project(&self, p: [f64; 3]) -> [f64; 2] {
+    pub(crate) fn project(&self, p: [f64; 3]) -> [f64; 2] {
         let row = |r: usize| (0..3).map(|c| self.mvp[c * 4 + r] * p[c]).sum::<f64>() + self.mvp[12 + r];
         let w = row(3);
         assert!(w > 0.0, "{p:?} is behind the eye");
@@ -278,12 +278,12 @@ fn material_point(scene: &Scene, s: &v1::State, u: f64, v: f64) -> [f64; 3] {
     })
 }
 
-fn pixel(v: &Value) -> [f64; 2] {
+pub(crate) fn pixel(v: &Value) -> [f64; 2] {
     let a = v.as_array().unwrap_or_else(|| panic!("a pixel [x, y], got {v}"));
     [a[0].as_f64().expect("x"), a[1].as_f64().expect("y")]
 }
 
-fn px_dist(a: [f64; 2], b: [f64; 2]) -> f64 {
+pub(crate) fn px_dist(a: [f64; 2], b: [f64; 2]) -> f64 {
     (a[0] - b[0]).hypot(a[1] - b[1])
 }
 
@@ -294,7 +294,7 @@ fn unix_nanos() -> u64 {
         .as_nanos() as u64
 }
 
-async fn next_metrics(c: &lodcloth::service::client::Client, instance: &str) -> v1::Metrics {
+pub(crate) async fn next_metrics(c: &lodcloth::service::client::Client, instance: &str) -> v1::Metrics {
     let sub = c
         .session
         .declare_subscriber(lodcloth::service::keys::metrics(PREFIX, instance))

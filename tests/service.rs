@@ -611,7 +611,7 @@ fn an_instance_steps_its_springs_in_the_configured_precision() {
     let precisions: Vec<SpringPrecision> = config.instances.iter().map(|i| i.spring_precision).collect();
     assert_eq!(
         precisions,
-        [[SpringPrecision::F32; 4].as_slice(), &[SpringPrecision::F64]].concat()
+        [[SpringPrecision::F32; 5].as_slice(), &[SpringPrecision::F64]].concat()
     );
     for plan in &config.instances {
         let preparer = Preparer::new(Arc::new(plan.clone()), config.estimation, None);

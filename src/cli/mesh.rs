@@ -28,8 +28,9 @@ pub enum Mesh {
     Info {
         /// The mesh file.
         file: PathBuf,
-        /// Vertex counts to simplify to, comma separated (e.g. 2000,800).
-        #[arg(long, value_delimiter = ',')]
+        /// Vertex counts to simplify to, comma separated, written as a
+        /// config's levels or bare (e.g. 2000v,800v or 2000,800).
+        #[arg(long, value_delimiter = ',', value_parser = vertex_count)]
         levels: Vec<usize>,
     },
 }
@@ -153,6 +154,16 @@ fn make(shape: Shape, out: PathBuf) -> Result<()> {
     std::fs::write(&out, generate::to_obj(&mesh, &comment)).with_context(|| format!("writing {}", out.display()))?;
     println!("{}: {}", out.display(), comment.replace('\n', "; "));
     Ok(())
+}
+
+/// `915v`, `915 vertices` or `915`: a mesh level's vertex count.
+fn vertex_count(s: &str) -> Result<usize, String> {
+    let t = s.trim();
+    let digits = t.strip_suffix("vertices").or_else(|| t.strip_suffix('v')).unwrap_or(t);
+    digits
+        .trim()
+        .parse()
+        .map_err(|_| format!("'{s}' is not a vertex count; write e.g. 915v or 915"))
 }
 
 fn info(file: PathBuf, levels: &[usize]) -> Result<()> {

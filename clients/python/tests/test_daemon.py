@@ -1,5 +1,5 @@
 """End-to-end tests against a live daemon running the default config
-(config/default.toml: hanging, paper-1..3, sphere). Skipped unless
+(config/default.toml: hanging, paper-1..3, skirt, sphere). Skipped unless
 LODCLOTH_DAEMON names its endpoint:
 
     LODCLOTH_DAEMON=tcp/127.0.0.1:7450 python -m unittest discover -s clients/python/tests -v
@@ -60,6 +60,22 @@ class LiveDaemon(unittest.TestCase):
         self.assertEqual(len(info.triangles) % 3, 0)
         self.assertTrue(all(t < n for t in info.triangles))
         self.assertEqual(len(lc.unpack_vec3(info.rest_positions)), n)
+
+    def test_info_describes_a_mesh_cloth(self):
+        info = self.client.info("skirt")
+        self.assertEqual(info.kind, "cloth")
+        self.assertEqual(lc.level_str(info.reference), "2288v")
+        self.assertIn(lc.level_str(info.level), ["570v", "915v", "1370v"])
+        rest = lc.unpack_vec3(info.rest_positions)
+        # The simplifier lands within 3 % of the asked count.
+        self.assertLessEqual(abs(len(rest) - info.level.vertices), 0.03 * info.level.vertices)
+        self.assertTrue(all(t < len(rest) for t in info.triangles))
+        uv = lc.material_uv(info)
+        self.assertEqual(len(uv), len(rest))
+        self.assertTrue(all(0.0 <= u <= 1.0 and 0.0 <= v <= 1.0 for u, v in uv))
+        state = next(iter(self.client.states("skirt", count=1, timeout=10)))
+        if lc.level_str(state.level) == lc.level_str(info.level):
+            self.assertEqual(len(lc.positions(state)), len(rest))
 
     def test_health(self):
         infos = self.client.health()

@@ -10,6 +10,7 @@ import json
 import math
 import os
 import re
+import struct
 import subprocess
 import sys
 import tempfile
@@ -174,6 +175,21 @@ class Coordinates(unittest.TestCase):
             lc.unpack_vec3(b"\x00" * 13)
         with self.assertRaises(ValueError):
             lc.pack_vec3([(1.0, 2.0)])
+
+    def test_material_coordinates_pair_with_the_rest_positions(self):
+        info = v1.InstanceInfo(
+            instance="m",
+            rest_positions=lc.pack_vec3([(0, 0, 0)] * 2),
+            material_uv=struct.pack("<4f", 0.25, 0.5, 1.0, 0.0),
+        )
+        self.assertEqual(lc.material_uv(info), [(0.25, 0.5), (1.0, 0.0)])
+        info.material_uv = struct.pack("<2f", 0.25, 0.5)
+        with self.assertRaises(lc.DecodeError) as ctx:
+            lc.material_uv(info)
+        self.assertIn("1 material coordinates for 2 nodes", str(ctx.exception))
+        info.material_uv = b"\x00" * 12
+        with self.assertRaises(lc.DecodeError):
+            lc.material_uv(info)
 
     def test_positions_checked_against_the_level(self):
         s = v1.State(instance="c", level=v1.Level(nx=2, ny=2), positions=lc.pack_vec3([(0, 0, 0)] * 3))

@@ -98,6 +98,11 @@ fn instance_info(inst: &Instance) -> v1::InstanceInfo {
         cloud_points: s.cloud_points as u32,
         halted: s.halted.as_deref().unwrap_or_default().to_string(),
         colliders: c.colliders().iter().map(proto::collider).collect(),
+        material_uv: s
+            .topology
+            .material_uv()
+            .map(|uv| proto::pack_positions(&uv.iter().flatten().map(|&c| c as f32).collect::<Vec<f32>>()))
+            .unwrap_or_default(),
         rest_positions: proto::pack_positions(
             &s.topology
                 .rest_positions

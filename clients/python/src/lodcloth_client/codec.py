@@ -194,6 +194,23 @@ def unpack_vec3(raw: bytes) -> List[Vec3]:
     return list(struct.iter_unpack("<3f", bytes(raw)))
 
 
+def material_uv(info: "v1.InstanceInfo") -> List[Tuple[float, float]]:
+    """``InstanceInfo.material_uv`` as ``(u, v)`` tuples, one per node of
+    the current level (grid or mesh; empty for a surface): where an
+    input's patch (``u``, ``v``) names a point of the cloth. Raises
+    DecodeError when the bytes are not whole pairs or do not match the
+    level's rest positions."""
+    raw = bytes(info.material_uv)
+    where = f"info of {info.instance or '?'}"
+    if len(raw) % 8:
+        raise DecodeError(where, f"{len(raw)} bytes of material coordinates, not a multiple of 8 (2 x f32)")
+    uv = list(struct.iter_unpack("<2f", raw))
+    nodes = len(info.rest_positions) // 12
+    if uv and nodes and len(uv) != nodes:
+        raise DecodeError(where, f"{len(uv)} material coordinates for {nodes} nodes")
+    return uv
+
+
 def pack_vec3(points: Iterable[Sequence[float]]) -> bytes:
     """The inverse of :func:`unpack_vec3` (values are rounded to f32)."""
     out = bytearray()

@@ -234,6 +234,24 @@ impl Topology {
         }
     }
 
+    /// Each node's material coordinates (u, v) ∈ \[0,1\]², where live input
+    /// names points: a grid's column and row fractions, a mesh level's
+    /// from its mesh. `None` for a cloth that is neither (a point surface).
+    pub fn material_uv(&self) -> Option<Vec<[f64; 2]>> {
+        match (&self.grid, &self.mesh) {
+            (Some(shape), _) => Some(
+                (0..self.n_nodes)
+                    .map(|k| {
+                        let (u, v) = shape.uv(k % shape.nx, k / shape.nx);
+                        [u, v]
+                    })
+                    .collect(),
+            ),
+            (None, Some(level)) => Some(level.mesh.uv.clone()),
+            (None, None) => None,
+        }
+    }
+
     /// Total number of springs.
     pub fn spring_count(&self) -> usize {
         self.groups.iter().map(SpringGroup::len).sum()

@@ -142,7 +142,7 @@ class LevelInfo(_message.Message):
     def __init__(self, level: _Optional[_Union[Level, _Mapping]] = ..., predicted_error: _Optional[float] = ..., dt: _Optional[float] = ..., ready: bool = ..., predicted_error_under_input: _Optional[float] = ...) -> None: ...
 
 class InstanceInfo(_message.Message):
-    __slots__ = ("instance", "scene", "description", "level", "reference", "levels", "method", "integrator", "dt", "coefficients", "coefficient_version", "triangles", "pinned", "publish_hz", "o_max", "shadow_reference", "paused", "kind", "simulation_points", "cloud_points", "rest_positions", "halted", "colliders")
+    __slots__ = ("instance", "scene", "description", "level", "reference", "levels", "method", "integrator", "dt", "coefficients", "coefficient_version", "triangles", "pinned", "publish_hz", "o_max", "shadow_reference", "paused", "kind", "simulation_points", "cloud_points", "rest_positions", "halted", "colliders", "material_uv")
     INSTANCE_FIELD_NUMBER: _ClassVar[int]
     SCENE_FIELD_NUMBER: _ClassVar[int]
     DESCRIPTION_FIELD_NUMBER: _ClassVar[int]
@@ -166,6 +166,7 @@ class InstanceInfo(_message.Message):
     REST_POSITIONS_FIELD_NUMBER: _ClassVar[int]
     HALTED_FIELD_NUMBER: _ClassVar[int]
     COLLIDERS_FIELD_NUMBER: _ClassVar[int]
+    MATERIAL_UV_FIELD_NUMBER: _ClassVar[int]
     instance: str
     scene: str
     description: str
@@ -189,7 +190,8 @@ class InstanceInfo(_message.Message):
     rest_positions: bytes
     halted: str
     colliders: _containers.RepeatedCompositeFieldContainer[Collider]
-    def __init__(self, instance: _Optional[str] = ..., scene: _Optional[str] = ..., description: _Optional[str] = ..., level: _Optional[_Union[Level, _Mapping]] = ..., reference: _Optional[_Union[Level, _Mapping]] = ..., levels: _Optional[_Iterable[_Union[LevelInfo, _Mapping]]] = ..., method: _Optional[str] = ..., integrator: _Optional[str] = ..., dt: _Optional[float] = ..., coefficients: _Optional[_Union[Coefficients, _Mapping]] = ..., coefficient_version: _Optional[int] = ..., triangles: _Optional[_Iterable[int]] = ..., pinned: _Optional[_Iterable[int]] = ..., publish_hz: _Optional[float] = ..., o_max: _Optional[float] = ..., shadow_reference: bool = ..., paused: bool = ..., kind: _Optional[str] = ..., simulation_points: _Optional[_Iterable[int]] = ..., cloud_points: _Optional[int] = ..., rest_positions: _Optional[bytes] = ..., halted: _Optional[str] = ..., colliders: _Optional[_Iterable[_Union[Collider, _Mapping]]] = ...) -> None: ...
+    material_uv: bytes
+    def __init__(self, instance: _Optional[str] = ..., scene: _Optional[str] = ..., description: _Optional[str] = ..., level: _Optional[_Union[Level, _Mapping]] = ..., reference: _Optional[_Union[Level, _Mapping]] = ..., levels: _Optional[_Iterable[_Union[LevelInfo, _Mapping]]] = ..., method: _Optional[str] = ..., integrator: _Optional[str] = ..., dt: _Optional[float] = ..., coefficients: _Optional[_Union[Coefficients, _Mapping]] = ..., coefficient_version: _Optional[int] = ..., triangles: _Optional[_Iterable[int]] = ..., pinned: _Optional[_Iterable[int]] = ..., publish_hz: _Optional[float] = ..., o_max: _Optional[float] = ..., shadow_reference: bool = ..., paused: bool = ..., kind: _Optional[str] = ..., simulation_points: _Optional[_Iterable[int]] = ..., cloud_points: _Optional[int] = ..., rest_positions: _Optional[bytes] = ..., halted: _Optional[str] = ..., colliders: _Optional[_Iterable[_Union[Collider, _Mapping]]] = ..., material_uv: _Optional[bytes] = ...) -> None: ...
 
 class Collider(_message.Message):
     __slots__ = ("shape", "position", "axis", "radius", "half_extents", "friction", "clearance", "triangles")
