@@ -243,7 +243,7 @@ impl Camera {
     }
 
     /// How far world point `p` is in front of the eye (m, along the view).
-    fn depth(&self, p: [f64; 3]) -> f64 {
+    pub(crate) fn depth(&self, p: [f64; 3]) -> f64 {
         (0..3).map(|c| self.mvp[c * 4 + 3] * p[c]).sum::<f64>() + self.mvp[15]
     }
 
