@@ -176,6 +176,11 @@ async fn a_mesh_instance_is_served_touched_and_switched_without_a_jump() {
     assert_eq!(pos.len(), 3 * n);
     let dropped = (0..n).map(|k| rest[n + k] - pos[n + k]).fold(0.0, f64::max);
     assert!(dropped > 0.1, "the free edge fell only {dropped} m");
+    // Foxglove gets the level's triangles over its vertices, as for a grid.
+    let (update, _) = lodcloth::foxglove_bridge::scene_update(&before, &info).expect("a scene update");
+    let drawn = &update.entities[0].triangles[0];
+    assert_eq!((drawn.points.len(), &drawn.indices), (n, &info.triangles));
+    assert_eq!(drawn.colors.len(), n, "a colour per vertex");
 
     // A grab on the free edge's middle, pulled out and up.
     let at = Patch {
