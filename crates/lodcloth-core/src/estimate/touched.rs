@@ -153,7 +153,12 @@ pub fn probes(scene: &Scene, reference: &Reference) -> Result<Vec<Probe>, Touche
     let damping = 2.0 * (stiffness * layout.patch_mass).sqrt();
 
     let mut out = Vec::with_capacity(layout.drags.len());
-    for ((u, v), out_of_plane, across) in layout.drags {
+    for Drag {
+        at: (u, v),
+        out_of_plane,
+        across,
+    } in layout.drags
+    {
         let patch = Patch { u, v, radius };
         let start = patch_position(&reference.topology, &patch, &reference.frames[f0])?;
         let grab = Input::Grab {
@@ -178,10 +183,8 @@ pub fn probes(scene: &Scene, reference: &Reference) -> Result<Vec<Probe>, Touche
 
 /// Where the standard drags take a cloth and how big its hand is.
 struct Layout {
-    /// Each drag: its material point, the unit direction of its first leg
-    /// (out of the rest surface) and of its second (across it, towards the
-    /// middle in u).
-    drags: Vec<((f64, f64), [f64; 3], [f64; 3])>,
+    /// Where each drag takes the cloth and which ways it carries it.
+    drags: Vec<Drag>,
     /// The cloth's size √(area) (m): the legs' and the hand's stretch scale.
     size: f64,
     /// The cloth's mass (kg).
@@ -189,6 +192,15 @@ struct Layout {
     /// The hand's patch radius (m) and the mass under it (kg).
     radius: f64,
     patch_mass: f64,
+}
+
+/// One standard drag: its material point, the unit direction of its first
+/// leg (out of the rest surface) and of its second (across it, towards the
+/// middle in u).
+struct Drag {
+    at: (f64, f64),
+    out_of_plane: [f64; 3],
+    across: [f64; 3],
 }
 
 /// The candidates u, v ∈ {0, ½, 1}, farthest first from the pins and from
@@ -267,7 +279,11 @@ fn grid_layout(
     Ok(Layout {
         drags: taken
             .into_iter()
-            .map(|(u, v)| ((u, v), normal, if u >= 0.5 { e_u.map(|x| -x) } else { e_u }))
+            .map(|(u, v)| Drag {
+                at: (u, v),
+                out_of_plane: normal,
+                across: if u >= 0.5 { e_u.map(|x| -x) } else { e_u },
+            })
             .collect(),
         size: (w * h).sqrt(),
         mass: w * h * scene.areal_density,
@@ -330,7 +346,11 @@ fn mesh_layout(scene: &Scene, mesh: &crate::mesh::TriMesh, sim: &Simulation) -> 
                 let x_u = [0, 1, 2].map(|i| (dv2 * e1[i] - dv1 * e2[i]) / det);
                 unit(tangential(x_u)).map(|x| -x)
             };
-            (c, normal, across)
+            Drag {
+                at: c,
+                out_of_plane: normal,
+                across,
+            }
         })
         .collect();
     let radius = 0.05 * size;
