@@ -46,13 +46,12 @@ fn grab(id: u32, at: Patch, target: [f64; 3], stiffness: f64) -> v1::InputReques
     }
 }
 
-/// The patch's position in a published state (SoA positions).
+/// The patch's position in a published state (SoA positions), on the
+/// state's level of `scene` (a grid or a mesh level).
 pub(crate) fn patch_position(scene: &Scene, s: &v1::State, at: Patch) -> [f64; 3] {
     let level = level_of(s);
-    let Level::Grid { nx, ny } = level else {
-        panic!("a grid level")
-    };
-    let (nodes, weights) = at.weights(&scene.shape(nx, ny));
+    let cloth = scene.cloth_level(level).expect("the state's level");
+    let (nodes, weights) = at.on(&cloth.topology).expect("a grid or a mesh level");
     let pos = unpack_positions(&s.positions).expect("packed positions");
     let g = Grab {
         nodes,

@@ -14,7 +14,7 @@ use lodcloth::level::Level;
 use lodcloth::lod::Correlation;
 use lodcloth::proto::{unpack_positions, v1, WireLevel};
 use lodcloth::scene::Scene;
-use lodcloth::sim::{Grab, Topology};
+use lodcloth::sim::Topology;
 use lodcloth::touch::Patch;
 use prost::Message;
 use std::sync::Arc;
@@ -85,18 +85,10 @@ fn topology(scene: &Scene, level: Level) -> Arc<Topology> {
     scene.cloth_level(level).expect("the level").topology
 }
 
-/// Where patch `at` is in state `s` (SoA positions) of `level`.
+/// Where patch `at` is in state `s`, which must be of `level`.
 fn patch_position(scene: &Scene, level: Level, s: &v1::State, at: Patch) -> [f64; 3] {
-    let (nodes, weights) = at.on(&topology(scene, level)).expect("a mesh level");
-    let pos = unpack_positions(&s.positions).expect("positions");
-    let g = Grab {
-        nodes,
-        weights,
-        target: [0.0; 3],
-        stiffness: 0.0,
-        damping: 0.0,
-    };
-    g.patch(&pos, &vec![0.0; pos.len()]).0
+    assert_eq!(level_of(s), level, "a state of {level}");
+    crate::input::patch_position(scene, s, at)
 }
 
 fn dist(a: [f64; 3], b: [f64; 3]) -> f64 {

@@ -297,7 +297,7 @@ fn state_directories_and_the_http_address_come_from_the_environment_under_a_serv
     );
     assert_eq!(
         text.lines().filter(|l| l.trim_start().starts_with("instance")).count(),
-        5
+        6
     );
 
     // systemd's StateDirectory=: every relative state directory moves under it.

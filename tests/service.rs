@@ -951,3 +951,56 @@ start = 100
         assert!(err.contains(needle), "missing '{needle}' in:\n{err}");
     }
 }
+
+/// A mesh cloth's instance takes vertex counts up to its mesh's own; a
+/// grid level, a larger count, a count below its pinned vertices and a
+/// `reference` are refused by path, naming the file; a grid scene refuses
+/// a vertex count naming itself.
+#[test]
+fn a_mesh_instance_with_grid_settings_or_counts_its_chain_cannot_make_is_refused_by_path() {
+    let scene = scene_path("skirt-swaying.toml");
+    let text = format!(
+        r#"
+[[instances]]
+name = "skirt"
+scene = "{scene}"
+reference = "64x64"
+levels = ["32x32", "915v", "5000v", "10v"]
+start = "915v"
+[[instances]]
+name = "ok"
+scene = "{scene}"
+levels = ["570v", "2288v"]
+start = "570v"
+[[instances]]
+name = "grid"
+scene = "{cloth}"
+levels = ["16x16", "300v"]
+start = "16x16"
+"#,
+        scene = scene.display(),
+        cloth = scene_path("paper-1-top-edge.toml").display(),
+    );
+    let err = ServiceConfig::from_toml(&text, "mesh.toml")
+        .expect_err("rejected")
+        .to_string();
+    for needle in [
+        "instances[0].reference: skirt-swaying is a mesh cloth",
+        "instances[0].levels[0]: 32x32 is not a vertex count",
+        "skirt.obj",
+        "instances[0].levels[2]: 5000v is more than the 2288 vertices",
+        "instances[0].levels[3]: ",
+        "pinned",
+        "instances[2].levels[1]: 300v is a mesh's vertex count; paper-1",
+    ] {
+        assert!(err.contains(needle), "missing '{needle}' in:\n{err}");
+    }
+    assert!(
+        !err.contains("instances[1]"),
+        "a valid mesh instance is accepted:\n{err}"
+    );
+    assert!(
+        !err.contains("instances[0].levels[1]"),
+        "915v is a level of the skirt:\n{err}"
+    );
+}

@@ -777,6 +777,8 @@ fn cloth_instance(r: &RawInstance, at: &str, p: &mut Problems) -> Option<(Instan
         Ok(s) => s,
         Err(err) => {
             p.push(format!("{at}.scene: {err}"));
+            // Whatever the scene is, a grid level must fit the daemon.
+            grid_sides(r, at, p);
             return None;
         }
     };
@@ -791,13 +793,10 @@ fn cloth_instance(r: &RawInstance, at: &str, p: &mut Problems) -> Option<(Instan
 /// A grid scene's levels: grids of MIN_SIDE..=MAX_SIDE nodes per side, no
 /// finer than the reference (the scene's, or `reference`, set on `scene`).
 fn grid_levels(r: &RawInstance, at: &str, p: &mut Problems, scene: &mut Scene) -> Option<()> {
-    let side_ok = |nx: usize, ny: usize| (MIN_SIDE..=MAX_SIDE).contains(&nx) && (MIN_SIDE..=MAX_SIDE).contains(&ny);
+    grid_sides(r, at, p);
     for (j, l) in r.levels.iter().enumerate() {
         match l.grid() {
-            Some((nx, ny)) if side_ok(nx, ny) => {}
-            Some(_) => p.push(format!(
-                "{at}.levels[{j}]: {l} is outside {MIN_SIDE}..={MAX_SIDE} nodes per side"
-            )),
+            Some(_) => {}
             None if matches!(l, Level::Vertices(_)) => p.push(format!(
                 "{at}.levels[{j}]: {l} is a mesh's vertex count; {} is a grid cloth, whose levels are NXxNY",
                 scene.name
@@ -809,7 +808,7 @@ fn grid_levels(r: &RawInstance, at: &str, p: &mut Problems, scene: &mut Scene) -
     }
     if let Some(reference) = r.reference {
         match reference.grid() {
-            Some((nx, ny)) if side_ok(nx, ny) => {
+            Some((nx, ny)) if side_ok(nx) && side_ok(ny) => {
                 scene.set_resolution(nx, ny);
             }
             _ => {
@@ -831,6 +830,24 @@ fn grid_levels(r: &RawInstance, at: &str, p: &mut Problems, scene: &mut Scene) -
         }
     }
     Some(())
+}
+
+/// A grid side the daemon runs: MIN_SIDE..=MAX_SIDE nodes.
+fn side_ok(n: usize) -> bool {
+    (MIN_SIDE..=MAX_SIDE).contains(&n)
+}
+
+/// Every grid level of `r` within MIN_SIDE..=MAX_SIDE nodes per side.
+fn grid_sides(r: &RawInstance, at: &str, p: &mut Problems) {
+    for (j, l) in r.levels.iter().enumerate() {
+        if let Some((nx, ny)) = l.grid() {
+            if !(side_ok(nx) && side_ok(ny)) {
+                p.push(format!(
+                    "{at}.levels[{j}]: {l} is outside {MIN_SIDE}..={MAX_SIDE} nodes per side"
+                ));
+            }
+        }
+    }
 }
 
 /// A mesh scene's levels: vertex counts the mesh's chain can make (at most
