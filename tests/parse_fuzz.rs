@@ -16,7 +16,7 @@
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, OnceLock};
 
-use lodcloth::plan::{InstanceKind, PrepareError, Preparer};
+use lodcloth::plan::{InstanceKind, Level, PrepareError, Preparer};
 use lodcloth::points::{io, PointCloud};
 use lodcloth::scene::{Scene, SceneError};
 use lodcloth::service::config::{ConfigError, ServiceConfig};
@@ -783,8 +783,8 @@ fn check_scene_valid(s: &Scene) -> Result<(), TestCaseError> {
 /// a refusal naming the file and the scene field behind it.
 fn check_scene_builds(s: &Scene) -> Result<(), TestCaseError> {
     let level = match &s.mesh {
-        Some(m) => lodcloth::plan::Level::Vertices(m.reference.vertices().min(200)),
-        None => lodcloth::plan::Level::new(s.nx.min(12), s.ny.min(12)),
+        Some(m) => Level::Vertices(m.reference.vertices().min(200)),
+        None => Level::new(s.nx.min(12), s.ny.min(12)),
     };
     match s.build_level(level) {
         Ok(sim) => {
@@ -902,13 +902,24 @@ fn check_config_valid(c: &ServiceConfig) -> Result<(), TestCaseError> {
         if let InstanceKind::Cloth(scene) = &inst.kind {
             check_scene_valid(scene)?;
             for l in &inst.levels {
-                let (nx, ny) = l.grid().expect("a cloth's levels are grids");
-                prop_assert!(
-                    nx >= 2 && ny >= 2 && nx <= scene.nx && ny <= scene.ny,
-                    "{l} in {}x{}",
-                    scene.nx,
-                    scene.ny
-                );
+                match (&scene.mesh, l) {
+                    // A mesh cloth's levels are vertex counts its chain makes.
+                    (Some(mesh), Level::Vertices(n)) => {
+                        prop_assert!(
+                            *n >= 3 && *n <= mesh.reference.vertices(),
+                            "{l} of a {}-vertex mesh",
+                            mesh.reference.vertices()
+                        );
+                        prop_assert!(scene.cloth_level(*l).is_ok(), "{l} cannot be made");
+                    }
+                    (None, Level::Grid { nx, ny }) => prop_assert!(
+                        *nx >= 2 && *ny >= 2 && *nx <= scene.nx && *ny <= scene.ny,
+                        "{l} in {}x{}",
+                        scene.nx,
+                        scene.ny
+                    ),
+                    _ => return Err(TestCaseError::fail(format!("{l} is not a level of {}", scene.name))),
+                }
             }
         }
     }
