@@ -814,10 +814,19 @@ async fn a_recording_started_mid_episode_gets_the_inputs_before_it_and_replays_e
                 .expect("move"),
         );
     }
-    // The daemon's log of the episode so far.
-    let log = within(5, "episode inputs", c.episode_inputs("late"))
-        .await
-        .expect("the log");
+    // The daemon's log of the episode so far. An input's event is logged
+    // as the input takes effect, which can come after its reply: ask until
+    // the seventh is there (or 5 s have passed).
+    let log = within(5, "episode inputs", async {
+        loop {
+            let log = c.episode_inputs("late").await.expect("the log");
+            if log.events.len() >= 7 {
+                return log;
+            }
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+    })
+    .await;
     assert_eq!((log.episode, log.events.len(), log.complete), (episode, 7, true));
     let recorder = tokio::task::block_in_place(|| {
         start_recorder(&d, "late", &["--seconds", "2.0", "--out", lct.to_str().unwrap()])
