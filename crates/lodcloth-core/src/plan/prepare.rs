@@ -10,7 +10,7 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 
-use super::estimator::{record_reference, stable_problem, Estimator, PlanError};
+use super::estimator::{default_problem, record_reference, stable_problem, Estimator, PlanError};
 use super::{EstimationPlan, InstanceKind, InstancePlan, Level};
 use crate::cache::{CacheEntry, CacheError, CacheKey, CoefficientCache, Provenance};
 use crate::estimate::inverse::{self, Distribution};
@@ -368,30 +368,13 @@ impl Preparer {
         let mass = MassConvention::Lumped;
         let integrator = self.plan.integrator;
         // One build of the level (a mesh level is simplified and correlated
-        // once): at the configured dt, or probed at the reference's frame
-        // interval with its `same` material and given the largest dt ≤ 0.75
-        // of that limit dividing the interval.
-        let interval = reference.dt * reference.spec.metric_stride as f64;
-        let problem = LodProblem::at(
-            scene,
-            reference.clone(),
-            level,
-            mass,
-            integrator,
-            self.plan.dt.unwrap_or(interval),
-        )
-        .map_err(|e| failed(e.into()))?;
+        // once): at the configured dt, or as `default_problem` makes it (the
+        // scene carries the plan's integrator).
         let problem = match self.plan.dt {
-            Some(_) => problem,
-            None => {
-                let limit = problem
-                    .simulation(problem.same_material())
-                    .map_err(|e| failed(e.into()))?
-                    .dt_limit();
-                problem
-                    .with_dt(interval / (interval / (0.75 * limit)).ceil().max(1.0))
-                    .map_err(|e| failed(e.into()))?
+            Some(dt) => {
+                LodProblem::at(scene, reference.clone(), level, mass, integrator, dt).map_err(|e| failed(e.into()))?
             }
+            None => default_problem(scene, &reference, level).map_err(failed)?,
         };
         let dt = problem.dt;
         let frames = problem.frames();
