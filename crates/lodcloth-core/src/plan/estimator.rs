@@ -44,8 +44,9 @@ pub enum PlanError {
 /// readings, the fit's guard against `same`, `same` bit for bit on square
 /// cells; 3: a Broyden-updated Jacobian, withdrawn; 4: BCD among the fit's
 /// starts, its tolerance 1 %; 5: the fit stops on a predicted gain below its
-/// tolerance), so no cache serves an estimate made by other code.
-pub const ESTIMATORS_VERSION: u32 = 5;
+/// tolerance; 6: BCD, GKD and `lsq` hold a mesh level's stretch at the
+/// material's), so no cache serves an estimate made by other code.
+pub const ESTIMATORS_VERSION: u32 = 6;
 
 /// Runs estimators, through the on-disk coefficient cache when there is one.
 #[derive(Debug, Clone, Default)]
@@ -248,8 +249,9 @@ pub fn notes(details: &Details) -> String {
             let considered: u64 = r.considered.iter().sum();
             let rejected: u64 = r.near_rest.iter().sum::<u64>() + r.negative_k.iter().sum::<u64>();
             let fallbacks = e.fallback_k.iter().chain(&e.fallback_c).filter(|&&f| f).count();
+            let held = e.held.iter().filter(|&&h| h).count();
             format!(
-                "rejected K samples {rejected}/{considered} (near rest {}, negative {}); C: no rel. velocity {}, negative {}; fallbacks {fallbacks}",
+                "rejected K samples {rejected}/{considered} (near rest {}, negative {}); C: no rel. velocity {}, negative {}; fallbacks {fallbacks}; classes held at the material {held}",
                 r.near_rest.iter().sum::<u64>(),
                 r.negative_k.iter().sum::<u64>(),
                 r.no_relative_velocity.iter().sum::<u64>(),
@@ -257,10 +259,11 @@ pub fn notes(details: &Details) -> String {
             )
         }
         Details::Lsq(e) => format!(
-            "condition {:.2e}, relative residual {:.3}, clamped {}",
+            "condition {:.2e}, relative residual {:.3}, clamped {}, held at the material {}",
             e.condition,
             e.relative_residual,
-            e.clamped.iter().filter(|&&c| c).count()
+            e.clamped.iter().filter(|&&c| c).count(),
+            e.held.iter().filter(|&&h| h).count()
         ),
         Details::Fit(f) => format!(
             "start {} (train rms {:.3}%), train rms {:.3}% after {} iterations, {} runs, {}{}",
