@@ -36,6 +36,37 @@ fn strains(topo: &Topology, pos: &[f64], class: usize) -> Vec<f64> {
     out
 }
 
+/// The spread of Van Gelder's per-edge stiffness `Σ A_t / L²` (the two
+/// triangles on an interior edge) over the mean: how far one K per class is from a uniform
+/// membrane on these triangles.
+fn edge_quality(name: &str, topo: &Topology) {
+    use std::collections::HashMap;
+    let x = &topo.rest_positions;
+    let mut area: HashMap<(u32, u32), (f64, u32)> = HashMap::new();
+    for t in &topo.triangles {
+        let [a, b, c] = t.map(|i| x[i as usize]);
+        let u = [0, 1, 2].map(|k| b[k] - a[k]);
+        let v = [0, 1, 2].map(|k| c[k] - a[k]);
+        let cr = [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]];
+        let ar = 0.5 * (cr[0] * cr[0] + cr[1] * cr[1] + cr[2] * cr[2]).sqrt();
+        for (p, q) in [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])] {
+            let e = area.entry((p.min(q), p.max(q))).or_default();
+            e.0 += ar;
+            e.1 += 1;
+        }
+    }
+    let w: Vec<f64> = area
+        .iter()
+        .filter(|(_, &(_, triangles))| triangles == 2)
+        .map(|(&(a, b), &(ar, _))| {
+            let (p, q) = (x[a as usize], x[b as usize]);
+            ar / ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2))
+        })
+        .collect();
+    let mean = w.iter().sum::<f64>() / w.len() as f64;
+    summary(&format!("{name} edge weight / mean"), w.iter().map(|v| v / mean - 1.0).collect());
+}
+
 fn summary(name: &str, mut v: Vec<f64>) {
     v.sort_by(f64::total_cmp);
     let q = |p: f64| v[((v.len() - 1) as f64 * p) as usize];
@@ -83,6 +114,9 @@ fn main() {
     .expect("level");
     let same = p.same_material();
     println!("level {level}: same {:?}", same.springs.map(|s| s.k));
+    for (name, topo) in [("reference", &*reference.topology), ("level", &**p.topology())] {
+        edge_quality(name, topo);
+    }
     let mut sim = p.simulation(same).expect("sim");
     let obs = observe(&reference, p.correlation(), &mut sim, &mut no_progress);
     // Strain distributions: reference springs vs coarse springs on mapped positions.
