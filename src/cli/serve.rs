@@ -263,6 +263,20 @@ fn level(l: &Option<v1::Level>) -> String {
     }
 }
 
+/// The spring classes a level's cloth has, named as its model names them:
+/// a grid's five; a mesh's or a surface's springs are stretch (on edges)
+/// and bend (across them) alone (mesh/springs.rs, points/surface.rs), so
+/// their other classes, which keep the prior's values, are not printed.
+fn spring_classes(l: &Option<v1::Level>) -> Vec<(&'static str, lodcloth::sim::SpringClass)> {
+    use lodcloth::sim::SpringClass;
+    match l.as_ref().map(Level::from_wire) {
+        Some(Ok(Level::Vertices(_) | Level::Points(_))) => {
+            vec![("stretch", SpringClass::StructuralU), ("bend", SpringClass::BendU)]
+        }
+        _ => SpringClass::ALL.iter().map(|&c| (c.name(), c)).collect(),
+    }
+}
+
 fn pct(e: Option<f64>) -> String {
     e.map_or("—".into(), |e| format!("{:.2} %", 100.0 * e))
 }
@@ -463,9 +477,9 @@ pub fn switch(c: Connect, args: SwitchArgs) -> Result<()> {
             r.coefficient_version
         );
         let m = lodcloth::proto::material(&k);
-        let kc: Vec<String> = lodcloth::sim::SpringClass::ALL
+        let kc: Vec<String> = spring_classes(&r.level)
             .iter()
-            .map(|&c| format!("{c} {:.4e}/{:.4e}", m.get(c).k, m.get(c).c))
+            .map(|&(name, c)| format!("{name} {:.4e}/{:.4e}", m.get(c).k, m.get(c).c))
             .collect();
         println!("  K/C {}", kc.join("  "));
         let _ = client.session.close().await;

@@ -236,6 +236,17 @@ class LiveDaemon(unittest.TestCase):
             check=True,
         )
         self.assertIn("hanging", r.stdout)
+        # A mesh level publishes its vertices (not nx * ny = 0 points).
+        info = self.client.info("skirt")
+        r = subprocess.run(
+            [sys.executable, "-m", "lodcloth_client", "--connect", ENDPOINT, "info", "skirt"],
+            capture_output=True,
+            text=True,
+            timeout=60,
+            check=True,
+        )
+        published = len(lc.unpack_vec3(info.rest_positions))
+        self.assertIn(f"({published} published points", r.stdout)
 
 
 if __name__ == "__main__":

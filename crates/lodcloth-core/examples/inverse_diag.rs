@@ -47,7 +47,11 @@ fn edge_quality(name: &str, topo: &Topology) {
         let [a, b, c] = t.map(|i| x[i as usize]);
         let u = [0, 1, 2].map(|k| b[k] - a[k]);
         let v = [0, 1, 2].map(|k| c[k] - a[k]);
-        let cr = [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]];
+        let cr = [
+            u[1] * v[2] - u[2] * v[1],
+            u[2] * v[0] - u[0] * v[2],
+            u[0] * v[1] - u[1] * v[0],
+        ];
         let ar = 0.5 * (cr[0] * cr[0] + cr[1] * cr[1] + cr[2] * cr[2]).sqrt();
         for (p, q) in [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])] {
             let e = area.entry((p.min(q), p.max(q))).or_default();
@@ -64,7 +68,10 @@ fn edge_quality(name: &str, topo: &Topology) {
         })
         .collect();
     let mean = w.iter().sum::<f64>() / w.len() as f64;
-    summary(&format!("{name} edge weight / mean"), w.iter().map(|v| v / mean - 1.0).collect());
+    summary(
+        &format!("{name} edge weight / mean"),
+        w.iter().map(|v| v / mean - 1.0).collect(),
+    );
 }
 
 fn summary(name: &str, mut v: Vec<f64>) {
@@ -103,7 +110,9 @@ fn main() {
         ..RecordSpec::PAPER
     };
     let reference = Arc::new(Reference::record(scene.build().expect("builds"), spec, &mut |_, _| {}).expect("records"));
-    let p = LodProblem::at(
+    // At the scene's dt when the level is stable there, else as the daemon
+    // runs it (the largest stable dt dividing the frame interval).
+    let at_scene_dt = LodProblem::at(
         &scene,
         reference.clone(),
         level,
@@ -112,6 +121,17 @@ fn main() {
         scene.params.dt,
     )
     .expect("level");
+    let stable = at_scene_dt
+        .simulation(at_scene_dt.same_material())
+        .expect("sim")
+        .dt_limit()
+        >= scene.params.dt;
+    let p = if stable {
+        at_scene_dt
+    } else {
+        lodcloth_core::plan::default_problem(&scene, &reference, level).expect("level")
+    };
+    println!("level {level} at dt {:.3e} s", p.dt);
     let same = p.same_material();
     println!("level {level}: same {:?}", same.springs.map(|s| s.k));
     for (name, topo) in [("reference", &*reference.topology), ("level", &**p.topology())] {
@@ -183,4 +203,14 @@ fn main() {
     }
     let err = p.score(same, 0..p.frames(), &mut no_progress).map(|e| e.mean * 100.0);
     println!("same error {err:?} %");
+    // `same` with its bend stiffness scaled: how much of what the
+    // estimators gain is the level's bending alone.
+    for f in [0.5, 0.25, 0.125, 1.0 / 16.0, 1.0 / 64.0] {
+        let mut m = same;
+        for t in [3, 4] {
+            m.springs[t].k *= f;
+        }
+        let err = p.score(m, 0..p.frames(), &mut no_progress).map(|e| e.mean * 100.0);
+        println!("same, bend K x {f}: error {err:?} %");
+    }
 }

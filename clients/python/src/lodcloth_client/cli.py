@@ -24,7 +24,7 @@ from typing import List, Optional
 
 from . import __version__, v1
 from .client import Client
-from .codec import ACTIONS, level_str, parse_level, percent, positions, v_coefficients
+from .codec import ACTIONS, level_str, parse_level, percent, positions, unpack_vec3, v_coefficients
 from .errors import LodclothError
 from .options import ConnectOptions, split_endpoints
 
@@ -221,6 +221,11 @@ def cmd_switch(args, client: Client) -> None:
         f"{time.monotonic() - started:.1f} s here), "
         f"coefficient version {r.coefficient_version}, frame {r.frame}"
     )
+    if r.level.vertices or r.level.points:
+        # A mesh's or a surface's springs are stretch and bend alone; the
+        # other classes keep the prior's values and are not printed.
+        print(f"  K/C stretch {c.structural_k:.4e}/{c.structural_c:.4e}  bend {c.bend_k:.4e}/{c.bend_c:.4e}")
+        return
     (svk, svc), (bvk, bvc) = v_coefficients(c)
     print(
         f"  K/C structural u {c.structural_k:.4e}/{c.structural_c:.4e} v {svk:.4e}/{svc:.4e}  "
@@ -231,7 +236,14 @@ def cmd_switch(args, client: Client) -> None:
 
 def cmd_info(args, client: Client) -> None:
     i = client.info(args.instance, args.timeout)
-    nodes = i.cloud_points if i.kind == "surface" else i.level.nx * i.level.ny
+    if i.kind == "surface":
+        nodes = i.cloud_points
+    elif i.level.vertices:
+        # A mesh level: the simplifier lands near the asked count; its
+        # vertices are what states carry.
+        nodes = len(unpack_vec3(i.rest_positions))
+    else:
+        nodes = i.level.nx * i.level.ny
     print(f"{i.instance}: {i.kind or 'cloth'} scene {i.scene}  {i.description}".rstrip())
     print(
         f"  level {level_str(i.level)} ({nodes} published points, {len(i.triangles) // 3} triangles, "
