@@ -136,6 +136,30 @@ fn main() {
     println!("level {level}: same {:?}", same.springs.map(|s| s.k));
     for (name, topo) in [("reference", &*reference.topology), ("level", &**p.topology())] {
         edge_quality(name, topo);
+        let areas = &topo.node_areas;
+        let mean = areas.iter().sum::<f64>() / areas.len() as f64;
+        let mut order: Vec<usize> = (0..areas.len()).collect();
+        order.sort_by(|&a, &b| areas[a].total_cmp(&areas[b]));
+        let shortest = |k: usize| {
+            topo.groups
+                .iter()
+                .filter(|g| g.kind() == lodcloth_core::sim::SpringKind::Structural)
+                .flat_map(|g| {
+                    (0..g.len())
+                        .filter(move |&s| g.a[s] as usize == k || g.b[s] as usize == k)
+                        .map(move |s| g.rest[s])
+                })
+                .fold(f64::INFINITY, f64::min)
+        };
+        for &k in order.iter().take(4) {
+            println!(
+                "  {name}: vertex {k} area {:.3e} ({:.4} of mean), shortest edge {:.2} mm, at {:?}",
+                areas[k],
+                areas[k] / mean,
+                1e3 * shortest(k),
+                topo.rest_positions[k].map(|x| (x * 1e3).round() / 1e3)
+            );
+        }
     }
     let mut sim = p.simulation(same).expect("sim");
     let obs = observe(&reference, p.correlation(), &mut sim, &mut no_progress);

@@ -633,3 +633,49 @@ fn the_inverse_fits_keep_a_folding_mesh_levels_stretch_at_the_material() {
         );
     }
 }
+
+/// A coarser level of a disc is no harder to step than the disc itself:
+/// its lightest vertex is not far below the mean and its stable step is at
+/// least the reference's. meshoptimizer left rim ears (a border vertex
+/// whose only triangle is as thin as the arc's sagitta) at 0.4 % of the
+/// mean vertex area, and the Cusick specimen's 504-vertex level could only
+/// step at 1/20 of the reference's dt; the chain now drops them
+/// (mesh/simplify.rs, "Rim slivers").
+#[test]
+fn a_simplified_disc_steps_at_least_as_far_as_its_reference() {
+    use lodcloth::level::Level;
+    use lodcloth::scene::Scene;
+    let dir = tempfile::tempdir().expect("temp dir");
+    let disc = generate::disc(0.15, 0.0, 0.0075);
+    std::fs::write(dir.path().join("disc.obj"), generate::to_obj(&disc, "disc")).expect("mesh");
+    let path = dir.path().join("scene.toml");
+    std::fs::write(
+        &path,
+        "name = \"disc\"\n[cloth]\nmesh = \"disc.obj\"\nareal_density = 0.2\n\
+         [material]\nstiffness = { stretch_u = 492.0, stretch_v = 492.0, shear = 60.0, bend_u = 32.0, bend_v = 32.0 }\n\
+         damping_time = 1e-4\n[simulation]\nintegrator = \"rk4\"\ndt = 1e-4\nduration = 0.1\n",
+    )
+    .expect("scene");
+    let scene = Scene::load(&path).expect("a valid mesh scene");
+    let all = scene.reference_level().nodes();
+    let reference_limit = scene.build().expect("builds").dt_limit();
+    for level in [all * 3 / 5, all * 2 / 5, all / 4, all * 3 / 20].map(Level::Vertices) {
+        let sim = scene
+            .build_level(level)
+            .unwrap_or_else(|e| panic!("{level} cannot step at the reference's dt: {e}"));
+        let areas = &sim.topology().node_areas;
+        let mean = areas.iter().sum::<f64>() / areas.len() as f64;
+        let lightest = areas.iter().copied().fold(f64::INFINITY, f64::min);
+        assert!(
+            lightest > 0.05 * mean,
+            "{level}: lightest vertex {:.4} of the mean",
+            lightest / mean
+        );
+        assert!(
+            sim.dt_limit() >= reference_limit,
+            "{level}: stable dt {:.3e} s against the reference's {:.3e} s",
+            sim.dt_limit(),
+            reference_limit
+        );
+    }
+}
