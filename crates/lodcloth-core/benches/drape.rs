@@ -12,7 +12,7 @@
 //! Prints a table (the coefficient at 1 s, 2 s and the end, and its largest
 //! difference from the reference's at those times) and writes it as CSV,
 //! one row per level, method and time.
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use lodcloth_core::drape::{drape_coefficient, shadow_area};
 use lodcloth_core::estimate::{no_progress, FitOptions, Method, RecordSpec};
@@ -62,9 +62,10 @@ fn over_time(mut sim: Simulation, times: &[f64], cloth: f64, support: f64) -> Ve
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     let root = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../.."));
-    let file =
-        arg(&args, "--scene").map_or_else(|| root.join("config/scenes/tablecloth-over-table.toml"), PathBuf::from);
-    let out = arg(&args, "--out").map_or_else(|| root.join("out/drape"), PathBuf::from);
+    // `cargo bench` runs in this crate's directory: relative paths are the
+    // repository's, as the docs write them.
+    let file = root.join(arg(&args, "--scene").unwrap_or("config/scenes/tablecloth-over-table.toml"));
+    let out = root.join(arg(&args, "--out").unwrap_or("out/drape"));
     let scene = Scene::load(&file).expect("scene");
     let mesh_vertices = scene.mesh.as_ref().map(|m| m.reference.vertices());
     let levels: Vec<Level> = arg(&args, "--levels")
