@@ -29,7 +29,7 @@ mod springs;
 pub use io::load;
 pub use locate::{locate, SurfaceIndex};
 pub use patch::{material_point, patch_weights};
-pub use simplify::{simplify, Simplified, VERTEX_TOLERANCE};
+pub use simplify::{simplify, Simplified, CHAIN_VERSION, VERTEX_TOLERANCE};
 pub use springs::{mesh_material, mesh_topology};
 
 /// A triangle mesh as a cloth: one vertex per material point (vertices that

@@ -56,6 +56,13 @@ pub struct Simplified {
     pub error: f64,
 }
 
+/// How levels are made, in every mesh scene's source hash: raise it with
+/// any change that makes another level from the same mesh and count, so no
+/// cached estimate or instance snapshot of the old level is taken for the
+/// new one (1: meshoptimizer regularised, border priority, pins locked;
+/// 2: rim slivers dropped).
+pub const CHAIN_VERSION: u32 = 2;
+
 /// An ear (module docs) whose triangle is under this share of the level's
 /// mean triangle area is a sliver and is removed.
 pub const SLIVER: f64 = 0.1;

@@ -99,7 +99,8 @@ pub struct Scene {
     /// (`Enforce`, the default) or accepts it (`Force`, set by
     /// `simulation.force_unstable = true`).
     pub stability: StabilityCheck,
-    /// FNV-1a 64 of the scene's TOML text (0 when built from parsed values):
+    /// FNV-1a 64 of the scene's TOML text (0 when built from parsed values),
+    /// and for a mesh cloth its file and [`crate::mesh::CHAIN_VERSION`]:
     /// caches of derived results (estimated coefficients) key on it, so an
     /// edited scene never reuses them.
     pub source_hash: u64,
@@ -153,9 +154,16 @@ impl Scene {
         let mut scene = Scene::validate(raw, origin)?;
         scene.source_hash = crate::hash::fnv1a64(text.as_bytes());
         if let Some(mesh) = &scene.mesh {
-            // An edited mesh file is another scene for every cache.
-            scene.source_hash =
-                crate::hash::fnv1a64(&[scene.source_hash.to_le_bytes(), mesh.hash.to_le_bytes()].concat());
+            // An edited mesh file, or levels made another way, is another
+            // scene for every cache and snapshot.
+            scene.source_hash = crate::hash::fnv1a64(
+                &[
+                    &scene.source_hash.to_le_bytes()[..],
+                    &mesh.hash.to_le_bytes(),
+                    &crate::mesh::CHAIN_VERSION.to_le_bytes(),
+                ]
+                .concat(),
+            );
         }
         Ok(scene)
     }
