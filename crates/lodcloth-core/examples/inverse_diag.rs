@@ -44,15 +44,7 @@ fn edge_quality(name: &str, topo: &Topology) {
     let x = &topo.rest_positions;
     let mut area: HashMap<(u32, u32), (f64, u32)> = HashMap::new();
     for t in &topo.triangles {
-        let [a, b, c] = t.map(|i| x[i as usize]);
-        let u = [0, 1, 2].map(|k| b[k] - a[k]);
-        let v = [0, 1, 2].map(|k| c[k] - a[k]);
-        let cr = [
-            u[1] * v[2] - u[2] * v[1],
-            u[2] * v[0] - u[0] * v[2],
-            u[0] * v[1] - u[1] * v[0],
-        ];
-        let ar = 0.5 * (cr[0] * cr[0] + cr[1] * cr[1] + cr[2] * cr[2]).sqrt();
+        let ar = lodcloth_core::mesh::triangle_area(x, *t);
         for (p, q) in [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])] {
             let e = area.entry((p.min(q), p.max(q))).or_default();
             e.0 += ar;

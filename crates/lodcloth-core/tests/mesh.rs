@@ -554,6 +554,16 @@ fn a_mesh_scene_that_mixes_in_grid_fields_or_names_what_the_mesh_lacks_is_refuse
     );
 }
 
+/// `mesh` written as `mesh.obj` beside a scene of `text`, loaded.
+fn scene_of(mesh: &TriMesh, text: &str) -> (tempfile::TempDir, lodcloth::scene::Scene) {
+    let dir = tempfile::tempdir().expect("temp dir");
+    std::fs::write(dir.path().join("mesh.obj"), generate::to_obj(mesh, "mesh")).expect("mesh");
+    let path = dir.path().join("scene.toml");
+    std::fs::write(&path, text).expect("scene");
+    let scene = lodcloth::scene::Scene::load(&path).expect("a valid mesh scene");
+    (dir, scene)
+}
+
 /// The inverse fits on a mesh level whose reference folds finer than the
 /// level resolves (a floppy sheet, bend modulus 1 N/m, falling from
 /// horizontal about its pinned top edge): BCD, GKD and `lsq` keep the
@@ -567,21 +577,15 @@ fn a_mesh_scene_that_mixes_in_grid_fields_or_names_what_the_mesh_lacks_is_refuse
 fn the_inverse_fits_keep_a_folding_mesh_levels_stretch_at_the_material() {
     use lodcloth::estimate::{no_progress, Details, FitOptions, LodProblem, Method, RecordSpec, Reference};
     use lodcloth::level::Level;
-    use lodcloth::scene::{MassConvention, Scene};
+    use lodcloth::scene::MassConvention;
     use lodcloth::sim::SpringClass;
-    let dir = tempfile::tempdir().expect("temp dir");
-    let sheet = generate::sheet(0.6, 0.4, 0.03);
-    std::fs::write(dir.path().join("sheet.obj"), generate::to_obj(&sheet, "sheet")).expect("mesh");
-    let path = dir.path().join("scene.toml");
-    std::fs::write(
-        &path,
-        "name = \"floppy\"\n[cloth]\nmesh = \"sheet.obj\"\nareal_density = 0.2\n\
+    let (_dir, scene) = scene_of(
+        &generate::sheet(0.6, 0.4, 0.03),
+        "name = \"floppy\"\n[cloth]\nmesh = \"mesh.obj\"\nareal_density = 0.2\n\
          [material]\nstiffness = { stretch_u = 300.0, stretch_v = 300.0, shear = 40.0, bend_u = 1.0, bend_v = 1.0 }\n\
          damping_time = 1e-4\n[simulation]\nintegrator = \"symplectic_euler\"\ndt = 2e-4\nduration = 1.0\ndrag = 0.5\n\
          [[pins]]\nnodes = { edge = \"top\" }\n",
-    )
-    .expect("scene");
-    let scene = Scene::load(&path).expect("a valid mesh scene");
+    );
     let all = scene.reference_level().nodes();
     let spec = RecordSpec {
         frames: scene.steps(),
@@ -644,19 +648,12 @@ fn the_inverse_fits_keep_a_folding_mesh_levels_stretch_at_the_material() {
 #[test]
 fn a_simplified_disc_steps_at_least_as_far_as_its_reference() {
     use lodcloth::level::Level;
-    use lodcloth::scene::Scene;
-    let dir = tempfile::tempdir().expect("temp dir");
-    let disc = generate::disc(0.15, 0.0, 0.0075);
-    std::fs::write(dir.path().join("disc.obj"), generate::to_obj(&disc, "disc")).expect("mesh");
-    let path = dir.path().join("scene.toml");
-    std::fs::write(
-        &path,
-        "name = \"disc\"\n[cloth]\nmesh = \"disc.obj\"\nareal_density = 0.2\n\
+    let (_dir, scene) = scene_of(
+        &generate::disc(0.15, 0.0, 0.0075),
+        "name = \"disc\"\n[cloth]\nmesh = \"mesh.obj\"\nareal_density = 0.2\n\
          [material]\nstiffness = { stretch_u = 492.0, stretch_v = 492.0, shear = 60.0, bend_u = 32.0, bend_v = 32.0 }\n\
          damping_time = 1e-4\n[simulation]\nintegrator = \"rk4\"\ndt = 1e-4\nduration = 0.1\n",
-    )
-    .expect("scene");
-    let scene = Scene::load(&path).expect("a valid mesh scene");
+    );
     let all = scene.reference_level().nodes();
     let reference_limit = scene.build().expect("builds").dt_limit();
     for level in [all * 3 / 5, all * 2 / 5, all / 4, all * 3 / 20].map(Level::Vertices) {

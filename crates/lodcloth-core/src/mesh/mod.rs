@@ -270,7 +270,7 @@ fn edge_key(a: u32, b: u32) -> (u32, u32) {
 }
 
 /// Area of triangle `t` (m²).
-pub(crate) fn triangle_area(positions: &[[f64; 3]], t: [u32; 3]) -> f64 {
+pub fn triangle_area(positions: &[[f64; 3]], t: [u32; 3]) -> f64 {
     use crate::sim::vec3::{cross, norm, sub};
     let [a, b, c] = t.map(|i| positions[i as usize]);
     0.5 * norm(cross(sub(b, a), sub(c, a)))

@@ -162,17 +162,7 @@ pub fn simplify(mesh: &TriMesh, vertices: usize, locked: &[bool], origin: &str) 
 /// the mean triangle area of `indices` (a triangle list into `positions`),
 /// until none is left. Returns how many were dropped.
 fn remove_slivers(indices: &mut Vec<u32>, positions: &[[f64; 3]], locked: &[bool]) -> usize {
-    let area = |t: &[u32]| {
-        let [a, b, c] = [t[0], t[1], t[2]].map(|i| positions[i as usize]);
-        let u = [0, 1, 2].map(|k| b[k] - a[k]);
-        let v = [0, 1, 2].map(|k| c[k] - a[k]);
-        let n = [
-            u[1] * v[2] - u[2] * v[1],
-            u[2] * v[0] - u[0] * v[2],
-            u[0] * v[1] - u[1] * v[0],
-        ];
-        0.5 * (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt()
-    };
+    let area = |t: &[u32]| super::triangle_area(positions, [t[0], t[1], t[2]]);
     let mut dropped = 0;
     loop {
         let triangles = indices.len() / 3;
