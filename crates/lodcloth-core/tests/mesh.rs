@@ -619,7 +619,23 @@ fn the_inverse_fits_keep_a_folding_mesh_levels_stretch_at_the_material() {
         }
         match &est.details {
             Details::Inverse(e) => {
-                assert!(e.held[SpringClass::StructuralU.index()] && !e.held[SpringClass::BendU.index()])
+                assert!(e.held[SpringClass::StructuralU.index()] && !e.held[SpringClass::BendU.index()]);
+                // Only the bend class is sampled: the stretch is held, and
+                // a mesh has no shear or v springs (nor fallbacks for them).
+                let r = &e.rejections;
+                assert!(r.considered[SpringClass::BendU.index()] > 0, "{r:?}");
+                for class in [
+                    SpringClass::StructuralU,
+                    SpringClass::StructuralV,
+                    SpringClass::Shear,
+                    SpringClass::BendV,
+                ] {
+                    assert_eq!(r.considered[class.index()], 0, "{class:?}: {r:?}");
+                    assert!(
+                        !e.fallback_k[class.index()] && !e.fallback_c[class.index()],
+                        "{class:?}"
+                    );
+                }
             }
             Details::Lsq(e) => assert!(e.held[SpringClass::StructuralU.index()] && !e.held[SpringClass::BendU.index()]),
             other => panic!("{other:?}"),

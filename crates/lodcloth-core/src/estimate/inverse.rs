@@ -484,7 +484,8 @@ pub struct InverseEstimate {
     /// Samples rejected, by reason and spring class.
     pub rejections: Rejections,
     /// Classes that had no accepted K (or C) sample and kept the prior's
-    /// value (the level's `same`).
+    /// value (the level's `same`); a class the level has no spring of is
+    /// neither sampled nor a fallback.
     pub fallback_k: [bool; T],
     /// See `fallback_k`.
     pub fallback_c: [bool; T],
@@ -564,6 +565,10 @@ pub fn inverse_estimate(
             .collect(),
     };
     let held = stretch_held(coarse);
+    // Classes the level has no spring of (a mesh's shear and v classes)
+    // carry nothing to estimate: neither samples nor fallbacks.
+    let present: [bool; T] = std::array::from_fn(|t| coarse.groups.iter().any(|g| g.class.index() == t && g.len() > 0));
+    let estimated: [bool; T] = std::array::from_fn(|t| present[t] && !held[t]);
     let mut fine = Bases::new(nf);
     let mut bases = Bases::new(n);
     let mut mags: [Vec<f64>; T] = std::array::from_fn(|_| vec![0.0; nf]);
@@ -652,7 +657,7 @@ pub fn inverse_estimate(
                 let fs = [0, 1, 2].map(|c| obs.spring_force[c * n + k]);
                 shares.map(|r| fs.map(|x| r * x))
             };
-            for t in (0..T).filter(|&t| !held[t]) {
+            for t in (0..T).filter(|&t| estimated[t]) {
                 rej.considered[t] += 1;
                 let ft = forces[t];
                 let g = [0, 1, 2].map(|c| bases.elastic[t][c * n + k]);
@@ -701,7 +706,7 @@ pub fn inverse_estimate(
     }
     if reading.least_squares() {
         // One ratio per class: accepted as one sample each when positive.
-        for t in (0..T).filter(|&t| !held[t]) {
+        for t in (0..T).filter(|&t| estimated[t]) {
             let e = sums[t];
             let kt = e.fg / e.gg;
             if !(e.gg > 0.0 && kt > 0.0 && kt.is_finite()) {
@@ -722,7 +727,7 @@ pub fn inverse_estimate(
     let mut material = *prior;
     let mut fallback_k = [false; T];
     let mut fallback_c = [false; T];
-    for t in (0..T).filter(|&t| !held[t]) {
+    for t in (0..T).filter(|&t| estimated[t]) {
         if rej.accepted_k[t] > 0 {
             material.springs[t].k = sum_k[t] / rej.accepted_k[t] as f64;
         } else {
