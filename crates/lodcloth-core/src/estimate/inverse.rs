@@ -567,7 +567,8 @@ pub fn inverse_estimate(
     let held = stretch_held(coarse);
     // Classes the level has no spring of (a mesh's shear and v classes)
     // carry nothing to estimate: neither samples nor fallbacks.
-    let present: [bool; T] = std::array::from_fn(|t| coarse.groups.iter().any(|g| g.class.index() == t && g.len() > 0));
+    let present: [bool; T] =
+        std::array::from_fn(|t| coarse.groups.iter().any(|g| g.class.index() == t && !g.is_empty()));
     let estimated: [bool; T] = std::array::from_fn(|t| present[t] && !held[t]);
     let mut fine = Bases::new(nf);
     let mut bases = Bases::new(n);
