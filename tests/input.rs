@@ -321,18 +321,36 @@ async fn bad_inputs_are_refused_naming_the_field_and_a_flood_is_cut_to_the_rate(
     let results = futures_util::future::join_all((0..1000).map(|_| c.input("poke", &release_all))).await;
     let wall = started.elapsed().as_secs_f64();
     let ok = results.iter().filter(|r| r.is_ok()).count();
-    let busy = results
-        .iter()
-        .filter(|r| matches!(r, Err(ClientError::Refused { code, .. }) if code == "CODE_BUSY"))
-        .count();
-    eprintln!("flood: {ok} applied, {busy} refused BUSY of 1000 in {wall:.3} s");
-    assert_eq!(ok + busy, 1000, "every input is answered, applied or BUSY");
-    assert!(busy > 0, "1000 inputs at once passed a burst of 200");
-    let allowed = 200.0 + 2000.0 * wall;
-    assert!(
-        ok >= 200 && (ok as f64) <= allowed + 1.0,
-        "{ok} applied; the limit allows {allowed}"
+    let busy = |why: &str| {
+        results
+            .iter()
+            .filter(|r| matches!(r, Err(ClientError::Refused { code, message }) if code == "CODE_BUSY" && message.contains(why)))
+            .count()
+    };
+    // Two limits answer BUSY: the instance's input rate, and the daemon's
+    // requests in flight (an input is in flight until the engine answers
+    // it, so on a loaded machine the 65th can be refused before the
+    // bucket's 200 are spent).
+    let (rate_busy, flight_busy) = (busy("inputs/s"), busy("requests; retry shortly"));
+    eprintln!(
+        "flood: {ok} applied, {rate_busy} refused BUSY by the rate, {flight_busy} by the requests in flight, of 1000 in {wall:.3} s"
     );
+    assert_eq!(
+        ok + rate_busy + flight_busy,
+        1000,
+        "every input is answered, applied or BUSY"
+    );
+    assert!(rate_busy + flight_busy > 0, "1000 inputs at once passed a burst of 200");
+    let allowed = 200.0 + 2000.0 * wall;
+    assert!((ok as f64) <= allowed + 1.0, "{ok} applied; the limit allows {allowed}");
+    // The first requests in flight are never refused; without that limit
+    // engaging, the whole burst passes.
+    let least = if flight_busy == 0 {
+        200
+    } else {
+        lodcloth::service::MAX_REQUESTS_IN_FLIGHT
+    };
+    assert!(ok >= least, "{ok} applied, fewer than {least}");
     // Stepping went on in real time through it all.
     let m = metrics(&c, "poke").await;
     assert!(
