@@ -11,10 +11,18 @@
 //!
 //! Prints a table (the coefficient at 1 s, 2 s and the end, and its largest
 //! difference from the reference's at those times) and writes it as CSV,
-//! one row per level, method and time.
+//! one row per level, method and time (`drape.csv`).
+//!
+//! A second table (`shape.csv`) splits each level's eq. 9 error into what
+//! the material decides and what the folds do: eq. 9 over the run and over
+//! its last quarter; the difference of the drape's axisymmetric sag (mean
+//! height by ring of rest distance from the support's axis, 10 rings, the
+//! largest difference of a ring, % of O_max) at the end; and the folds
+//! counted on the rim's outline at the end (`lodcloth_core::drape`).
+//! `drape.svg` draws each drape at the end from above, as a tester sees it.
 use std::path::Path;
 
-use lodcloth_core::drape::{drape_coefficient, shadow_area};
+use lodcloth_core::drape::{drape_coefficient, fold_count, ring_profile, shadow_area};
 use lodcloth_core::estimate::{no_progress, FitOptions, Method, RecordSpec};
 use lodcloth_core::level::{GridLevel, Level};
 use lodcloth_core::plan::{default_problem, record_reference};
@@ -44,10 +52,18 @@ fn support_area(shape: &Shape) -> f64 {
     }
 }
 
-/// The coefficient of `sim` stepped from rest, at each of `times` (s).
-fn over_time(mut sim: Simulation, times: &[f64], cloth: f64, support: f64) -> Vec<f64> {
+const RINGS: usize = 10;
+
+/// The radius of the circle of the support's area seen from above (m).
+fn support_radius(shape: &Shape) -> f64 {
+    (support_area(shape) / std::f64::consts::PI).sqrt()
+}
+
+/// The coefficient of `sim` stepped from rest, at each of `times` (s), and
+/// the drape at the last of them: its sag by ring and its folds.
+fn over_time(mut sim: Simulation, times: &[f64], cloth: f64, support: f64, axis: [f64; 2]) -> (Vec<f64>, Drape) {
     let dt = sim.params().dt;
-    times
+    let dc: Vec<f64> = times
         .iter()
         .map(|&t| {
             while sim.state().time < t - 0.5 * dt {
@@ -56,7 +72,88 @@ fn over_time(mut sim: Simulation, times: &[f64], cloth: f64, support: f64) -> Ve
             let pos = &sim.state().pos;
             drape_coefficient(shadow_area(&sim.topology().triangles, pos, PIXEL), cloth, support)
         })
-        .collect()
+        .collect();
+    let (rest, pos) = (&sim.topology().rest_positions, &sim.state().pos);
+    let n = sim.topology().n_nodes;
+    let drape = Drape {
+        profile: ring_profile(rest, pos, axis, RINGS),
+        folds: fold_count(rest, pos, axis),
+        top: sim
+            .topology()
+            .triangles
+            .iter()
+            .map(|t| t.map(|k| [pos[k as usize] - axis[0], pos[2 * n + k as usize] - axis[1]]))
+            .collect(),
+        dc: *dc.last().expect("a time"),
+    };
+    (dc, drape)
+}
+
+/// A drape's shape at the end of a run.
+struct Drape {
+    /// Mean height by ring of rest distance (m).
+    profile: Vec<f64>,
+    /// Folds on the rim's outline.
+    folds: usize,
+    /// Its triangles seen from above, about the axis (x, z in m).
+    top: Vec<[[f64; 2]; 3]>,
+    /// Its drape coefficient.
+    dc: f64,
+}
+
+/// Each drape from above, one panel per run, at one scale: the cloth's
+/// triangles translucent (folded layers darker) over the support's outline.
+fn drape_svg(panels: &[(String, &Drape)], reach: f64, support_radius: f64) -> String {
+    const SIDE: f64 = 220.0;
+    const COLUMNS: usize = 3;
+    let rows = panels.len().div_ceil(COLUMNS);
+    let scale = 0.45 * SIDE / reach;
+    let mut svg = format!(
+        "<svg xmlns='http://www.w3.org/2000/svg' width='{}' height='{}' font-family='sans-serif' font-size='12'>\n\
+         <rect width='100%' height='100%' fill='white'/>\n",
+        SIDE * COLUMNS as f64,
+        (SIDE + 20.0) * rows as f64
+    );
+    for (i, (title, drape)) in panels.iter().enumerate() {
+        let (x0, y0) = (
+            SIDE * ((i % COLUMNS) as f64 + 0.5),
+            (SIDE + 20.0) * (i / COLUMNS) as f64 + 20.0 + SIDE / 2.0,
+        );
+        svg.push_str(&format!(
+            "<text x='{x0}' y='{}' text-anchor='middle'>{title}: {} folds, DC {:.3}</text>\n<g fill='#2f6db5' fill-opacity='0.25'>\n",
+            y0 - SIDE / 2.0 - 4.0,
+            drape.folds,
+            drape.dc
+        ));
+        for t in &drape.top {
+            let p: Vec<String> = t
+                .iter()
+                .map(|q| format!("{:.1},{:.1}", x0 + scale * q[0], y0 + scale * q[1]))
+                .collect();
+            svg.push_str(&format!("<polygon points='{}'/>\n", p.join(" ")));
+        }
+        svg.push_str(&format!(
+            "</g>\n<circle cx='{x0}' cy='{y0}' r='{:.1}' fill='none' stroke='#c0392b' stroke-width='1'/>\n\
+             <circle cx='{x0}' cy='{y0}' r='{:.1}' fill='none' stroke='#999' stroke-dasharray='3 3'/>\n",
+            scale * support_radius,
+            scale * reach
+        ));
+    }
+    svg.push_str("</svg>\n");
+    svg
+}
+
+impl Drape {
+    /// The largest difference of a ring's mean height from `other`'s (m),
+    /// over the rings both have nodes in.
+    fn sag_difference(&self, other: &Drape) -> f64 {
+        self.profile
+            .iter()
+            .zip(&other.profile)
+            .map(|(a, b)| (a - b).abs())
+            .filter(|d| d.is_finite())
+            .fold(0.0, f64::max)
+    }
 }
 
 fn main() {
@@ -107,7 +204,19 @@ fn main() {
         scene.duration
     );
     let (reference, _) = record_reference(&scene, spec, &mut |line| eprintln!("{line}")).expect("reference");
-    let reference_dc = over_time(scene.build().expect("builds"), &times, cloth, support);
+    let axis = {
+        let (centre, _) = body.at(scene.duration);
+        [centre[0], centre[2]]
+    };
+    let (reference_dc, reference_drape) = over_time(scene.build().expect("builds"), &times, cloth, support, axis);
+    let mut shape_csv =
+        String::from("level,method,eq9_mean_pct,eq9_last_quarter_pct,sag_largest_ring_pct,folds,reference_folds\n");
+    let mut drapes: Vec<(String, Drape)> = Vec::new();
+    let mut shape_rows = vec![format!(
+        "| {} | reference | — | — | — | {} |",
+        scene.reference_level(),
+        reference_drape.folds
+    )];
     let mut csv = String::from("level,method,time_s,drape_coefficient,reference,difference\n");
     println!(
         "scene {} (reference {}), support {:.4} m², cloth {:.4} m², shadow pixels {PIXEL} m",
@@ -145,10 +254,53 @@ fn main() {
                 .estimate(method, &FitOptions::default(), &mut no_progress)
                 .expect("estimates");
             let sim = problem.simulation(est.material).expect("builds");
-            row(&label, method.name(), &over_time(sim, &times, cloth, support), &mut csv);
+            let (dc, drape) = over_time(sim, &times, cloth, support, axis);
+            row(&label, method.name(), &dc, &mut csv);
+            let eq9 = problem
+                .score(est.material, 0..problem.frames(), &mut no_progress)
+                .expect("scores");
+            let sag = 100.0 * drape.sag_difference(&reference_drape) / reference.o_max;
+            shape_csv.push_str(&format!(
+                "{level},{},{:.3},{:.3},{sag:.3},{},{}\n",
+                method.name(),
+                100.0 * eq9.mean,
+                100.0 * eq9.last_quarter,
+                drape.folds,
+                reference_drape.folds
+            ));
+            shape_rows.push(format!(
+                "| {label} | {} | {:.2} | {:.2} | {sag:.2} | {} |",
+                method.name(),
+                100.0 * eq9.mean,
+                100.0 * eq9.last_quarter,
+                drape.folds
+            ));
+            drapes.push((format!("{level} {}", method.name()), drape));
         }
+    }
+    println!();
+    println!("| level | method | eq. 9 mean % | last quarter % | sag: largest ring difference, % of O_max | folds |");
+    println!("|---|---|---|---|---|---|");
+    for r in &shape_rows {
+        println!("{r}");
     }
     std::fs::create_dir_all(&out).expect("output directory");
     std::fs::write(out.join("drape.csv"), csv).expect("drape.csv");
-    eprintln!("wrote {}", out.join("drape.csv").display());
+    std::fs::write(out.join("shape.csv"), shape_csv).expect("shape.csv");
+    let reach = scene
+        .build()
+        .expect("builds")
+        .topology()
+        .rest_positions
+        .iter()
+        .map(|p| (p[0] - axis[0]).hypot(p[2] - axis[1]))
+        .fold(0.0, f64::max);
+    let mut panels = vec![(format!("{} reference", scene.reference_level()), &reference_drape)];
+    panels.extend(drapes.iter().map(|(t, d)| (t.clone(), d)));
+    std::fs::write(
+        out.join("drape.svg"),
+        drape_svg(&panels, reach, support_radius(&body.shape)),
+    )
+    .expect("drape.svg");
+    eprintln!("wrote {}: drape.csv, shape.csv, drape.svg", out.display());
 }

@@ -74,3 +74,120 @@ pub fn shadow_area(triangles: &[[u32; 3]], pos: &[f64], pixel: f64) -> f64 {
 pub fn drape_coefficient(shadow: f64, cloth: f64, support: f64) -> f64 {
     (shadow - support) / (cloth - support)
 }
+
+/// Horizontal (x, z) distance of node `k` of `pos` (SoA) from `axis`, and
+/// its azimuth about it.
+fn polar(pos: &[f64], k: usize, axis: [f64; 2]) -> (f64, f64) {
+    let n = pos.len() / 3;
+    let (x, z) = (pos[k] - axis[0], pos[2 * n + k] - axis[1]);
+    (x.hypot(z), z.atan2(x))
+}
+
+/// Horizontal distance of each rest position from `axis`.
+fn rest_reach(rest: &[[f64; 3]], axis: [f64; 2]) -> Vec<f64> {
+    rest.iter().map(|p| (p[0] - axis[0]).hypot(p[2] - axis[1])).collect()
+}
+
+/// The drape's *nodes* (the folds a Cusick tester counts): local maxima of
+/// the rim's outline around `axis` (a vertical line through (x, z)).
+///
+/// The rim is the nodes whose rest distance from the axis is at least
+/// `RIM` of the largest. Their current azimuths fall into `BINS` sectors,
+/// each taking its rim's largest horizontal distance (an empty sector its
+/// neighbours' mean), smoothed over three sectors. A fold is a maximum
+/// of that outline rising at least `PROMINENCE` of the outline's range
+/// above the lower of the two minima around it. 0 for a rim that is
+/// level (a range under `LEVEL` of its largest distance) or has a sector
+/// empty with both neighbours (a rim too coarse for the sectors).
+pub fn fold_count(rest: &[[f64; 3]], pos: &[f64], axis: [f64; 2]) -> usize {
+    const RIM: f64 = 0.9;
+    const BINS: usize = 72;
+    const PROMINENCE: f64 = 0.1;
+    const LEVEL: f64 = 1e-3;
+    let n = pos.len() / 3;
+    let reach = rest_reach(rest, axis);
+    let far = reach.iter().copied().fold(0.0, f64::max);
+    let mut outline = [f64::NAN; BINS];
+    for k in (0..n).filter(|&k| reach[k] >= RIM * far) {
+        let (r, phi) = polar(pos, k, axis);
+        let bin = (((phi + std::f64::consts::PI) / std::f64::consts::TAU * BINS as f64) as usize).min(BINS - 1);
+        if !(outline[bin] >= r) {
+            outline[bin] = r;
+        }
+    }
+    let filled: Vec<f64> = (0..BINS)
+        .map(|b| {
+            if outline[b].is_finite() {
+                return outline[b];
+            }
+            let around = [outline[(b + BINS - 1) % BINS], outline[(b + 1) % BINS]];
+            let known: Vec<f64> = around.into_iter().filter(|r| r.is_finite()).collect();
+            if known.is_empty() {
+                f64::NAN
+            } else {
+                known.iter().sum::<f64>() / known.len() as f64
+            }
+        })
+        .collect();
+    if filled.iter().any(|r| !r.is_finite()) {
+        return 0;
+    }
+    let smooth: Vec<f64> = (0..BINS)
+        .map(|b| (filled[(b + BINS - 1) % BINS] + filled[b] + filled[(b + 1) % BINS]) / 3.0)
+        .collect();
+    let (lo, hi) = smooth
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &r| (a.min(r), b.max(r)));
+    let threshold = PROMINENCE * (hi - lo);
+    if !(hi - lo >= LEVEL * hi) {
+        return 0;
+    }
+    // Walk the closed outline from its lowest sector: a fold is counted
+    // when the outline, having risen `threshold` above the last minimum,
+    // falls `threshold` below the maximum since (hysteresis, so a ripple
+    // on a fold's flank is not a fold of its own).
+    let start = (0..BINS).min_by(|&a, &b| smooth[a].total_cmp(&smooth[b])).unwrap_or(0);
+    let (mut folds, mut low, mut high, mut rising) = (0, smooth[start], smooth[start], true);
+    for i in 1..=BINS {
+        let r = smooth[(start + i) % BINS];
+        if rising {
+            if r < low {
+                (low, high) = (r, r);
+            }
+            high = high.max(r);
+            if high - low >= threshold && high - r >= threshold {
+                folds += 1;
+                (rising, low) = (false, r);
+            }
+        } else {
+            low = low.min(r);
+            if r - low >= threshold {
+                (rising, high) = (true, r);
+            }
+        }
+    }
+    folds
+}
+
+/// The drape's axisymmetric part: the mean height (y) of the nodes of
+/// `pos` in each of `rings` rings of rest distance from `axis`, the rings
+/// splitting 0 … the largest rest distance evenly (NaN for an empty
+/// ring). Two levels with the same profile sag alike, wherever their
+/// folds formed: their difference is the material's, not the folds'.
+pub fn ring_profile(rest: &[[f64; 3]], pos: &[f64], axis: [f64; 2], rings: usize) -> Vec<f64> {
+    let n = pos.len() / 3;
+    let reach = rest_reach(rest, axis);
+    let far = reach.iter().copied().fold(0.0, f64::max);
+    let mut sum = vec![(0.0, 0usize); rings];
+    if rings == 0 || !(far > 0.0) {
+        return vec![f64::NAN; rings];
+    }
+    for k in 0..n {
+        let ring = ((reach[k] / far * rings as f64) as usize).min(rings - 1);
+        sum[ring].0 += pos[n + k];
+        sum[ring].1 += 1;
+    }
+    sum.iter()
+        .map(|&(s, c)| if c > 0 { s / c as f64 } else { f64::NAN })
+        .collect()
+}
