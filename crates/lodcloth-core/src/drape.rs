@@ -96,7 +96,7 @@ fn rest_reach(rest: &[[f64; 3]], axis: [f64; 2]) -> Vec<f64> {
 /// each taking its rim's largest horizontal distance (an empty sector its
 /// neighbours' mean), smoothed over three sectors. A fold is a maximum
 /// of that outline rising at least `PROMINENCE` of the outline's range
-/// above the lower of the two minima around it. 0 for a rim that is
+/// above both minima around it. 0 for a rim that is
 /// level (a range under `LEVEL` of its largest distance) or has a sector
 /// empty with both neighbours (a rim too coarse for the sectors).
 pub fn fold_count(rest: &[[f64; 3]], pos: &[f64], axis: [f64; 2]) -> usize {
