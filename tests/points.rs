@@ -466,6 +466,7 @@ fn tether_is_a_harmonic_oscillator() {
         triangles: Vec::new(),
         grid: None,
         mesh: None,
+        bending: Default::default(),
     });
     let (m, k) = (0.2f64, 50.0f64);
     let omega = (k / m).sqrt();

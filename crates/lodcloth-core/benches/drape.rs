@@ -189,9 +189,10 @@ fn main() {
         .expect("a scene with a support (its first collider)");
     let cloth = scene.mesh.as_ref().map_or(scene.width * scene.height, |m| m.area);
     let support = support_area(&body.shape);
-    let mut times: Vec<f64> = [1.0, 2.0, scene.duration]
-        .into_iter()
-        .filter(|&t| t <= scene.duration)
+    // Every whole second (whether the drape has settled), and the end.
+    let mut times: Vec<f64> = (1..=scene.duration.floor() as usize)
+        .map(|t| t as f64)
+        .chain([scene.duration])
         .collect();
     times.dedup();
     let spec = RecordSpec {

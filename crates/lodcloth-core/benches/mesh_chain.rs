@@ -68,7 +68,7 @@ fn chain(name: &str, reference: &TriMesh, locked: &[bool]) {
         let (t_s, level) = best(|| simplify(reference, target, locked, name).expect("simplifies"));
         let (t_t, coarse) = best(|| {
             let topo = mesh_topology(&level.mesh);
-            let material = mesh_material(&membrane(), &topo);
+            let material = mesh_material(&membrane(), &topo, None);
             (topo, material)
         });
         let (t_down, _) = best(|| Correlation::between(&fine, &coarse.0).expect("correlates"));

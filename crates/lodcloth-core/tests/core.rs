@@ -9,6 +9,7 @@ extern crate lodcloth_core as lodcloth;
 
 mod common;
 
+mod bending;
 mod cache;
 mod conservation;
 mod contact;

@@ -101,7 +101,7 @@ fn every_level_of_a_chain_stores_the_membranes_biaxial_energy() {
     for target in [n, n * 2 / 5, n / 8] {
         let level = mesh::simplify(&reference, target, &locked, "disc").expect("simplifies");
         let topo = mesh::mesh_topology(&level.mesh);
-        let material = mesh::mesh_material(&m, &topo);
+        let material = mesh::mesh_material(&m, &topo, None);
         let eps = 1e-3;
         let state = deformed(&topo, |p| p.map(|x| x * (1.0 + eps)));
         let energy = scalar_elastic_energy(&topo, &material, &state);
@@ -155,7 +155,7 @@ fn an_equilateral_mesh_is_isotropic_with_shear_a_third_of_stretch() {
     // lattice's three directions unequally, 0.8 % at 2 cm) stays small.
     let sheet = generate::sheet(1.0, 231.0 * 0.005 * 3f64.sqrt() / 2.0, 0.005);
     let topo = mesh::mesh_topology(&sheet);
-    let material = mesh::mesh_material(&membrane(), &topo);
+    let material = mesh::mesh_material(&membrane(), &topo, None);
     let eps = 1e-4;
     let uniaxial = |theta: f64| {
         let (c, s) = (theta.cos(), theta.sin());

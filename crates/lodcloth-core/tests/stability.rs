@@ -223,7 +223,7 @@ fn predicted_limits_are_the_textbook_multiples_of_one_over_omega_max() {
 /// Dense M^{-1/2} K M^{-1/2} of the cloth at rest (3n × 3n, pins excluded:
 /// `free` lists the free nodes), K from the springs' axial stiffness
 /// k·u uᵀ, u the rest direction (no pre-stress at rest).
-fn dense_mass_scaled_stiffness(
+pub(crate) fn dense_mass_scaled_stiffness(
     topology: &Topology,
     material: &Material,
     masses: &[f64],
@@ -255,12 +255,29 @@ fn dense_mass_scaled_stiffness(
             }
         }
     }
+    // Bending stencils (a mesh with a bending rigidity): D·WᵀW per component.
+    let (b, d) = (&topology.bending, material.get(lodcloth::sim::SpringClass::BendU).k);
+    for st in 0..b.len() {
+        let entries = b.offsets[st] as usize..b.offsets[st + 1] as usize;
+        for e in entries.clone() {
+            for f in entries.clone() {
+                let (i, j) = (b.nodes[e] as usize, b.nodes[f] as usize);
+                if slot[i] == usize::MAX || slot[j] == usize::MAX {
+                    continue;
+                }
+                let scale = d * b.weights[e] * b.weights[f] / (masses[i] * masses[j]).sqrt();
+                for c in 0..3 {
+                    a[3 * slot[i] + c][3 * slot[j] + c] += scale;
+                }
+            }
+        }
+    }
     a
 }
 
 /// Eigenvalues and eigenvectors (columns of the returned matrix) of a dense
 /// symmetric matrix by cyclic Jacobi rotations.
-fn symmetric_eigen(mut a: Vec<Vec<f64>>) -> (Vec<f64>, Vec<Vec<f64>>) {
+pub(crate) fn symmetric_eigen(mut a: Vec<Vec<f64>>) -> (Vec<f64>, Vec<Vec<f64>>) {
     let n = a.len();
     let mut v: Vec<Vec<f64>> = (0..n)
         .map(|i| (0..n).map(|j| if i == j { 1.0 } else { 0.0 }).collect())

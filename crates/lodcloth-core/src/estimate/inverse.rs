@@ -169,6 +169,11 @@ impl Bases {
                 }
             }
         }
+        // Bending stencils (a mesh cloth with a bending rigidity) are the bend class: unit D gives
+        // −WᵀW·x, unit C −WᵀW·v.
+        let bend = SpringClass::BendU.index();
+        topology.bending.add_product(-1.0, pos, &mut self.elastic[bend]);
+        topology.bending.add_product(-1.0, vel, &mut self.damping[bend]);
     }
 
     /// Class-t force on node k for coefficients (K, C): `K·G + C·H`.
@@ -474,6 +479,23 @@ fn spring_magnitudes(topology: &Topology, material: &Material, pos: &[f64], vel:
             out[t][b] += f;
         }
     }
+    // A bending stencil's force on each of its nodes: |w_si|·|D·(Wx)_s + C·(Wv)_s|.
+    let bending = &topology.bending;
+    let co = material.get(SpringClass::BendU);
+    for s in 0..bending.len() {
+        let (lo, hi) = (bending.offsets[s] as usize, bending.offsets[s + 1] as usize);
+        let mut g = [0.0; 3];
+        for e in lo..hi {
+            let (i, w) = (bending.nodes[e] as usize, bending.weights[e]);
+            for c in 0..3 {
+                g[c] += w * (co.k * pos[c * n + i] + co.c * vel[c * n + i]);
+            }
+        }
+        let g = dot(g, g).sqrt();
+        for e in lo..hi {
+            out[SpringClass::BendU.index()][bending.nodes[e] as usize] += bending.weights[e].abs() * g;
+        }
+    }
 }
 
 /// Result of BCD/GKD.
@@ -567,8 +589,10 @@ pub fn inverse_estimate(
     let held = stretch_held(coarse);
     // Classes the level has no spring of (a mesh's shear and v classes)
     // carry nothing to estimate: neither samples nor fallbacks.
-    let present: [bool; T] =
-        std::array::from_fn(|t| coarse.groups.iter().any(|g| g.class.index() == t && !g.is_empty()));
+    let present: [bool; T] = std::array::from_fn(|t| {
+        coarse.groups.iter().any(|g| g.class.index() == t && !g.is_empty())
+            || (t == SpringClass::BendU.index() && !coarse.bending.is_empty())
+    });
     let estimated: [bool; T] = std::array::from_fn(|t| present[t] && !held[t]);
     let mut fine = Bases::new(nf);
     let mut bases = Bases::new(n);

@@ -19,6 +19,7 @@
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 
+mod bending;
 pub mod generate;
 mod io;
 mod locate;
@@ -26,11 +27,12 @@ mod patch;
 mod simplify;
 mod springs;
 
+pub use bending::{bending_stencils, delaunay_flips};
 pub use io::load;
 pub use locate::{locate, SurfaceIndex};
 pub use patch::{material_point, patch_weights};
 pub use simplify::{simplify, Simplified, CHAIN_VERSION, VERTEX_TOLERANCE};
-pub use springs::{mesh_material, mesh_topology};
+pub use springs::{mesh_material, mesh_topology, plate_topology};
 
 /// A triangle mesh as a cloth: one vertex per material point (vertices that
 /// share a position are one vertex, so UV seams do not tear the cloth).

@@ -40,6 +40,20 @@ use super::TriMesh;
 use crate::sim::vec3::dist;
 use crate::sim::{Material, Membrane, Moduli, SpringClass, SpringCoeffs, SpringGroup, SpringKind, Topology};
 
+/// The mesh's stretch springs and bending stencils
+/// ([`super::bending::bending_stencils`]) instead of bend springs, its rest
+/// shape, triangles and lumped areas: a cloth with a bending rigidity.
+///
+/// # Errors
+/// When the rest shape is not flat (the stencils bend about a flat sheet).
+pub fn plate_topology(mesh: &TriMesh) -> Result<Topology, String> {
+    let bending = super::bending::bending_stencils(mesh)?;
+    let mut topology = mesh_topology(mesh);
+    topology.groups.retain(|g| g.kind() != SpringKind::Bend);
+    topology.bending = bending;
+    Ok(topology)
+}
+
 /// The mesh's springs, rest shape, triangles and lumped areas.
 pub fn mesh_topology(mesh: &TriMesh) -> Topology {
     let mut stretch = Vec::new();
@@ -84,13 +98,44 @@ pub fn mesh_topology(mesh: &TriMesh) -> Topology {
         triangles: mesh.triangles.clone(),
         grid: None,
         mesh: None,
+        bending: Default::default(),
     }
 }
 
 /// The per-spring coefficients that make `membrane` on `topology` (a mesh
 /// topology from [`mesh_topology`]) in the sense of the module docs: the
 /// biaxial stiffness and damping exact, the stretch/bend split kept.
-pub fn mesh_material(membrane: &Membrane, topology: &Topology) -> Material {
+///
+/// On a topology with bending stencils ([`plate_topology`]) the stretch
+/// springs carry the whole membrane and the bend class is `bending`: the
+/// bending rigidity D (N·m) and its damping (N·m·s), the same at every
+/// level (the stencils carry the mesh's geometry).
+///
+/// # Panics
+/// When `topology` has bending stencils and `bending` is None.
+pub fn mesh_material(membrane: &Membrane, topology: &Topology, bending: Option<SpringCoeffs>) -> Material {
+    if !topology.bending.is_empty() {
+        let bending = bending.expect("a mesh with bending stencils needs its bending rigidity");
+        let stretch_only = |m: &Moduli| Moduli {
+            bend_u: 0.0,
+            bend_v: 0.0,
+            ..*m
+        };
+        let membrane = Membrane {
+            stiffness: stretch_only(&membrane.stiffness),
+            damping: stretch_only(&membrane.damping),
+        };
+        let mut material = spring_material(&membrane, topology);
+        for class in [SpringClass::BendU, SpringClass::BendV] {
+            material.springs[class.index()] = bending;
+        }
+        return material;
+    }
+    spring_material(membrane, topology)
+}
+
+/// [`mesh_material`] of the springs alone.
+fn spring_material(membrane: &Membrane, topology: &Topology) -> Material {
     let area: f64 = topology.node_areas.iter().sum();
     let sum_l2 = |kind: SpringKind| -> f64 {
         topology

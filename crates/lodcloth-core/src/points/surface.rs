@@ -142,6 +142,7 @@ impl Surface {
             triangles,
             grid: None,
             mesh: None,
+            bending: Default::default(),
         };
         Ok(Surface { topology, rings })
     }

@@ -15,7 +15,7 @@ use std::sync::Arc;
 use super::{Scene, SceneError};
 use crate::level::Level;
 use crate::mesh::{self, Simplified, TriMesh};
-use crate::sim::{Material, Membrane, SimParams, Simulation, State, Topology};
+use crate::sim::{Material, Membrane, SimParams, Simulation, SpringCoeffs, State, Topology};
 
 /// A scene's mesh cloth: the file as read, its material and what every
 /// level keeps.
@@ -27,6 +27,9 @@ pub struct MeshCloth {
     pub reference: TriMesh,
     /// The fabric, as membrane moduli (`[material]`).
     pub membrane: Membrane,
+    /// Its bending rigidity D (N·m) and damping (N·m·s) when the scene
+    /// gives one: every level bends with stencils instead of bend springs.
+    pub bending: Option<SpringCoeffs>,
     /// Reference vertices no level may collapse: every pinned vertex.
     pub locked: Vec<bool>,
     /// The reference mesh's rest area (m²).
@@ -51,7 +54,19 @@ impl Scene {
     /// Make this scene a mesh cloth of `reference` (validated), with the
     /// membrane `membrane`: the reference's springs become the scene's
     /// material, and every pinned vertex is locked for simplification.
-    pub(super) fn attach_mesh(&mut self, reference: TriMesh, file: PathBuf, hash: u64, membrane: Membrane) {
+    pub(super) fn attach_mesh(
+        &mut self,
+        reference: TriMesh,
+        file: PathBuf,
+        hash: u64,
+        membrane: Membrane,
+        bending: Option<SpringCoeffs>,
+    ) {
+        let mut reference = reference;
+        if bending.is_some() {
+            // Stencils need a Delaunay mesh (mesh/bending.rs); only triangles change.
+            mesh::delaunay_flips(&mut reference);
+        }
         let identity = Simplified {
             source: (0..reference.vertices() as u32).collect(),
             mesh: reference.clone(),
@@ -63,8 +78,8 @@ impl Scene {
                 locked[k as usize] = true;
             }
         }
-        let topology = mesh::mesh_topology(&reference);
-        self.params.material = mesh::mesh_material(&membrane, &topology);
+        let topology = topology_of(&reference, bending);
+        self.params.material = mesh::mesh_material(&membrane, &topology, bending);
         self.nx = reference.vertices();
         self.ny = 1;
         self.mesh = Some(Arc::new(MeshCloth {
@@ -72,6 +87,7 @@ impl Scene {
             area: reference.area(),
             reference,
             membrane,
+            bending,
             locked,
             hash,
         }));
@@ -107,12 +123,15 @@ impl Scene {
                 })
             }
             (Some(m), Level::Vertices(n)) => {
-                let simplified = mesh::simplify(&m.reference, n, &m.locked, &m.file.display().to_string())
+                let mut simplified = mesh::simplify(&m.reference, n, &m.locked, &m.file.display().to_string())
                     .map_err(|e| invalid(format!("level {level}: {e}")))?;
+                if m.bending.is_some() {
+                    mesh::delaunay_flips(&mut simplified.mesh);
+                }
                 let simplified = Arc::new(simplified);
                 let topology = Topology {
                     mesh: Some(simplified.clone()),
-                    ..mesh::mesh_topology(&simplified.mesh)
+                    ..level_topology(&simplified.mesh, m.bending).map_err(|e| invalid(format!("level {level}: {e}")))?
                 };
                 Ok(ClothLevel {
                     level,
@@ -134,7 +153,7 @@ impl Scene {
     /// level's springs made from the membrane.
     pub fn material_on(&self, cloth: &ClothLevel) -> Material {
         match (&self.mesh, cloth.level) {
-            (Some(m), _) => mesh::mesh_material(&m.membrane, &cloth.topology),
+            (Some(m), _) => mesh::mesh_material(&m.membrane, &cloth.topology, m.bending),
             (None, Level::Grid { nx, ny }) => self.material_at(nx, ny),
             (None, _) => unreachable!("a grid scene's levels are grids"),
         }
@@ -161,5 +180,21 @@ impl Scene {
             level: cloth.level.to_string(),
             source,
         })
+    }
+}
+
+/// A mesh's topology: bend springs, or bending stencils when the scene
+/// gives a bending rigidity (its flat rest shape was validated, and a
+/// simplified level of a flat mesh is flat).
+fn topology_of(mesh: &TriMesh, bending: Option<SpringCoeffs>) -> Topology {
+    level_topology(mesh, bending).expect("a validated flat mesh has stencils")
+}
+
+/// [`topology_of`] for a simplified level, which could in principle fail
+/// (a degenerate triangle).
+fn level_topology(mesh: &TriMesh, bending: Option<SpringCoeffs>) -> Result<Topology, String> {
+    match bending {
+        Some(_) => mesh::plate_topology(mesh),
+        None => Ok(mesh::mesh_topology(mesh)),
     }
 }

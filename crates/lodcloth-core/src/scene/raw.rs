@@ -151,6 +151,13 @@ pub struct RawMaterial {
     pub damping: Option<RawModuli>,
     /// Damping as a time τ (s): damping moduli = τ × stiffness moduli.
     pub damping_time: Option<f64>,
+    /// A mesh cloth's bending rigidity D (N·m): bending stencils across its
+    /// edges instead of bend springs ([`crate::sim::Bending`]); its rest
+    /// shape must be flat and `bend_u`, `bend_v` 0.
+    pub bending_rigidity: Option<f64>,
+    /// The bending's damping (N·m·s); default τ·D with `damping_time`,
+    /// required with `damping` moduli.
+    pub bending_damping: Option<f64>,
 }
 
 /// Membrane moduli ([`crate::sim::Moduli`]).

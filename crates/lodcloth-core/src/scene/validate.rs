@@ -31,6 +31,7 @@ impl Scene {
             Some((m, _)) => Reference::Mesh(m),
             None => Reference::Grid(grid),
         };
+        let bending = p.bending(&raw, mesh.as_ref().map(|(m, _)| m));
         let (material, membrane) = match &mesh {
             Some(_) => {
                 let membrane = p.mesh_membrane(&raw);
@@ -93,7 +94,7 @@ impl Scene {
             colliders,
         };
         if let (Some((reference, (file, hash))), Some(membrane)) = (mesh, membrane) {
-            scene.attach_mesh(reference, file, hash, membrane);
+            scene.attach_mesh(reference, file, hash, membrane, bending);
         }
         Ok(scene)
     }
@@ -211,6 +212,55 @@ impl Problems {
         if let (Some(nx), Some(ny)) = (c.nx, c.ny) {
             self.grid_size("cloth", nx, ny);
         }
+    }
+
+    /// `material.bending_rigidity` and `bending_damping`: a mesh cloth's
+    /// bending stencils' D and C (None without them). Only for a mesh, whose
+    /// rest shape is flat, and without bend springs' shares.
+    fn bending(&mut self, raw: &RawScene, mesh: Option<&TriMesh>) -> Option<SpringCoeffs> {
+        let m = raw.material.as_ref()?;
+        let Some(d) = m.bending_rigidity else {
+            if m.bending_damping.is_some() {
+                self.push("material.bending_damping: given without bending_rigidity".into());
+            }
+            return None;
+        };
+        self.coefficient("material.bending_rigidity", d, "N·m");
+        let Some(mesh) = mesh else {
+            self.push(
+                "material.bending_rigidity: only a mesh cloth bends with stencils; a grid's bend springs \
+                 are given as bend_u, bend_v"
+                    .into(),
+            );
+            return None;
+        };
+        for (name, share) in [("bend_u", m.stiffness.bend_u), ("bend_v", m.stiffness.bend_v)] {
+            if share != 0.0 {
+                self.push(format!(
+                    "material.stiffness.{name}: a cloth with bending_rigidity has no bend springs; \
+                     give {name} = 0 (got {share})"
+                ));
+            }
+        }
+        let c = match (m.bending_damping, m.damping_time) {
+            (Some(c), _) => {
+                self.coefficient("material.bending_damping", c, "N·m·s");
+                c
+            }
+            (None, Some(t)) => t * d,
+            (None, None) => {
+                self.push(
+                    "material.bending_damping: needed with damping moduli (N·m·s); with damping_time it is τ·D".into(),
+                );
+                0.0
+            }
+        };
+        let mut flipped = mesh.clone();
+        crate::mesh::delaunay_flips(&mut flipped);
+        if let Err(e) = crate::mesh::bending_stencils(&flipped) {
+            self.push(format!("material.bending_rigidity: {e}"));
+        }
+        Some(SpringCoeffs { k: d, c })
     }
 
     /// A mesh cloth's material: `[material]` only (per-spring `[springs]`

@@ -14,7 +14,7 @@
 //! adds dt·γ·M to the diagonal. Pinned nodes are filtered out of the solve
 //! (their Δv is 0; their motion is prescribed).
 
-use super::params::{CgSettings, Material};
+use super::params::{CgSettings, Material, SpringClass};
 use super::topology::Topology;
 
 /// Per-spring linearisation data and CG vectors, sized once.
@@ -129,6 +129,9 @@ pub(crate) fn step(
         }
     }
     add_scaled_stiffness_product(topo, ws, vel, dt * dt);
+    // Bending stencils: their Jacobian is the constant −D·WᵀW.
+    let bend = inp.material.get(SpringClass::BendU);
+    topo.bending.add_product(-dt * dt * bend.k, vel, &mut ws.rhs);
     // Diagonal of A for the preconditioner.
     for c in 0..3 {
         for k in 0..n {
@@ -136,6 +139,13 @@ pub(crate) fn step(
         }
     }
     spring_diag(topo, ws, dt);
+    if !topo.bending.is_empty() {
+        let (lo, rest) = ws.diag.split_at_mut(n);
+        let (mid, hi) = rest.split_at_mut(n);
+        for part in [lo, mid, hi] {
+            topo.bending.add_diagonal(dt * bend.c + dt * dt * bend.k, part);
+        }
+    }
     for c in 0..3 {
         for k in 0..n {
             let i = c * n + k;
@@ -283,6 +293,9 @@ fn system_apply(inp: &ImplicitInputs<'_>, ws: &mut ImplicitWorkspace) {
             s += 1;
         }
     }
+    let bend = inp.material.get(SpringClass::BendU);
+    topo.bending
+        .add_product(dt * bend.c + dt * dt * bend.k, &ws.p, &mut ws.q);
     for c in 0..3 {
         for k in 0..n {
             ws.q[c * n + k] *= inp.free[k];

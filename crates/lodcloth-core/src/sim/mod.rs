@@ -5,6 +5,7 @@
 //! and returns a [`StepReport`]. Numerical trouble comes back as data
 //! (`report.finite == false`), never as a panic or an error.
 
+mod bending;
 mod contact;
 mod forces;
 mod implicit;
@@ -24,6 +25,7 @@ pub mod vec3;
 
 use std::sync::Arc;
 
+pub use bending::Bending;
 pub use contact::{Collider, Shape};
 pub use forces::{SpringKernel, SpringTotals};
 pub use live::GrabHeadroom;
@@ -303,7 +305,7 @@ impl Model {
         debug_assert!(ws.force.all_zero(), "force buffer not cleared");
         let f = ws.force.window_away_from([pos.as_ptr(), vel.as_ptr()]);
         let (material, adjust) = (&self.params.material, self.adjust_ratio());
-        let totals = match (ws.mixed.as_deref_mut(), par.split) {
+        let mut totals = match (ws.mixed.as_deref_mut(), par.split) {
             (None, Some(split)) => forces::spring_forces_split(
                 topo,
                 &ws.kernel.rest,
@@ -351,6 +353,12 @@ impl Model {
                 }
             }
         };
+        if !topo.bending.is_empty() {
+            // Bending stencils (a mesh cloth with a bending rigidity), in f64 whatever the springs'
+            // precision: few, and linear.
+            let b = material.get(SpringClass::BendU);
+            totals.elastic_energy += topo.bending.add_forces(b.k, b.c, pos, vel, f);
+        }
         self.loads.add_forces(topo, t, pos, vel, f, &mut ws.normals);
         for grab in &self.grabs {
             grab.add_force(pos, vel, f);

@@ -2,7 +2,7 @@
 //! cloth (Gershgorin bound and power iteration) and the largest stable time
 //! step of each integrator for that mode (`REFERENCE.md`, last section).
 
-use super::params::{Integrator, Material};
+use super::params::{Integrator, Material, SpringClass};
 use super::topology::Topology;
 
 /// Modal estimate of a cloth about its rest shape.
@@ -104,6 +104,15 @@ pub fn modal_estimate(
             csum[b] += c / masses[b] + if pinned[a] { 0.0 } else { cross };
         }
     }
+    // Bending stencils (a mesh cloth with a bending rigidity): row i of M^{-1}·D·WᵀW is bounded by
+    // D·Σ_s |w_si|·Σ_j |w_sj| / m_i, and the same for its damping (M^{-1}C
+    // has the eigenvalues of M^{-1/2} C M^{-1/2}).
+    let bend = material.get(SpringClass::BendU);
+    let bend_rows = topology.bending.row_bounds(n);
+    for i in 0..n {
+        ksum[i] += 0.5 * bend.k * bend_rows[i];
+        csum[i] += bend.c * bend_rows[i] / masses[i];
+    }
     let damped_rate_bound = (0..n)
         .filter(|&i| !pinned[i])
         .map(|i| csum[i] + ground_of(i, 1) / masses[i])
@@ -142,6 +151,26 @@ pub fn modal_estimate(
         for (i, v) in y.iter_mut().enumerate() {
             let g = ground_of(i, which) * inv_sqrt_m[i] * inv_sqrt_m[i];
             *v = w[i].map(|x| g * x);
+        }
+        let bending = &topology.bending;
+        let kb = if which == 0 { bend.k } else { bend.c };
+        for st in 0..bending.len() {
+            let (lo, hi) = (bending.offsets[st] as usize, bending.offsets[st + 1] as usize);
+            let mut r = [0.0; 3];
+            for e in lo..hi {
+                let i = bending.nodes[e] as usize;
+                let ww = bending.weights[e] * inv_sqrt_m[i];
+                for c in 0..3 {
+                    r[c] += ww * w[i][c];
+                }
+            }
+            for e in lo..hi {
+                let i = bending.nodes[e] as usize;
+                let ww = kb * bending.weights[e] * inv_sqrt_m[i];
+                for c in 0..3 {
+                    y[i][c] += ww * r[c];
+                }
+            }
         }
         for (gi, g) in topology.groups.iter().enumerate() {
             let k = coef(gi);

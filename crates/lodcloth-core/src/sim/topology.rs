@@ -159,6 +159,10 @@ pub struct Topology {
     /// coordinates, groups) and the reference vertex each node is, so live
     /// input and pin sets resolve on it as they do on a grid.
     pub mesh: Option<std::sync::Arc<crate::mesh::Simplified>>,
+    /// Linear bending stencils (a mesh cloth with a bending rigidity; empty
+    /// otherwise). The material's bend class coefficients are their D and
+    /// C ([`super::bending`]).
+    pub bending: super::bending::Bending,
 }
 
 impl Topology {
@@ -231,6 +235,7 @@ impl Topology {
             triangles,
             grid: Some(shape),
             mesh: None,
+            bending: Default::default(),
         }
     }
 

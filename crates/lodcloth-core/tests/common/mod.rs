@@ -123,6 +123,7 @@ pub fn pairs_topology(rest_positions: Vec<[f64; 3]>, pairs: &[(u32, u32)], kind:
         triangles: Vec::new(),
         grid: None,
         mesh: None,
+        bending: Default::default(),
     }
 }
 
@@ -145,6 +146,7 @@ pub fn as_gather_topology(topology: &Topology) -> Topology {
         triangles: topology.triangles.clone(),
         grid: None,
         mesh: None,
+        bending: Default::default(),
     }
 }
 

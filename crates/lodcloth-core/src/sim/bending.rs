@@ -1,0 +1,227 @@
+//! Linear bending stencils: a bending energy with a continuum limit.
+//!
+//! A bend spring across an edge shortens by about L·θ²/8 when its two
+//! triangles fold by θ, so its energy is quartic in the fold and the folding
+//! energy per area of a mesh goes as K·κ⁴·h⁴: it has no continuum limit, and
+//! two meshes of one fabric fold differently (results.md, "What the Cusick
+//! error is made of"). A plate's bending energy is quadratic in curvature,
+//! `½·D·∫ (κ₁ + κ₂)² − 2(1 − ν)·κ₁κ₂ dA` with the bending rigidity D (N·m).
+//!
+//! Here the energy is `½·D·Σ_s |Σ_i w_si·x_i|²`: each stencil `s` is a
+//! fixed linear combination of a few nodes' positions that vanishes on the
+//! flat rest shape and on every affine map of it (Σ w = 0, Σ w·X = 0), and
+//! reads the curvature there: a mesh's are its cotangent Laplacian per
+//! interior vertex (`mesh/bending.rs`), as in Bergou et al. 2006's quadratic
+//! bending model for inextensible surfaces. The forces are linear in the
+//! positions and the Hessian `D·Σ_s w_s w_sᵀ ⊗ I₃` is constant, so implicit
+//! Euler and the stability bound take it exactly. Rigid motions of the flat
+//! sheet store nothing, and a developable bend stores the plate's energy
+//! `½·D·(κ₁ + κ₂)²`; the model presumes near-isometric motion (stretch
+//! springs far stiffer than bending, as in cloth): a patch stretched and
+//! turned at once is not read exactly.
+//!
+//! Damping is the same operator on velocities with coefficient C (N·m·s).
+
+/// The stencils of one cloth, stored as rows of a sparse matrix W: the
+/// bending energy is `½·D·|W x|²` per component.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Bending {
+    /// Where stencil s's entries start in `nodes` and `weights`; one more
+    /// entry than there are stencils (empty when there are none).
+    pub offsets: Vec<u32>,
+    /// The node of each entry.
+    pub nodes: Vec<u32>,
+    /// The weight of each entry (1/m): a stencil's weights sum to 0.
+    pub weights: Vec<f64>,
+}
+
+impl Bending {
+    /// Stencils from rows of (node, weight) pairs.
+    pub fn from_rows<'a>(rows: impl IntoIterator<Item = &'a [(u32, f64)]>) -> Bending {
+        let mut b = Bending {
+            offsets: vec![0],
+            ..Bending::default()
+        };
+        for row in rows {
+            for &(i, w) in row {
+                b.nodes.push(i);
+                b.weights.push(w);
+            }
+            b.offsets.push(b.nodes.len() as u32);
+        }
+        if b.offsets.len() == 1 {
+            b.offsets.clear();
+        }
+        b
+    }
+
+    /// Number of stencils.
+    pub fn len(&self) -> usize {
+        self.offsets.len().saturating_sub(1)
+    }
+
+    /// Whether there are none (every grid, and a mesh with bend springs).
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Stencil s's nodes and weights.
+    #[inline(always)]
+    fn row(&self, s: usize) -> (&[u32], &[f64]) {
+        let (a, b) = (self.offsets[s] as usize, self.offsets[s + 1] as usize);
+        (&self.nodes[a..b], &self.weights[a..b])
+    }
+
+    /// `Σ_i w_si·x_i` of a `[x…, y…, z…]` field of `n` nodes.
+    #[inline(always)]
+    fn read(nodes: &[u32], weights: &[f64], x: &[f64], n: usize) -> [f64; 3] {
+        let mut s = [0.0; 3];
+        for (&i, &w) in nodes.iter().zip(weights) {
+            let i = i as usize;
+            s[0] += w * x[i];
+            s[1] += w * x[n + i];
+            s[2] += w * x[2 * n + i];
+        }
+        s
+    }
+
+    /// Add `−k·Wᵀ W pos − c·Wᵀ W vel` to `force` (all `[x…, y…, z…]` of
+    /// `n` nodes) and return the energy `½·k·|W pos|²` (J). Allocates
+    /// nothing.
+    pub fn add_forces(&self, k: f64, c: f64, pos: &[f64], vel: &[f64], force: &mut [f64]) -> f64 {
+        let n = pos.len() / 3;
+        let mut energy = 0.0;
+        for s in 0..self.len() {
+            let (nodes, weights) = self.row(s);
+            let x = Self::read(nodes, weights, pos, n);
+            let v = Self::read(nodes, weights, vel, n);
+            energy += x[0] * x[0] + x[1] * x[1] + x[2] * x[2];
+            let g = [0, 1, 2].map(|d| -(k * x[d] + c * v[d]));
+            for (&i, &w) in nodes.iter().zip(weights) {
+                let i = i as usize;
+                force[i] += w * g[0];
+                force[n + i] += w * g[1];
+                force[2 * n + i] += w * g[2];
+            }
+        }
+        0.5 * k * energy
+    }
+
+    /// `out += scale·Wᵀ W x` (all `[x…, y…, z…]` of `n` nodes).
+    pub fn add_product(&self, scale: f64, x: &[f64], out: &mut [f64]) {
+        let n = x.len() / 3;
+        for s in 0..self.len() {
+            let (nodes, weights) = self.row(s);
+            let r = Self::read(nodes, weights, x, n).map(|v| scale * v);
+            for (&i, &w) in nodes.iter().zip(weights) {
+                let i = i as usize;
+                out[i] += w * r[0];
+                out[n + i] += w * r[1];
+                out[2 * n + i] += w * r[2];
+            }
+        }
+    }
+
+    /// `out[i] += scale·(Wᵀ W)_ii` for every node: the diagonal of the
+    /// operator (the same in each component).
+    pub fn add_diagonal(&self, scale: f64, out: &mut [f64]) {
+        for s in 0..self.len() {
+            let (nodes, weights) = self.row(s);
+            for (&i, &w) in nodes.iter().zip(weights) {
+                out[i as usize] += scale * w * w;
+            }
+        }
+    }
+
+    /// Per node, `Σ_j |(Wᵀ W)_ij|` bounded by `Σ_s |w_si|·Σ_j |w_sj|`:
+    /// a Gershgorin row bound of the operator (1/m²).
+    pub fn row_bounds(&self, n: usize) -> Vec<f64> {
+        let mut out = vec![0.0; n];
+        for s in 0..self.len() {
+            let (nodes, weights) = self.row(s);
+            let total: f64 = weights.iter().map(|w| w.abs()).sum();
+            for (&i, &w) in nodes.iter().zip(weights) {
+                out[i as usize] += w.abs() * total;
+            }
+        }
+        out
+    }
+
+    /// `Σ_s |Σ_i w_si·x_i|²` of `[x, y, z]` points (the energy for D = 2).
+    pub fn energy_of(&self, points: &[[f64; 3]]) -> f64 {
+        (0..self.len())
+            .map(|s| {
+                let (nodes, weights) = self.row(s);
+                let mut r = [0.0; 3];
+                for (&i, &w) in nodes.iter().zip(weights) {
+                    let p = points[i as usize];
+                    for d in 0..3 {
+                        r[d] += w * p[d];
+                    }
+                }
+                r[0] * r[0] + r[1] * r[1] + r[2] * r[2]
+            })
+            .sum()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn soa(points: &[[f64; 3]]) -> Vec<f64> {
+        (0..3).flat_map(|d| points.iter().map(move |p| p[d])).collect()
+    }
+
+    /// Two Laplacian-like rows: the forces are minus the gradient of their
+    /// energy (central differences) and they sum to zero
+    /// (no net force, momentum kept).
+    #[test]
+    fn forces_are_minus_the_energys_gradient_and_sum_to_zero() {
+        let rows: Vec<Vec<(u32, f64)>> = vec![
+            vec![(0, -1.3), (1, -0.7), (2, 1.1), (3, 0.9)],
+            vec![(1, 2.0), (2, -1.0), (4, -1.0)],
+        ];
+        let b = Bending::from_rows(rows.iter().map(Vec::as_slice));
+        assert_eq!(b.len(), 2);
+        let pts = [
+            [0.0, 0.1, 0.0],
+            [1.0, -0.2, 0.3],
+            [0.4, 0.9, -0.1],
+            [0.5, -0.8, 0.2],
+            [1.7, 0.3, 0.6],
+        ];
+        let (k, c) = (2.5, 0.0);
+        let pos = soa(&pts);
+        let vel = vec![0.0; pos.len()];
+        let mut f = vec![0.0; pos.len()];
+        let e = b.add_forces(k, c, &pos, &vel, &mut f);
+        assert!((e - 0.5 * k * b.energy_of(&pts)).abs() < 1e-12 * e.abs().max(1.0));
+        let h = 1e-6;
+        for j in 0..pos.len() {
+            let energy = |x: &[f64]| {
+                let mut scratch = vec![0.0; x.len()];
+                b.add_forces(k, 0.0, x, &vel, &mut scratch)
+            };
+            let (mut p, mut m) = (pos.clone(), pos.clone());
+            p[j] += h;
+            m[j] -= h;
+            let grad = (energy(&p) - energy(&m)) / (2.0 * h);
+            assert!((f[j] + grad).abs() < 1e-6, "entry {j}: force {} gradient {grad}", f[j]);
+        }
+        for d in 0..3 {
+            let net: f64 = f[d * 5..d * 5 + 5].iter().sum();
+            // Row 0 sums to 0, row 1 too: no net force.
+            assert!(net.abs() < 1e-12, "net force {net} in component {d}");
+        }
+        // The product and the diagonal are the same operator as the forces.
+        let mut q = vec![0.0; pos.len()];
+        b.add_product(k, &pos, &mut q);
+        for j in 0..pos.len() {
+            assert!((q[j] + f[j]).abs() < 1e-12);
+        }
+        let mut diag = vec![0.0; 5];
+        b.add_diagonal(1.0, &mut diag);
+        assert!((diag[1] - (0.7f64.powi(2) + 4.0)).abs() < 1e-12);
+    }
+}
