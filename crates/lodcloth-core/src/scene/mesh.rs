@@ -62,11 +62,6 @@ impl Scene {
         membrane: Membrane,
         bending: Option<SpringCoeffs>,
     ) {
-        let mut reference = reference;
-        if bending.is_some() {
-            // Stencils need a Delaunay mesh (mesh/bending.rs); only triangles change.
-            mesh::delaunay_flips(&mut reference);
-        }
         let identity = Simplified {
             source: (0..reference.vertices() as u32).collect(),
             mesh: reference.clone(),
@@ -123,11 +118,8 @@ impl Scene {
                 })
             }
             (Some(m), Level::Vertices(n)) => {
-                let mut simplified = mesh::simplify(&m.reference, n, &m.locked, &m.file.display().to_string())
+                let simplified = mesh::simplify(&m.reference, n, &m.locked, &m.file.display().to_string())
                     .map_err(|e| invalid(format!("level {level}: {e}")))?;
-                if m.bending.is_some() {
-                    mesh::delaunay_flips(&mut simplified.mesh);
-                }
                 let simplified = Arc::new(simplified);
                 let topology = Topology {
                     mesh: Some(simplified.clone()),

@@ -255,9 +255,7 @@ impl Problems {
                 0.0
             }
         };
-        let mut flipped = mesh.clone();
-        crate::mesh::delaunay_flips(&mut flipped);
-        if let Err(e) = crate::mesh::bending_stencils(&flipped) {
+        if let Err(e) = crate::mesh::bending_stencils(mesh) {
             self.push(format!("material.bending_rigidity: {e}"));
         }
         Some(SpringCoeffs { k: d, c })
