@@ -134,7 +134,7 @@ fn hessian_stencils(mesh: &TriMesh) -> Bending {
 
 /// Rings gathered at most around a vertex, and the points a fit wants.
 const MAX_RINGS: usize = 3;
-const MIN_POINTS: usize = 9;
+const MIN_POINTS: usize = 7;
 
 /// The least-squares weights of `x_uu`, `x_uv`, `x_vv` at vertex `i` from
 /// the points `ring` (i first), in the rest plane's axes `t1`, `t2`: rows
