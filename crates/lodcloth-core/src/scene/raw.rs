@@ -151,9 +151,10 @@ pub struct RawMaterial {
     pub damping: Option<RawModuli>,
     /// Damping as a time τ (s): damping moduli = τ × stiffness moduli.
     pub damping_time: Option<f64>,
-    /// A mesh cloth's bending rigidity D (N·m): bending stencils across its
-    /// edges instead of bend springs ([`crate::sim::Bending`]); its rest
-    /// shape must be flat and `bend_u`, `bend_v` 0.
+    /// A mesh cloth's bending rigidity D (N·m): plate bending by stencils
+    /// at its vertices instead of bend springs ([`crate::sim::Bending`],
+    /// `mesh/bending.rs`); its rest shape must be flat and `bend_u`,
+    /// `bend_v` 0.
     pub bending_rigidity: Option<f64>,
     /// The bending's damping (N·m·s); default τ·D with `damping_time`,
     /// required with `damping` moduli.

@@ -10,13 +10,13 @@
 //! Here the energy is `½·D·Σ_s |Σ_i w_si·x_i|²`: each stencil `s` is a
 //! fixed linear combination of a few nodes' positions that vanishes on the
 //! flat rest shape and on every affine map of it (Σ w = 0, Σ w·X = 0), and
-//! reads the curvature there: a mesh's are its cotangent Laplacian per
-//! interior vertex (`mesh/bending.rs`), as in Bergou et al. 2006's quadratic
-//! bending model for inextensible surfaces. The forces are linear in the
+//! reads the curvature there: a mesh's are the least-squares second
+//! derivatives at every vertex (`mesh/bending.rs`), so the energy is the
+//! plate's `½·D·∫(κ₁² + κ₂²)` (Poisson's ratio 0), a quadratic bending
+//! model in the sense of Bergou et al. 2006. The forces are linear in the
 //! positions and the Hessian `D·Σ_s w_s w_sᵀ ⊗ I₃` is constant, so implicit
 //! Euler and the stability bound take it exactly. Rigid motions of the flat
-//! sheet store nothing, and a developable bend stores the plate's energy
-//! `½·D·(κ₁ + κ₂)²`; the model presumes near-isometric motion (stretch
+//! sheet store nothing; the model presumes near-isometric motion (stretch
 //! springs far stiffer than bending, as in cloth): a patch stretched and
 //! turned at once is not read exactly.
 //!
@@ -173,7 +173,7 @@ mod tests {
         (0..3).flat_map(|d| points.iter().map(move |p| p[d])).collect()
     }
 
-    /// Two Laplacian-like rows: the forces are minus the gradient of their
+    /// Two rows that sum to zero: the forces are minus the gradient of their
     /// energy (central differences) and they sum to zero
     /// (no net force, momentum kept).
     #[test]
