@@ -5,7 +5,7 @@
 //! depends on the edge length (no continuum limit).
 
 use lodcloth::mesh::{self, generate, TriMesh};
-use lodcloth::sim::SpringKind;
+use lodcloth::sim::{Membrane, Moduli, SpringKind};
 
 /// `mesh` (flat in x–z) wrapped onto a cylinder of radius `r` whose axis
 /// lies in the plane at `angle` from z: arc length across the axis is kept.
@@ -26,6 +26,22 @@ fn wrapped(mesh: &TriMesh, r: f64, angle: f64) -> Vec<[f64; 3]> {
 /// The mesh's area.
 fn area(mesh: &TriMesh) -> f64 {
     mesh.vertex_areas().iter().sum()
+}
+
+/// A membrane of stretch springs alone: stretch `k` (N/m) both ways, its
+/// damping `c` (N·s/m), no shear or bend share.
+fn stretch_membrane(k: f64, c: f64) -> Membrane {
+    let moduli = |x: f64| Moduli {
+        stretch_u: x,
+        stretch_v: x,
+        shear: 0.0,
+        bend_u: 0.0,
+        bend_v: 0.0,
+    };
+    Membrane {
+        stiffness: moduli(k),
+        damping: moduli(c),
+    }
 }
 
 /// Σ ½ (L − L0)² of the bend springs (unit K) at `points`.
@@ -105,25 +121,11 @@ fn cylinders_bend_with_the_plates_energy_on_irregular_meshes() {
 fn the_predicted_top_mode_takes_the_bending_stencils() {
     use crate::common::{build, lumped_masses, params};
     use crate::stability::{dense_mass_scaled_stiffness, symmetric_eigen};
-    use lodcloth::sim::{Integrator, Loads, Membrane, Moduli, SpringCoeffs, StabilityCheck, State};
+    use lodcloth::sim::{Integrator, Loads, SpringCoeffs, StabilityCheck, State};
     use std::sync::Arc;
     let disc = generate::disc(0.05, 0.0, 0.01);
     let topology = Arc::new(mesh::plate_topology(&disc).expect("flat"));
-    let stretch = Moduli {
-        stretch_u: 10.0,
-        stretch_v: 10.0,
-        shear: 0.0,
-        bend_u: 0.0,
-        bend_v: 0.0,
-    };
-    let membrane = Membrane {
-        stiffness: stretch,
-        damping: Moduli {
-            stretch_u: 0.0,
-            stretch_v: 0.0,
-            ..stretch
-        },
-    };
+    let membrane = stretch_membrane(10.0, 0.0);
     let masses = lumped_masses(&topology, 0.2);
     let free: Vec<usize> = (0..topology.n_nodes).collect();
     let mut omegas = Vec::new();
@@ -156,14 +158,7 @@ fn the_predicted_top_mode_takes_the_bending_stencils() {
     // The stencils alone store nothing on exactly the affine maps of the
     // rest disc (1, u, v per component: 9 modes): no other shape is free
     // of bending energy.
-    let zero = Membrane {
-        stiffness: Moduli {
-            stretch_u: 0.0,
-            stretch_v: 0.0,
-            ..stretch
-        },
-        ..membrane
-    };
+    let zero = stretch_membrane(0.0, 0.0);
     let material = mesh::mesh_material(&zero, &topology, Some(SpringCoeffs { k: 1.0, c: 0.0 }));
     let (values, _) = symmetric_eigen(dense_mass_scaled_stiffness(&topology, &material, &masses, &free));
     let top = values.iter().cloned().fold(0.0, f64::max);
@@ -322,26 +317,12 @@ fn a_bending_rigidity_that_cannot_apply_is_refused_naming_why() {
 #[test]
 fn a_clamped_strip_sags_by_the_beams_deflection() {
     use crate::common::{build, fixed_pins, lumped_masses, params};
-    use lodcloth::sim::{Integrator, Loads, Membrane, Moduli, SpringCoeffs, StabilityCheck, State};
+    use lodcloth::sim::{Integrator, Loads, SpringCoeffs, StabilityCheck, State};
     use std::sync::Arc;
     let (length, width, clamp): (f64, f64, f64) = (0.14, 0.03, 0.02);
     let (d, rho, g) = (1e-4, 0.2, 0.05);
     let analytic = rho * g * (length - clamp).powi(4) / (8.0 * d);
-    let stretch = Moduli {
-        stretch_u: 300.0,
-        stretch_v: 300.0,
-        shear: 0.0,
-        bend_u: 0.0,
-        bend_v: 0.0,
-    };
-    let membrane = Membrane {
-        stiffness: stretch,
-        damping: Moduli {
-            stretch_u: 0.03,
-            stretch_v: 0.03,
-            ..stretch
-        },
-    };
+    let membrane = stretch_membrane(300.0, 0.03);
     let mut errors = Vec::new();
     let mut drops = Vec::new();
     for edge in [0.005, 0.0025] {
