@@ -183,20 +183,14 @@ fn the_predicted_top_mode_takes_the_bending_stencils() {
 /// held at the material's.
 #[test]
 fn lsq_recovers_a_mesh_cloths_bending_rigidity() {
-    use lodcloth::estimate::{no_progress, FitOptions, LodProblem, Method, RecordSpec, Reference};
-    use lodcloth::scene::{MassConvention, Scene};
+    use lodcloth::estimate::{no_progress, FitOptions, LodProblem, Method};
+    use lodcloth::scene::MassConvention;
     use lodcloth::sim::SpringClass;
-    let dir = tempfile::tempdir().expect("temp dir");
-    std::fs::write(
-        dir.path().join("mesh.obj"),
-        generate::to_obj(&generate::sheet(0.4, 0.3, 0.03), "sheet"),
-    )
-    .expect("mesh");
+    let sheet = generate::sheet(0.4, 0.3, 0.03);
     let scene = |d: f64, c: f64| {
-        let path = dir.path().join(format!("scene-{d}.toml"));
-        std::fs::write(
-            &path,
-            format!(
+        crate::mesh::scene_of(
+            &sheet,
+            &format!(
                 "name = \"plate\"\n[cloth]\nmesh = \"mesh.obj\"\nareal_density = 0.2\n\
                  [material]\nstiffness = {{ stretch_u = 300.0, stretch_v = 300.0, shear = 40.0 }}\n\
                  damping_time = 1e-4\nbending_rigidity = {d}\nbending_damping = {c}\n\
@@ -204,16 +198,10 @@ fn lsq_recovers_a_mesh_cloths_bending_rigidity() {
                  [[pins]]\nnodes = {{ edge = \"top\" }}\n"
             ),
         )
-        .expect("scene");
-        Scene::load(&path).expect("a valid scene")
     };
-    let (truth, start) = (scene(2e-4, 2e-6), scene(8e-4, 1e-6));
-    let spec = RecordSpec {
-        frames: truth.steps(),
-        ..RecordSpec::PAPER
-    };
-    let reference =
-        std::sync::Arc::new(Reference::record(truth.build().expect("builds"), spec, &mut |_, _| {}).expect("records"));
+    // The directories live as long as the scenes that name them.
+    let ((_truth_dir, truth), (_start_dir, start)) = (scene(2e-4, 2e-6), scene(8e-4, 1e-6));
+    let reference = crate::common::record_whole_run(&truth);
     let own = LodProblem::at(
         &start,
         reference,

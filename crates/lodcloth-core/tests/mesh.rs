@@ -458,7 +458,7 @@ fn mesh_scene(extra: &str, cloth_extra: &str) -> (tempfile::TempDir, std::path::
 /// finite coefficients with BCD.
 #[test]
 fn a_mesh_scene_pins_the_same_vertices_at_every_level_and_its_reference_scores_zero() {
-    use lodcloth::estimate::{no_progress, FitOptions, LodProblem, Method, RecordSpec, Reference};
+    use lodcloth::estimate::{no_progress, FitOptions, LodProblem, Method};
     use lodcloth::level::Level;
     use lodcloth::scene::{MassConvention, Scene};
     let (_dir, path) = mesh_scene(
@@ -481,12 +481,7 @@ fn a_mesh_scene_pins_the_same_vertices_at_every_level_and_its_reference_scores_z
         p.sort_by(|a, b| a.partial_cmp(b).expect("finite"));
         assert_eq!(p, reference_pins, "pins at {level}");
     }
-    let spec = RecordSpec {
-        frames: scene.steps(),
-        ..RecordSpec::PAPER
-    };
-    let reference =
-        std::sync::Arc::new(Reference::record(scene.build().expect("builds"), spec, &mut |_, _| {}).expect("records"));
+    let reference = crate::common::record_whole_run(&scene);
     let own = LodProblem::at(
         &scene,
         reference.clone(),
@@ -555,7 +550,7 @@ fn a_mesh_scene_that_mixes_in_grid_fields_or_names_what_the_mesh_lacks_is_refuse
 }
 
 /// `mesh` written as `mesh.obj` beside a scene of `text`, loaded.
-fn scene_of(mesh: &TriMesh, text: &str) -> (tempfile::TempDir, lodcloth::scene::Scene) {
+pub(crate) fn scene_of(mesh: &TriMesh, text: &str) -> (tempfile::TempDir, lodcloth::scene::Scene) {
     let dir = tempfile::tempdir().expect("temp dir");
     std::fs::write(dir.path().join("mesh.obj"), generate::to_obj(mesh, "mesh")).expect("mesh");
     let path = dir.path().join("scene.toml");
@@ -575,7 +570,7 @@ fn scene_of(mesh: &TriMesh, text: &str) -> (tempfile::TempDir, lodcloth::scene::
 /// error 38.8 % against `same`'s 1.1 % (`lsq` 63.8 %).
 #[test]
 fn the_inverse_fits_keep_a_folding_mesh_levels_stretch_at_the_material() {
-    use lodcloth::estimate::{no_progress, Details, FitOptions, LodProblem, Method, RecordSpec, Reference};
+    use lodcloth::estimate::{no_progress, Details, FitOptions, LodProblem, Method};
     use lodcloth::level::Level;
     use lodcloth::scene::MassConvention;
     use lodcloth::sim::SpringClass;
@@ -587,12 +582,7 @@ fn the_inverse_fits_keep_a_folding_mesh_levels_stretch_at_the_material() {
          [[pins]]\nnodes = { edge = \"top\" }\n",
     );
     let all = scene.reference_level().nodes();
-    let spec = RecordSpec {
-        frames: scene.steps(),
-        ..RecordSpec::PAPER
-    };
-    let reference =
-        std::sync::Arc::new(Reference::record(scene.build().expect("builds"), spec, &mut |_, _| {}).expect("records"));
+    let reference = crate::common::record_whole_run(&scene);
     let level = LodProblem::at(
         &scene,
         reference,

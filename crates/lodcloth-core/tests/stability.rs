@@ -258,14 +258,14 @@ pub(crate) fn dense_mass_scaled_stiffness(
     // Bending stencils (a mesh with a bending rigidity): D·WᵀW per component.
     let (b, d) = (&topology.bending, material.get(lodcloth::sim::SpringClass::BendU).k);
     for st in 0..b.len() {
-        let entries = b.offsets[st] as usize..b.offsets[st + 1] as usize;
-        for e in entries.clone() {
-            for f in entries.clone() {
-                let (i, j) = (b.nodes[e] as usize, b.nodes[f] as usize);
+        let (nodes, weights) = b.row(st);
+        for (&i, &we) in nodes.iter().zip(weights) {
+            for (&j, &wf) in nodes.iter().zip(weights) {
+                let (i, j) = (i as usize, j as usize);
                 if slot[i] == usize::MAX || slot[j] == usize::MAX {
                     continue;
                 }
-                let scale = d * b.weights[e] * b.weights[f] / (masses[i] * masses[j]).sqrt();
+                let scale = d * we * wf / (masses[i] * masses[j]).sqrt();
                 for c in 0..3 {
                     a[3 * slot[i] + c][3 * slot[j] + c] += scale;
                 }

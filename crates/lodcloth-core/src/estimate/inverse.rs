@@ -483,17 +483,12 @@ fn spring_magnitudes(topology: &Topology, material: &Material, pos: &[f64], vel:
     let bending = &topology.bending;
     let co = material.get(SpringClass::BendU);
     for s in 0..bending.len() {
-        let (lo, hi) = (bending.offsets[s] as usize, bending.offsets[s + 1] as usize);
-        let mut g = [0.0; 3];
-        for e in lo..hi {
-            let (i, w) = (bending.nodes[e] as usize, bending.weights[e]);
-            for c in 0..3 {
-                g[c] += w * (co.k * pos[c * n + i] + co.c * vel[c * n + i]);
-            }
-        }
+        let (x, v) = (bending.value(s, pos), bending.value(s, vel));
+        let g = [0, 1, 2].map(|c| co.k * x[c] + co.c * v[c]);
         let g = dot(g, g).sqrt();
-        for e in lo..hi {
-            out[SpringClass::BendU.index()][bending.nodes[e] as usize] += bending.weights[e].abs() * g;
+        let (nodes, weights) = bending.row(s);
+        for (&i, w) in nodes.iter().zip(weights) {
+            out[SpringClass::BendU.index()][i as usize] += w.abs() * g;
         }
     }
 }

@@ -67,7 +67,7 @@ impl Bending {
 
     /// Stencil s's nodes and weights.
     #[inline(always)]
-    fn row(&self, s: usize) -> (&[u32], &[f64]) {
+    pub fn row(&self, s: usize) -> (&[u32], &[f64]) {
         let (a, b) = (self.offsets[s] as usize, self.offsets[s + 1] as usize);
         (&self.nodes[a..b], &self.weights[a..b])
     }
@@ -105,6 +105,12 @@ impl Bending {
             }
         }
         0.5 * k * energy
+    }
+
+    /// Stencil s applied to a `[x…, y…, z…]` field: `Σ_i w_si·x_i`.
+    pub fn value(&self, s: usize, x: &[f64]) -> [f64; 3] {
+        let (nodes, weights) = self.row(s);
+        Self::read(nodes, weights, x, x.len() / 3)
     }
 
     /// `out += scale·Wᵀ W x` (all `[x…, y…, z…]` of `n` nodes).

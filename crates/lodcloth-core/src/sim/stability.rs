@@ -155,20 +155,18 @@ pub fn modal_estimate(
         let bending = &topology.bending;
         let kb = if which == 0 { bend.k } else { bend.c };
         for st in 0..bending.len() {
-            let (lo, hi) = (bending.offsets[st] as usize, bending.offsets[st + 1] as usize);
+            let (nodes, weights) = bending.row(st);
             let mut r = [0.0; 3];
-            for e in lo..hi {
-                let i = bending.nodes[e] as usize;
-                let ww = bending.weights[e] * inv_sqrt_m[i];
+            for (&i, &wt) in nodes.iter().zip(weights) {
+                let ww = wt * inv_sqrt_m[i as usize];
                 for c in 0..3 {
-                    r[c] += ww * w[i][c];
+                    r[c] += ww * w[i as usize][c];
                 }
             }
-            for e in lo..hi {
-                let i = bending.nodes[e] as usize;
-                let ww = kb * bending.weights[e] * inv_sqrt_m[i];
+            for (&i, &wt) in nodes.iter().zip(weights) {
+                let ww = kb * wt * inv_sqrt_m[i as usize];
                 for c in 0..3 {
-                    y[i][c] += ww * r[c];
+                    y[i as usize][c] += ww * r[c];
                 }
             }
         }

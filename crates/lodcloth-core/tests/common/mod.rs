@@ -314,3 +314,13 @@ pub fn scalar_total_energy(
     }
     e
 }
+
+/// `scene`'s whole run recorded as a reference at the paper's strides.
+pub fn record_whole_run(scene: &lodcloth::scene::Scene) -> Arc<lodcloth::estimate::Reference> {
+    let spec = lodcloth::estimate::RecordSpec {
+        frames: scene.steps(),
+        ..lodcloth::estimate::RecordSpec::PAPER
+    };
+    let sim = scene.build().expect("builds");
+    Arc::new(lodcloth::estimate::Reference::record(sim, spec, &mut |_, _| {}).expect("records"))
+}
