@@ -42,12 +42,13 @@ use crate::sim::{Material, Membrane, Moduli, SpringClass, SpringCoeffs, SpringGr
 
 /// The mesh's stretch springs and bending stencils
 /// ([`super::bending::bending_stencils`]) instead of bend springs, its rest
-/// shape, triangles and lumped areas: a cloth with a bending rigidity.
+/// shape, triangles and lumped areas: a cloth with a bending rigidity,
+/// `pinned` its pinned vertices (empty: none).
 ///
 /// # Errors
 /// When the rest shape is not flat (the stencils bend about a flat sheet).
-pub fn plate_topology(mesh: &TriMesh) -> Result<Topology, String> {
-    let bending = super::bending::bending_stencils(mesh)?;
+pub fn plate_topology(mesh: &TriMesh, pinned: &[bool]) -> Result<Topology, String> {
+    let bending = super::bending::bending_stencils(mesh, pinned)?;
     let mut topology = mesh_topology(mesh);
     topology.groups.retain(|g| g.kind() != SpringKind::Bend);
     topology.bending = bending;

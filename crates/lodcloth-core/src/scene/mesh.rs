@@ -73,7 +73,7 @@ impl Scene {
                 locked[k as usize] = true;
             }
         }
-        let topology = topology_of(&reference, bending);
+        let topology = topology_of(&reference, bending, &locked);
         self.params.material = mesh::mesh_material(&membrane, &topology, bending);
         self.nx = reference.vertices();
         self.ny = 1;
@@ -121,9 +121,11 @@ impl Scene {
                 let simplified = mesh::simplify(&m.reference, n, &m.locked, &m.file.display().to_string())
                     .map_err(|e| invalid(format!("level {level}: {e}")))?;
                 let simplified = Arc::new(simplified);
+                let pinned: Vec<bool> = simplified.source.iter().map(|&k| m.locked[k as usize]).collect();
                 let topology = Topology {
                     mesh: Some(simplified.clone()),
-                    ..level_topology(&simplified.mesh, m.bending).map_err(|e| invalid(format!("level {level}: {e}")))?
+                    ..level_topology(&simplified.mesh, m.bending, &pinned)
+                        .map_err(|e| invalid(format!("level {level}: {e}")))?
                 };
                 Ok(ClothLevel {
                     level,
@@ -178,15 +180,15 @@ impl Scene {
 /// A mesh's topology: bend springs, or bending stencils when the scene
 /// gives a bending rigidity (its flat rest shape was validated, and a
 /// simplified level of a flat mesh is flat).
-fn topology_of(mesh: &TriMesh, bending: Option<SpringCoeffs>) -> Topology {
-    level_topology(mesh, bending).expect("a validated flat mesh has stencils")
+fn topology_of(mesh: &TriMesh, bending: Option<SpringCoeffs>, pinned: &[bool]) -> Topology {
+    level_topology(mesh, bending, pinned).expect("a validated flat mesh has stencils")
 }
 
 /// [`topology_of`] for a simplified level, which could in principle fail
 /// (a degenerate triangle).
-fn level_topology(mesh: &TriMesh, bending: Option<SpringCoeffs>) -> Result<Topology, String> {
+fn level_topology(mesh: &TriMesh, bending: Option<SpringCoeffs>, pinned: &[bool]) -> Result<Topology, String> {
     match bending {
-        Some(_) => mesh::plate_topology(mesh),
+        Some(_) => mesh::plate_topology(mesh, pinned),
         None => Ok(mesh::mesh_topology(mesh)),
     }
 }

@@ -255,7 +255,7 @@ impl Problems {
                 0.0
             }
         };
-        if let Err(e) = crate::mesh::bending_stencils(mesh) {
+        if let Err(e) = crate::mesh::bending_stencils(mesh, &[]) {
             self.push(format!("material.bending_rigidity: {e}"));
         }
         Some(SpringCoeffs { k: d, c })
