@@ -1,0 +1,424 @@
+//! What a mesh cloth's drape coefficient depends on: the mesh's resolution,
+//! the level's bending and stretch coefficients, and where the level starts.
+//! Every run steps a level of the scene (any vertex count, its own mesh at
+//! 100 %) with the scene's material made there (`same`), its bend class
+//! and stretch classes' K optionally scaled, and prints the Cusick drape
+//! coefficient at every whole second, the folds at the end and the strain
+//! of the stretch springs over the overhang.
+//!
+//! ```text
+//! cargo run --release --example drape_scan -- run SCENE --levels 721v,100% [--bend 1,1.35] [--stretch 2] [--dt 1e-4] [--csv FILE]
+//! cargo run --release --example drape_scan -- restart SCENE --levels 1081v,721v [--bend 1,1.35] [--stretch 2] [--csv FILE]
+//! cargo run --release --example drape_scan -- write SCENE --levels 1800v --out LEVEL.obj
+//! cargo run --release --example drape_scan -- chart --csv FILE --out CHART.svg
+//! ```
+//!
+//! `restart` steps the scene's reference for its duration and prints, at
+//! every second, the bending energy each level's stencils read on the
+//! reference's own vertices (a level's vertices are reference vertices)
+//! against the reference's; then each level starts from the reference's
+//! last shape, at rest, and runs 3 s. `write` saves a level as OBJ, to be
+//! used as another scene's mesh (a reference of that resolution).
+//! `--csv` appends every run to FILE (made with its header when absent);
+//! `chart` draws its runs from rest: the DC at their end against the
+//! vertex count, one series per bend and stretch scale.
+//! Runs go two at a time (rayon). Measured with it: docs/results.md,
+//! "Mesh cloths".
+use lodcloth_core::drape::{drape_coefficient, fold_count, shadow_area};
+use lodcloth_core::level::GridLevel;
+use lodcloth_core::scene::{ClothLevel, Scene};
+use lodcloth_core::sim::{Material, Shape, Simulation, SpringClass, SpringKind};
+use rayon::prelude::*;
+
+/// Shadow pixels (m), as the drape bench.
+const PIXEL: f64 = 1e-3;
+
+fn flag<'a>(args: &'a [String], name: &str) -> Option<&'a str> {
+    args.iter()
+        .position(|a| a == name)
+        .and_then(|i| args.get(i + 1))
+        .map(String::as_str)
+}
+
+fn numbers(args: &[String], name: &str, default: f64) -> Vec<f64> {
+    flag(args, name).map_or(vec![default], |s| {
+        s.split(',')
+            .map(|x| x.parse().unwrap_or_else(|_| panic!("{name}: numbers, comma-separated")))
+            .collect()
+    })
+}
+
+/// The scene, its stepping geometry and the levels asked for.
+struct Setup {
+    scene: Scene,
+    cloth: f64,
+    support: f64,
+    levels: Vec<ClothLevel>,
+}
+
+impl Setup {
+    fn new(args: &[String]) -> Setup {
+        let file = args.get(2).expect("a scene file");
+        let scene = Scene::load(std::path::Path::new(file)).expect("scene");
+        let mesh = scene.mesh.as_ref().expect("a mesh scene");
+        let support = match scene.colliders().first().map(|c| &c.shape) {
+            Some(&Shape::Cylinder { radius, .. }) => std::f64::consts::PI * radius * radius,
+            _ => panic!("a Cusick scene: its first collider an upright cylinder"),
+        };
+        let levels = flag(args, "--levels")
+            .expect("--levels")
+            .split(',')
+            .map(|l| {
+                let level = l
+                    .parse::<GridLevel>()
+                    .expect("--levels: Nv or P%")
+                    .on(scene.width, scene.height, Some(mesh.reference.vertices()))
+                    .expect("a level of this scene");
+                scene.cloth_level(level).expect("a level")
+            })
+            .collect();
+        Setup {
+            cloth: mesh.area,
+            support,
+            levels,
+            scene,
+        }
+    }
+
+    /// The scene's material on `cloth`, bend class and stretch K scaled.
+    fn material(&self, cloth: &ClothLevel, bend: f64, stretch: f64) -> Material {
+        let mut m = self.scene.material_on(cloth);
+        for class in SpringClass::ALL {
+            let s = &mut m.springs[class.index()];
+            match class.kind() {
+                SpringKind::Bend => {
+                    s.k *= bend;
+                    s.c *= bend;
+                }
+                SpringKind::Structural | SpringKind::Shear => s.k *= stretch,
+            }
+        }
+        m
+    }
+
+    fn dc(&self, sim: &Simulation) -> f64 {
+        drape_coefficient(
+            shadow_area(&sim.topology().triangles, &sim.state().pos, PIXEL),
+            self.cloth,
+            self.support,
+        )
+    }
+
+    /// `sim` stepped `seconds` more, DC after each.
+    fn stepped(&self, sim: &mut Simulation, seconds: usize) -> Vec<f64> {
+        let (dt, t0) = (sim.params().dt, sim.state().time);
+        (1..=seconds)
+            .map(|t| {
+                while sim.state().time < t0 + t as f64 - 0.5 * dt {
+                    assert!(sim.step().finite, "diverged");
+                }
+                self.dc(sim)
+            })
+            .collect()
+    }
+
+    /// The scene's file name, for CSV rows.
+    fn name(&self) -> String {
+        self.scene.origin.rsplit('/').next().unwrap_or_default().to_string()
+    }
+}
+
+const HEADER: &str = "scene,vertices,bend_scale,stretch_scale,dt_s,start,time_s,drape_coefficient,folds_at_end";
+
+/// One run's rows (one per second) for `--csv`.
+struct Run<'a> {
+    scene: String,
+    vertices: usize,
+    bend: f64,
+    stretch: f64,
+    dt: f64,
+    start: &'a str,
+    dc: Vec<f64>,
+    folds: Option<usize>,
+}
+
+impl Run<'_> {
+    fn rows(&self) -> String {
+        let folds = self.folds.map_or(String::new(), |f| f.to_string());
+        self.dc
+            .iter()
+            .enumerate()
+            .map(|(t, dc)| {
+                format!(
+                    "{},{},{},{},{:e},{},{},{dc:.5},{folds}\n",
+                    self.scene,
+                    self.vertices,
+                    self.bend,
+                    self.stretch,
+                    self.dt,
+                    self.start,
+                    t + 1
+                )
+            })
+            .collect()
+    }
+
+    fn cells(&self) -> String {
+        self.dc.iter().map(|d| format!(" {d:.4}")).collect()
+    }
+}
+
+/// Append `runs` to the `--csv` file, if one was given.
+fn append(args: &[String], runs: &[Run<'_>]) {
+    let Some(path) = flag(args, "--csv") else { return };
+    let fresh = !std::path::Path::new(path).exists();
+    let mut text = if fresh { format!("{HEADER}\n") } else { String::new() };
+    for r in runs {
+        text.push_str(&r.rows());
+    }
+    use std::io::Write;
+    std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(path)
+        .and_then(|mut f| f.write_all(text.as_bytes()))
+        .unwrap_or_else(|e| panic!("{path}: {e}"));
+}
+
+/// 5th percentile, median and mean compression of the stretch springs whose
+/// two ends lie beyond the support (rest distance from the axis).
+fn overhang_strain(sim: &Simulation, support_radius: f64) -> String {
+    let topo = sim.topology();
+    let (pos, n) = (&sim.state().pos, topo.n_nodes);
+    let r = |i: usize| topo.rest_positions[i][0].hypot(topo.rest_positions[i][2]);
+    let mut e: Vec<f64> = Vec::new();
+    for g in topo.groups.iter().filter(|g| g.class.kind() == SpringKind::Structural) {
+        for k in 0..g.len() {
+            let (a, b) = (g.a[k] as usize, g.b[k] as usize);
+            if r(a).min(r(b)) > support_radius {
+                let l = (0..3)
+                    .map(|c| (pos[c * n + b] - pos[c * n + a]).powi(2))
+                    .sum::<f64>()
+                    .sqrt();
+                e.push(l / g.rest[k] - 1.0);
+            }
+        }
+    }
+    if e.is_empty() {
+        return String::new();
+    }
+    e.sort_by(f64::total_cmp);
+    let compression = e.iter().map(|x| (-x).max(0.0)).sum::<f64>() / e.len() as f64;
+    format!(
+        "; overhang strain p5 {:+.4}, median {:+.4}, mean compression {:.4}",
+        e[e.len() / 20],
+        e[e.len() / 2],
+        compression
+    )
+}
+
+fn run(args: &[String]) {
+    let setup = Setup::new(args);
+    let (bends, stretch) = (numbers(args, "--bend", 1.0), numbers(args, "--stretch", 1.0)[0]);
+    let dt = flag(args, "--dt").map(|s| s.parse::<f64>().expect("--dt: seconds"));
+    let support_radius = (setup.support / std::f64::consts::PI).sqrt();
+    let jobs: Vec<(&ClothLevel, f64)> = setup
+        .levels
+        .iter()
+        .flat_map(|l| bends.iter().map(move |&b| (l, b)))
+        .collect();
+    let runs: Vec<Run<'_>> = jobs
+        .par_iter()
+        .map(|&(cloth, bend)| {
+            let clock = std::time::Instant::now();
+            let mut scene = setup.scene.clone();
+            if let Some(dt) = dt {
+                scene.params.dt = dt;
+            }
+            let mut sim = scene
+                .build_on(cloth, setup.material(cloth, bend, stretch))
+                .expect("builds");
+            let dc = setup.stepped(&mut sim, setup.scene.duration.round() as usize);
+            let folds = fold_count(&sim.topology().rest_positions, &sim.state().pos, [0.0, 0.0]);
+            let run = Run {
+                scene: setup.name(),
+                vertices: cloth.topology.n_nodes,
+                bend,
+                stretch,
+                dt: sim.params().dt,
+                start: "rest",
+                dc,
+                folds: Some(folds),
+            };
+            println!(
+                "{} bend ×{bend} stretch ×{stretch} dt {:e}: DC{}; {folds} folds{} ({:.0} s)",
+                cloth.level,
+                run.dt,
+                run.cells(),
+                overhang_strain(&sim, support_radius),
+                clock.elapsed().as_secs_f64()
+            );
+            run
+        })
+        .collect();
+    append(args, &runs);
+}
+
+fn restart(args: &[String]) {
+    let setup = Setup::new(args);
+    let (bends, stretch) = (numbers(args, "--bend", 1.0), numbers(args, "--stretch", 1.0)[0]);
+    let mut reference = setup.scene.build().expect("builds");
+    let n = reference.topology().n_nodes;
+    let points = |pos: &[f64], of: &[u32]| -> Vec<[f64; 3]> {
+        of.iter()
+            .map(|&k| [pos[k as usize], pos[n + k as usize], pos[2 * n + k as usize]])
+            .collect()
+    };
+    let all: Vec<u32> = (0..n as u32).collect();
+    let seconds = setup.scene.duration.round() as usize;
+    for t in 1..=seconds {
+        setup.stepped(&mut reference, 1);
+        let pos = &reference.state().pos;
+        let fine = reference.topology().bending.energy_of(&points(pos, &all));
+        let ratios: Vec<String> = setup
+            .levels
+            .iter()
+            .map(|l| {
+                let source = &l.mesh.as_ref().expect("a mesh level").source;
+                let coarse = l.topology.bending.energy_of(&points(pos, source));
+                format!("{} {:.3}", l.level, fine / coarse)
+            })
+            .collect();
+        println!(
+            "t = {t} s: reference DC {:.4}; its bending energy over each level's: {}",
+            setup.dc(&reference),
+            ratios.join(", ")
+        );
+    }
+    let pos = reference.state().pos.clone();
+    let jobs: Vec<(&ClothLevel, f64)> = setup
+        .levels
+        .iter()
+        .flat_map(|l| bends.iter().map(move |&b| (l, b)))
+        .collect();
+    let start = format!("reference at {seconds} s");
+    let runs: Vec<Run<'_>> = jobs
+        .par_iter()
+        .map(|&(cloth, bend)| {
+            let mut sim = setup
+                .scene
+                .build_on(cloth, setup.material(cloth, bend, stretch))
+                .expect("builds");
+            let source = &cloth.mesh.as_ref().expect("a mesh level").source;
+            let m = source.len();
+            let mut state = sim.state().clone();
+            for c in 0..3 {
+                for (k, &j) in source.iter().enumerate() {
+                    state.pos[c * m + k] = pos[c * n + j as usize];
+                }
+            }
+            sim.set_state(state).expect("same size");
+            let first = setup.dc(&sim);
+            let run = Run {
+                scene: setup.name(),
+                vertices: m,
+                bend,
+                stretch,
+                dt: sim.params().dt,
+                start: &start,
+                dc: setup.stepped(&mut sim, 3),
+                folds: None,
+            };
+            println!(
+                "{} bend ×{bend} stretch ×{stretch}, from the reference's last shape: DC {first:.4} →{}",
+                cloth.level,
+                run.cells()
+            );
+            run
+        })
+        .collect();
+    append(args, &runs);
+}
+
+fn write(args: &[String]) {
+    let setup = Setup::new(args);
+    let out = flag(args, "--out").expect("--out FILE.obj");
+    let level = setup.levels.first().expect("one level");
+    let mesh = &level.mesh.as_ref().expect("a mesh level").mesh;
+    let comment = format!("level {} of {}", level.level, args[2]);
+    std::fs::write(out, lodcloth_core::mesh::generate::to_obj(mesh, &comment)).expect("writes");
+}
+
+/// The runs from rest in `--csv`: DC at each run's end against its vertex
+/// count, one series per bend and stretch scale.
+fn chart(args: &[String]) {
+    use lodcloth::output::{line_chart_svg, Series, PALETTE};
+    let path = flag(args, "--csv").expect("--csv FILE");
+    let out = flag(args, "--out").expect("--out CHART.svg");
+    let mut reader = csv::Reader::from_path(path).unwrap_or_else(|e| panic!("{path}: {e}"));
+    // (bend, stretch) → run (scene, vertices, dt) → (last time, DC).
+    type Key = (String, String);
+    let mut last: std::collections::BTreeMap<(Key, String, String, String), (f64, f64)> = Default::default();
+    for row in reader.records() {
+        let row = row.unwrap_or_else(|e| panic!("{path}: {e}"));
+        if &row[5] != "rest" {
+            continue;
+        }
+        let number = |i: usize| {
+            row[i]
+                .parse::<f64>()
+                .unwrap_or_else(|_| panic!("{path}: column {i}: {}", &row[i]))
+        };
+        let key = (
+            (row[2].to_string(), row[3].to_string()),
+            row[0].to_string(),
+            row[1].to_string(),
+            row[4].to_string(),
+        );
+        let (t, dc) = (number(6), number(7));
+        let e = last.entry(key).or_insert((t, dc));
+        if t >= e.0 {
+            *e = (t, dc);
+        }
+    }
+    let mut series: std::collections::BTreeMap<Key, Vec<(f64, f64)>> = Default::default();
+    for ((scales, _, vertices, _), (_, dc)) in last {
+        series
+            .entry(scales)
+            .or_default()
+            .push((vertices.parse().expect("vertices"), dc));
+    }
+    let names: Vec<String> = series.keys().map(|(b, s)| format!("bend ×{b}, stretch ×{s}")).collect();
+    let drawn: Vec<Series<'_>> = series
+        .into_values()
+        .zip(&names)
+        .enumerate()
+        .map(|(i, (points, name))| Series {
+            name,
+            points,
+            markers: true,
+            color: PALETTE[i % PALETTE.len()],
+        })
+        .collect();
+    line_chart_svg(
+        std::path::Path::new(out),
+        "Cusick drape coefficient at the end of each run, from rest",
+        "vertices",
+        "drape coefficient",
+        &drawn,
+        true,
+        false,
+    )
+    .unwrap_or_else(|e| panic!("{out}: {e}"));
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    match args.get(1).map(String::as_str) {
+        Some("run") => run(&args),
+        Some("restart") => restart(&args),
+        Some("write") => write(&args),
+        Some("chart") => chart(&args),
+        _ => eprintln!("usage: drape_scan run|restart|write SCENE --levels …, or chart --csv … (see the file's docs)"),
+    }
+}
