@@ -385,3 +385,51 @@ fn a_clamped_strip_sags_by_the_beams_deflection() {
         "extrapolated {extrapolated} against the beam's {analytic}"
     );
 }
+
+/// A mesh scene's pins reach its stencils, at the reference and at a
+/// level: the scene's bending is its mesh's plate topology with the pinned
+/// vertices (the level's, through its reference vertices) as clamps, and
+/// not the free sheet's.
+#[test]
+fn a_mesh_scenes_pinned_region_clamps_its_stencils_at_every_level() {
+    use lodcloth::level::Level;
+    let sheet = generate::sheet(0.14, 0.03, 0.005);
+    let clamp: Vec<usize> = (0..sheet.vertices())
+        .filter(|&k| sheet.positions[k][0] <= 0.02 + 1e-9)
+        .collect();
+    let (_dir, scene) = crate::mesh::scene_of(
+        &sheet,
+        &format!(
+            "name = \"strip\"\n[cloth]\nmesh = \"mesh.obj\"\nareal_density = 0.2\n\
+             [material]\nstiffness = {{ stretch_u = 300.0, stretch_v = 300.0, shear = 40.0 }}\n\
+             damping_time = 1e-4\nbending_rigidity = 1e-4\n\
+             [simulation]\nintegrator = \"implicit_euler\"\ndt = 1e-3\nduration = 0.1\n\
+             [[pins]]\nnodes = {{ vertices = {clamp:?} }}\n"
+        ),
+    );
+    let cloth = scene.mesh.as_ref().expect("a mesh scene");
+    assert_eq!(cloth.locked.iter().filter(|&&l| l).count(), clamp.len());
+    let plate = |m: &TriMesh, pinned: &[bool]| mesh::plate_topology(m, pinned).expect("flat").bending;
+    let reference = scene.build().expect("builds");
+    // (Bending's Debug is thousands of numbers: compare, then say which.)
+    assert!(
+        reference.topology().bending == plate(&cloth.reference, &cloth.locked),
+        "the reference's stencils are not its pinned plate's"
+    );
+    assert!(
+        reference.topology().bending != plate(&cloth.reference, &[]),
+        "the reference's stencils are a free sheet's"
+    );
+    let level = scene.cloth_level(Level::Vertices(120)).expect("a level");
+    let simplified = level.mesh.as_ref().expect("a mesh level");
+    let pinned: Vec<bool> = simplified.source.iter().map(|&k| cloth.locked[k as usize]).collect();
+    assert!(pinned.iter().filter(|&&p| p).count() == clamp.len(), "pins are locked");
+    assert!(
+        level.topology.bending == plate(&simplified.mesh, &pinned),
+        "the level's stencils are not its pinned plate's"
+    );
+    assert!(
+        level.topology.bending != plate(&simplified.mesh, &[]),
+        "the level's stencils are a free sheet's"
+    );
+}
