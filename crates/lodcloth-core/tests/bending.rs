@@ -321,9 +321,7 @@ fn a_clamped_strip_sags_by_the_beams_deflection() {
         let pinned: Vec<bool> = strip.positions.iter().map(|p| p[0] <= clamp + 1e-9).collect();
         let topology = Arc::new(mesh::plate_topology(&strip, &pinned).expect("flat"));
         let material = mesh::mesh_material(&membrane, &topology, Some(SpringCoeffs { k: d, c: 0.0 }));
-        let clamped: Vec<usize> = (0..topology.n_nodes)
-            .filter(|&k| topology.rest_positions[k][0] <= clamp + 1e-9)
-            .collect();
+        let clamped: Vec<usize> = (0..topology.n_nodes).filter(|&k| pinned[k]).collect();
         let tip: Vec<usize> = (0..topology.n_nodes)
             .filter(|&k| topology.rest_positions[k][0] >= length - 1e-9)
             .collect();

@@ -141,6 +141,9 @@ fn hessian_stencils(mesh: &TriMesh, pinned: &[bool]) -> Bending {
     let mut ring: Vec<u32> = Vec::new();
     let mut seen = vec![false; n];
     for i in 0..n {
+        if clamp[i] == 0.0 {
+            continue; // inside a clamp: no bending energy
+        }
         // Rings of neighbours until the fit is well posed.
         ring.clear();
         ring.push(i as u32);
@@ -171,9 +174,6 @@ fn hessian_stencils(mesh: &TriMesh, pinned: &[bool]) -> Bending {
         // A vertex with no well-posed fit within MAX_RINGS (a tiny mesh)
         // adds no stencil.
         let Some(r) = fit else { continue };
-        if clamp[i] == 0.0 {
-            continue;
-        }
         for (row, weight) in r.iter().zip([1.0, 2.0, 1.0]) {
             let s = (weight * clamp[i] * areas[i]).sqrt();
             rows.push(ring.iter().zip(row).map(|(&j, &w)| (j, w * s)).collect());
