@@ -352,7 +352,8 @@ fn write(args: &[String]) {
 /// The runs from rest in `--csv`: DC at each run's end against its vertex
 /// count, one series per bend and stretch scale.
 fn chart(args: &[String]) {
-    use lodcloth::output::{line_chart_svg, Series, PALETTE};
+    use lodcloth::output::{line_chart_svg_legend, Series, PALETTE};
+    use plotters::prelude::SeriesLabelPosition;
     let path = flag(args, "--csv").expect("--csv FILE");
     let out = flag(args, "--out").expect("--out CHART.svg");
     let mut reader = csv::Reader::from_path(path).unwrap_or_else(|e| panic!("{path}: {e}"));
@@ -400,14 +401,13 @@ fn chart(args: &[String]) {
             color: PALETTE[i % PALETTE.len()],
         })
         .collect();
-    line_chart_svg(
+    line_chart_svg_legend(
         std::path::Path::new(out),
         "Cusick drape coefficient at the end of each run, from rest",
-        "vertices",
-        "drape coefficient",
+        ("vertices", "drape coefficient"),
         &drawn,
-        true,
-        false,
+        (true, false),
+        SeriesLabelPosition::LowerRight,
     )
     .unwrap_or_else(|e| panic!("{out}: {e}"));
 }

@@ -16,7 +16,8 @@ pub struct Series<'a> {
 }
 
 /// A chart of several series to an SVG file. Log axes when requested
-/// (non-positive values are then skipped).
+/// (non-positive values are then skipped). The legend is at the middle of
+/// the right side ([`line_chart_svg_legend`] puts it elsewhere).
 pub fn line_chart_svg(
     path: &Path,
     title: &str,
@@ -25,6 +26,26 @@ pub fn line_chart_svg(
     series: &[Series<'_>],
     log_x: bool,
     log_y: bool,
+) -> Result<(), OutputError> {
+    line_chart_svg_legend(
+        path,
+        title,
+        (x_label, y_label),
+        series,
+        (log_x, log_y),
+        SeriesLabelPosition::MiddleRight,
+    )
+}
+
+/// [`line_chart_svg`] with its legend at `legend`, for charts whose data
+/// lies where the legend would; labels and log axes as (x, y).
+pub fn line_chart_svg_legend(
+    path: &Path,
+    title: &str,
+    (x_label, y_label): (&str, &str),
+    series: &[Series<'_>],
+    (log_x, log_y): (bool, bool),
+    legend: SeriesLabelPosition,
 ) -> Result<(), OutputError> {
     let draw_err = |e: String| OutputError::Draw {
         path: path.display().to_string(),
@@ -79,6 +100,7 @@ pub fn line_chart_svg(
             }
             chart
                 .configure_series_labels()
+                .position(legend.clone())
                 .background_style(WHITE.mix(0.8))
                 .border_style(BLACK)
                 .draw()

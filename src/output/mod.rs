@@ -13,7 +13,7 @@ mod trajectory;
 
 use std::path::Path;
 
-pub use chart::{line_chart_svg, Series, PALETTE};
+pub use chart::{line_chart_svg, line_chart_svg_legend, Series, PALETTE};
 pub use csv_table::CsvTable;
 pub use error_map::{error_map_svg, heat_color, ClothPanel};
 pub use render::{render_png, render_points_png};
