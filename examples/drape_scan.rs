@@ -24,6 +24,8 @@
 //! vertex count, one series per bend and stretch scale.
 //! Runs go two at a time (rayon). Measured with it: docs/results.md,
 //! "Mesh cloths".
+use std::path::{Path, PathBuf};
+
 use lodcloth_core::drape::{drape_coefficient, fold_count, shadow_area};
 use lodcloth_core::level::GridLevel;
 use lodcloth_core::scene::{ClothLevel, Scene};
@@ -33,19 +35,60 @@ use rayon::prelude::*;
 /// Shadow pixels (m), as the drape bench.
 const PIXEL: f64 = 1e-3;
 
-fn flag<'a>(args: &'a [String], name: &str) -> Option<&'a str> {
-    args.iter()
-        .position(|a| a == name)
-        .and_then(|i| args.get(i + 1))
-        .map(String::as_str)
+#[derive(clap::Parser)]
+#[command(about = "The Cusick drape coefficient of a mesh cloth's levels and meshes")]
+enum Command {
+    /// Step each level from rest, its bend class scaled by each --bend.
+    Run {
+        #[command(flatten)]
+        runs: Runs,
+        /// The time step (s); default the scene's.
+        #[arg(long)]
+        dt: Option<f64>,
+    },
+    /// Step the reference, then each level from its last shape, at rest.
+    Restart {
+        #[command(flatten)]
+        runs: Runs,
+    },
+    /// Save the (first) level as OBJ.
+    Write {
+        #[command(flatten)]
+        levels: Levels,
+        #[arg(long)]
+        out: PathBuf,
+    },
+    /// Draw the runs from rest in a CSV written by --csv.
+    Chart {
+        #[arg(long)]
+        csv: PathBuf,
+        #[arg(long)]
+        out: PathBuf,
+    },
 }
 
-fn numbers(args: &[String], name: &str, default: f64) -> Vec<f64> {
-    flag(args, name).map_or(vec![default], |s| {
-        s.split(',')
-            .map(|x| x.parse().unwrap_or_else(|_| panic!("{name}: numbers, comma-separated")))
-            .collect()
-    })
+#[derive(clap::Args)]
+struct Levels {
+    /// A Cusick scene with a mesh cloth.
+    scene: PathBuf,
+    /// Levels: vertex counts (`721v`) or shares of the mesh (`60%`, `100%`).
+    #[arg(long, value_delimiter = ',', required = true)]
+    levels: Vec<GridLevel>,
+}
+
+#[derive(clap::Args)]
+struct Runs {
+    #[command(flatten)]
+    levels: Levels,
+    /// Scales of the levels' bend class (K and C).
+    #[arg(long, value_delimiter = ',', default_value = "1")]
+    bend: Vec<f64>,
+    /// Scale of every stretch and shear K.
+    #[arg(long, default_value_t = 1.0)]
+    stretch: f64,
+    /// Append every run to this CSV.
+    #[arg(long)]
+    csv: Option<PathBuf>,
 }
 
 /// The scene, its stepping geometry and the levels asked for.
@@ -57,24 +100,21 @@ struct Setup {
 }
 
 impl Setup {
-    fn new(args: &[String]) -> Setup {
-        let file = args.get(2).expect("a scene file");
-        let scene = Scene::load(std::path::Path::new(file)).expect("scene");
+    fn new(args: &Levels) -> Setup {
+        let scene = Scene::load(&args.scene).unwrap_or_else(|e| panic!("{}: {e}", args.scene.display()));
         let mesh = scene.mesh.as_ref().expect("a mesh scene");
         let support = match scene.colliders().first().map(|c| &c.shape) {
             Some(&Shape::Cylinder { radius, .. }) => std::f64::consts::PI * radius * radius,
             _ => panic!("a Cusick scene: its first collider an upright cylinder"),
         };
-        let levels = flag(args, "--levels")
-            .expect("--levels")
-            .split(',')
+        let levels = args
+            .levels
+            .iter()
             .map(|l| {
                 let level = l
-                    .parse::<GridLevel>()
-                    .expect("--levels: Nv or P%")
                     .on(scene.width, scene.height, Some(mesh.reference.vertices()))
-                    .expect("a level of this scene");
-                scene.cloth_level(level).expect("a level")
+                    .unwrap_or_else(|e| panic!("--levels {l}: {e}"));
+                scene.cloth_level(level).unwrap_or_else(|e| panic!("--levels {l}: {e}"))
             })
             .collect();
         Setup {
@@ -169,9 +209,9 @@ impl Run<'_> {
 }
 
 /// Append `runs` to the `--csv` file, if one was given.
-fn append(args: &[String], runs: &[Run<'_>]) {
-    let Some(path) = flag(args, "--csv") else { return };
-    let fresh = !std::path::Path::new(path).exists();
+fn append(csv: Option<&Path>, runs: &[Run<'_>]) {
+    let Some(path) = csv else { return };
+    let fresh = !path.exists();
     let mut text = if fresh { format!("{HEADER}\n") } else { String::new() };
     for r in runs {
         text.push_str(&r.rows());
@@ -182,7 +222,7 @@ fn append(args: &[String], runs: &[Run<'_>]) {
         .append(true)
         .open(path)
         .and_then(|mut f| f.write_all(text.as_bytes()))
-        .unwrap_or_else(|e| panic!("{path}: {e}"));
+        .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
 }
 
 /// 5th percentile, median and mean compression of the stretch springs whose
@@ -217,10 +257,9 @@ fn overhang_strain(sim: &Simulation, support_radius: f64) -> String {
     )
 }
 
-fn run(args: &[String]) {
-    let setup = Setup::new(args);
-    let (bends, stretch) = (numbers(args, "--bend", 1.0), numbers(args, "--stretch", 1.0)[0]);
-    let dt = flag(args, "--dt").map(|s| s.parse::<f64>().expect("--dt: seconds"));
+fn run(args: &Runs, dt: Option<f64>) {
+    let setup = Setup::new(&args.levels);
+    let (bends, stretch) = (&args.bend, args.stretch);
     let support_radius = (setup.support / std::f64::consts::PI).sqrt();
     let jobs: Vec<(&ClothLevel, f64)> = setup
         .levels
@@ -261,12 +300,12 @@ fn run(args: &[String]) {
             run
         })
         .collect();
-    append(args, &runs);
+    append(args.csv.as_deref(), &runs);
 }
 
-fn restart(args: &[String]) {
-    let setup = Setup::new(args);
-    let (bends, stretch) = (numbers(args, "--bend", 1.0), numbers(args, "--stretch", 1.0)[0]);
+fn restart(args: &Runs) {
+    let setup = Setup::new(&args.levels);
+    let (bends, stretch) = (&args.bend, args.stretch);
     let mut reference = setup.scene.build().expect("builds");
     let n = reference.topology().n_nodes;
     let points = |pos: &[f64], of: &[u32]| -> Vec<[f64; 3]> {
@@ -337,38 +376,37 @@ fn restart(args: &[String]) {
             run
         })
         .collect();
-    append(args, &runs);
+    append(args.csv.as_deref(), &runs);
 }
 
-fn write(args: &[String]) {
+fn write(args: &Levels, out: &Path) {
     let setup = Setup::new(args);
-    let out = flag(args, "--out").expect("--out FILE.obj");
     let level = setup.levels.first().expect("one level");
     let mesh = &level.mesh.as_ref().expect("a mesh level").mesh;
-    let comment = format!("level {} of {}", level.level, args[2]);
-    std::fs::write(out, lodcloth_core::mesh::generate::to_obj(mesh, &comment)).expect("writes");
+    let comment = format!("level {} of {}", level.level, args.scene.display());
+    std::fs::write(out, lodcloth_core::mesh::generate::to_obj(mesh, &comment))
+        .unwrap_or_else(|e| panic!("{}: {e}", out.display()));
 }
 
 /// The runs from rest in `--csv`: DC at each run's end against its vertex
 /// count, one series per bend and stretch scale.
-fn chart(args: &[String]) {
+fn chart(path: &Path, out: &Path) {
     use lodcloth::output::{line_chart_svg_legend, Series, PALETTE};
     use plotters::prelude::SeriesLabelPosition;
-    let path = flag(args, "--csv").expect("--csv FILE");
-    let out = flag(args, "--out").expect("--out CHART.svg");
-    let mut reader = csv::Reader::from_path(path).unwrap_or_else(|e| panic!("{path}: {e}"));
+    let shown = path.display();
+    let mut reader = csv::Reader::from_path(path).unwrap_or_else(|e| panic!("{shown}: {e}"));
     // (bend, stretch) → run (scene, vertices, dt) → (last time, DC).
     type Key = (String, String);
     let mut last: std::collections::BTreeMap<(Key, String, String, String), (f64, f64)> = Default::default();
     for row in reader.records() {
-        let row = row.unwrap_or_else(|e| panic!("{path}: {e}"));
+        let row = row.unwrap_or_else(|e| panic!("{shown}: {e}"));
         if &row[5] != "rest" {
             continue;
         }
         let number = |i: usize| {
             row[i]
                 .parse::<f64>()
-                .unwrap_or_else(|_| panic!("{path}: column {i}: {}", &row[i]))
+                .unwrap_or_else(|_| panic!("{shown}: column {i}: {}", &row[i]))
         };
         let key = (
             (row[2].to_string(), row[3].to_string()),
@@ -402,23 +440,21 @@ fn chart(args: &[String]) {
         })
         .collect();
     line_chart_svg_legend(
-        std::path::Path::new(out),
+        out,
         "Cusick drape coefficient at the end of each run, from rest",
         ("vertices", "drape coefficient"),
         &drawn,
         (true, false),
         SeriesLabelPosition::LowerRight,
     )
-    .unwrap_or_else(|e| panic!("{out}: {e}"));
+    .unwrap_or_else(|e| panic!("{}: {e}", out.display()));
 }
 
 fn main() {
-    let args: Vec<String> = std::env::args().collect();
-    match args.get(1).map(String::as_str) {
-        Some("run") => run(&args),
-        Some("restart") => restart(&args),
-        Some("write") => write(&args),
-        Some("chart") => chart(&args),
-        _ => eprintln!("usage: drape_scan run|restart|write SCENE --levels …, or chart --csv … (see the file's docs)"),
+    match <Command as clap::Parser>::parse() {
+        Command::Run { runs, dt } => run(&runs, dt),
+        Command::Restart { runs } => restart(&runs),
+        Command::Write { levels, out } => write(&levels, &out),
+        Command::Chart { csv, out } => chart(&csv, &out),
     }
 }
