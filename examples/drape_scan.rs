@@ -162,13 +162,31 @@ impl Setup {
             .collect()
     }
 
+    /// Every level with every bend scale.
+    fn jobs<'a>(&'a self, bends: &'a [f64]) -> Vec<(&'a ClothLevel, f64)> {
+        self.levels
+            .iter()
+            .flat_map(|l| bends.iter().map(move |&b| (l, b)))
+            .collect()
+    }
+
     /// The scene's file name, for CSV rows.
     fn name(&self) -> String {
         self.scene.origin.rsplit('/').next().unwrap_or_default().to_string()
     }
 }
 
-const HEADER: &str = "scene,vertices,bend_scale,stretch_scale,dt_s,start,time_s,drape_coefficient,folds_at_end";
+const HEADER: [&str; 9] = [
+    "scene",
+    "vertices",
+    "bend_scale",
+    "stretch_scale",
+    "dt_s",
+    "start",
+    "time_s",
+    "drape_coefficient",
+    "folds_at_end",
+];
 
 /// One run's rows (one per second) for `--csv`.
 struct Run<'a> {
@@ -183,24 +201,21 @@ struct Run<'a> {
 }
 
 impl Run<'_> {
-    fn rows(&self) -> String {
+    fn rows(&self) -> impl Iterator<Item = [String; 9]> + '_ {
         let folds = self.folds.map_or(String::new(), |f| f.to_string());
-        self.dc
-            .iter()
-            .enumerate()
-            .map(|(t, dc)| {
-                format!(
-                    "{},{},{},{},{:e},{},{},{dc:.5},{folds}\n",
-                    self.scene,
-                    self.vertices,
-                    self.bend,
-                    self.stretch,
-                    self.dt,
-                    self.start,
-                    t + 1
-                )
-            })
-            .collect()
+        self.dc.iter().enumerate().map(move |(t, dc)| {
+            [
+                self.scene.clone(),
+                self.vertices.to_string(),
+                self.bend.to_string(),
+                self.stretch.to_string(),
+                format!("{:e}", self.dt),
+                self.start.to_string(),
+                (t + 1).to_string(),
+                format!("{dc:.5}"),
+                folds.clone(),
+            ]
+        })
     }
 
     fn cells(&self) -> String {
@@ -208,21 +223,27 @@ impl Run<'_> {
     }
 }
 
+fn failed<T>(path: &Path, e: impl std::fmt::Display) -> T {
+    panic!("{}: {e}", path.display())
+}
+
 /// Append `runs` to the `--csv` file, if one was given.
 fn append(csv: Option<&Path>, runs: &[Run<'_>]) {
     let Some(path) = csv else { return };
     let fresh = !path.exists();
-    let mut text = if fresh { format!("{HEADER}\n") } else { String::new() };
-    for r in runs {
-        text.push_str(&r.rows());
-    }
-    use std::io::Write;
-    std::fs::OpenOptions::new()
+    let file = std::fs::OpenOptions::new()
         .create(true)
         .append(true)
         .open(path)
-        .and_then(|mut f| f.write_all(text.as_bytes()))
-        .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        .unwrap_or_else(|e| failed(path, e));
+    let mut out = csv::Writer::from_writer(file);
+    if fresh {
+        out.write_record(HEADER).unwrap_or_else(|e| failed(path, e));
+    }
+    for row in runs.iter().flat_map(Run::rows) {
+        out.write_record(&row).unwrap_or_else(|e| failed(path, e));
+    }
+    out.flush().unwrap_or_else(|e| failed(path, e));
 }
 
 /// 5th percentile, median and mean compression of the stretch springs whose
@@ -261,11 +282,7 @@ fn run(args: &Runs, dt: Option<f64>) {
     let setup = Setup::new(&args.levels);
     let (bends, stretch) = (&args.bend, args.stretch);
     let support_radius = (setup.support / std::f64::consts::PI).sqrt();
-    let jobs: Vec<(&ClothLevel, f64)> = setup
-        .levels
-        .iter()
-        .flat_map(|l| bends.iter().map(move |&b| (l, b)))
-        .collect();
+    let jobs = setup.jobs(bends);
     let runs: Vec<Run<'_>> = jobs
         .par_iter()
         .map(|&(cloth, bend)| {
@@ -335,11 +352,7 @@ fn restart(args: &Runs) {
         );
     }
     let pos = reference.state().pos.clone();
-    let jobs: Vec<(&ClothLevel, f64)> = setup
-        .levels
-        .iter()
-        .flat_map(|l| bends.iter().map(move |&b| (l, b)))
-        .collect();
+    let jobs = setup.jobs(bends);
     let start = format!("reference at {seconds} s");
     let runs: Vec<Run<'_>> = jobs
         .par_iter()
