@@ -7,7 +7,7 @@
 //! of the stretch springs over the overhang.
 //!
 //! ```text
-//! cargo run --release --example drape_scan -- run SCENE --levels 721v,100% [--bend 1,1.35] [--stretch 2] [--dt 1e-4] [--csv FILE]
+//! cargo run --release --example drape_scan -- run SCENE --levels 721v,100% [--bend 1,1.35] [--stretch 2] [--dt 1e-4] [--twins 8 [--jitter 1e-6]] [--csv FILE]
 //! cargo run --release --example drape_scan -- restart SCENE --levels 1081v,721v [--bend 1,1.35] [--stretch 2] [--csv FILE]
 //! cargo run --release --example drape_scan -- write SCENE --levels 1800v --out LEVEL.obj
 //! cargo run --release --example drape_scan -- chart --csv FILE --out CHART.svg
@@ -45,6 +45,16 @@ enum Command {
         /// The time step (s); default the scene's.
         #[arg(long)]
         dt: Option<f64>,
+        /// Runs per level and bend scale: the first from the scene's rest
+        /// shape, every other with each vertex raised or lowered by a
+        /// seeded normal draw of --jitter (its twins). Where the overhang
+        /// breaks into folds is decided by rounding on a symmetric disc, so
+        /// one run is one draw of the DC; the twins give its spread.
+        #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..))]
+        twins: u64,
+        /// The twins' vertical jitter's standard deviation (m).
+        #[arg(long, default_value_t = 1e-6)]
+        jitter: f64,
     },
     /// Step the reference, then each level from its last shape, at rest.
     Restart {
@@ -176,7 +186,7 @@ impl Setup {
     }
 }
 
-const HEADER: [&str; 9] = [
+const HEADER: [&str; 10] = [
     "scene",
     "vertices",
     "bend_scale",
@@ -186,6 +196,7 @@ const HEADER: [&str; 9] = [
     "time_s",
     "drape_coefficient",
     "folds_at_end",
+    "twin",
 ];
 
 /// One run's rows (one per second) for `--csv`.
@@ -198,10 +209,11 @@ struct Run<'a> {
     start: &'a str,
     dc: Vec<f64>,
     folds: Option<usize>,
+    twin: u64,
 }
 
 impl Run<'_> {
-    fn rows(&self) -> impl Iterator<Item = [String; 9]> + '_ {
+    fn rows(&self) -> impl Iterator<Item = [String; 10]> + '_ {
         let folds = self.folds.map_or(String::new(), |f| f.to_string());
         self.dc.iter().enumerate().map(move |(t, dc)| {
             [
@@ -214,6 +226,7 @@ impl Run<'_> {
                 (t + 1).to_string(),
                 format!("{dc:.5}"),
                 folds.clone(),
+                self.twin.to_string(),
             ]
         })
     }
@@ -278,14 +291,22 @@ fn overhang_strain(sim: &Simulation, support_radius: f64) -> String {
     )
 }
 
-fn run(args: &Runs, dt: Option<f64>) {
+fn run(args: &Runs, dt: Option<f64>, twins: u64, jitter: f64) {
+    assert!(
+        jitter.is_finite() && jitter >= 0.0,
+        "--jitter must be a length ≥ 0, got {jitter}"
+    );
     let setup = Setup::new(&args.levels);
     let (bends, stretch) = (&args.bend, args.stretch);
     let support_radius = (setup.support / std::f64::consts::PI).sqrt();
-    let jobs = setup.jobs(bends);
+    let jobs: Vec<_> = setup
+        .jobs(bends)
+        .into_iter()
+        .flat_map(|(cloth, bend)| (0..twins).map(move |twin| (cloth, bend, twin)))
+        .collect();
     let runs: Vec<Run<'_>> = jobs
         .par_iter()
-        .map(|&(cloth, bend)| {
+        .map(|&(cloth, bend, twin)| {
             let clock = std::time::Instant::now();
             let mut scene = setup.scene.clone();
             if let Some(dt) = dt {
@@ -294,6 +315,9 @@ fn run(args: &Runs, dt: Option<f64>) {
             let mut sim = scene
                 .build_on(cloth, setup.material(cloth, bend, stretch))
                 .expect("builds");
+            if twin > 0 {
+                jittered(&mut sim, twin, jitter);
+            }
             let dc = setup.stepped(&mut sim, setup.scene.duration.round() as usize);
             let folds = fold_count(&sim.topology().rest_positions, &sim.state().pos, [0.0, 0.0]);
             let run = Run {
@@ -305,9 +329,10 @@ fn run(args: &Runs, dt: Option<f64>) {
                 start: "rest",
                 dc,
                 folds: Some(folds),
+                twin,
             };
             println!(
-                "{} bend ×{bend} stretch ×{stretch} dt {:e}: DC{}; {folds} folds{} ({:.0} s)",
+                "{} bend ×{bend} stretch ×{stretch} dt {:e} twin {twin}: DC{}; {folds} folds{} ({:.0} s)",
                 cloth.level,
                 run.dt,
                 run.cells(),
@@ -317,7 +342,51 @@ fn run(args: &Runs, dt: Option<f64>) {
             run
         })
         .collect();
+    if twins > 1 {
+        spread(&runs);
+    }
     append(args.csv.as_deref(), &runs);
+}
+
+/// Each vertex of `sim`'s state raised or lowered (y) by a normal draw of
+/// standard deviation `jitter`, seeded by `twin`; pins are put back.
+fn jittered(sim: &mut Simulation, twin: u64, jitter: f64) {
+    let mut rng = lodcloth_core::points::generate::SplitMix(twin);
+    let mut state = sim.state().clone();
+    let n = sim.topology().n_nodes;
+    for y in &mut state.pos[n..2 * n] {
+        *y += jitter * rng.gaussian();
+    }
+    sim.set_state(state).expect("same size");
+}
+
+/// Per level and bend scale: the twins' DC at the end (mean, sample
+/// standard deviation, range) and their fold counts.
+fn spread(runs: &[Run<'_>]) {
+    let mut groups: Vec<((usize, f64), Vec<&Run<'_>>)> = Vec::new();
+    for r in runs {
+        let key = (r.vertices, r.bend);
+        match groups.iter_mut().find(|(k, _)| *k == key) {
+            Some((_, g)) => g.push(r),
+            None => groups.push((key, vec![r])),
+        }
+    }
+    for ((vertices, bend), g) in groups {
+        let ends: Vec<f64> = g.iter().filter_map(|r| r.dc.last().copied()).collect();
+        let n = ends.len() as f64;
+        let mean = ends.iter().sum::<f64>() / n;
+        let sd = (ends.iter().map(|d| (d - mean).powi(2)).sum::<f64>() / (n - 1.0).max(1.0)).sqrt();
+        let (lo, hi) = ends
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &d| (a.min(d), b.max(d)));
+        let folds: Vec<String> = g.iter().filter_map(|r| r.folds).map(|f| f.to_string()).collect();
+        println!(
+            "{vertices} v bend ×{bend}: DC at the end over {} twins {mean:.4} ± {sd:.4} (sd; standard error {:.4}), {lo:.4}–{hi:.4}; folds {}",
+            ends.len(),
+            sd / n.sqrt(),
+            folds.join(" ")
+        );
+    }
 }
 
 fn restart(args: &Runs) {
@@ -380,6 +449,7 @@ fn restart(args: &Runs) {
                 start: &start,
                 dc: setup.stepped(&mut sim, 3),
                 folds: None,
+                twin: 0,
             };
             println!(
                 "{} bend ×{bend} stretch ×{stretch}, from the reference's last shape: DC {first:.4} →{}",
@@ -402,15 +472,16 @@ fn write(args: &Levels, out: &Path) {
 }
 
 /// The runs from rest in `--csv`: DC at each run's end against its vertex
-/// count, one series per bend and stretch scale.
+/// count (the mean over its twins), one series per bend and stretch scale.
 fn chart(path: &Path, out: &Path) {
     use lodcloth::output::{line_chart_svg_legend, Series, PALETTE};
     use plotters::prelude::SeriesLabelPosition;
     let shown = path.display();
     let mut reader = csv::Reader::from_path(path).unwrap_or_else(|e| panic!("{shown}: {e}"));
-    // (bend, stretch) → run (scene, vertices, dt) → (last time, DC).
+    // (bend, stretch) → run (scene, vertices, dt, twin) → (last time, DC).
     type Key = (String, String);
-    let mut last: std::collections::BTreeMap<(Key, String, String, String), (f64, f64)> = Default::default();
+    type RunKey = (Key, String, String, String, String);
+    let mut last: std::collections::BTreeMap<RunKey, (f64, f64)> = Default::default();
     for row in reader.records() {
         let row = row.unwrap_or_else(|e| panic!("{shown}: {e}"));
         if &row[5] != "rest" {
@@ -426,6 +497,8 @@ fn chart(path: &Path, out: &Path) {
             row[0].to_string(),
             row[1].to_string(),
             row[4].to_string(),
+            // Files written before twins have no such column: one run each.
+            row.get(9).unwrap_or("0").to_string(),
         );
         let (t, dc) = (number(6), number(7));
         let e = last.entry(key).or_insert((t, dc));
@@ -433,13 +506,33 @@ fn chart(path: &Path, out: &Path) {
             *e = (t, dc);
         }
     }
-    let mut series: std::collections::BTreeMap<Key, Vec<(f64, f64)>> = Default::default();
-    for ((scales, _, vertices, _), (_, dc)) in last {
-        series
+    // (bend, stretch) → (scene, vertices, dt) → the twins' DC.
+    let mut twins: std::collections::BTreeMap<Key, std::collections::BTreeMap<(String, String, String), Vec<f64>>> =
+        Default::default();
+    for ((scales, scene, vertices, dt, _), (_, dc)) in last {
+        twins
             .entry(scales)
             .or_default()
-            .push((vertices.parse().expect("vertices"), dc));
+            .entry((scene, vertices, dt))
+            .or_default()
+            .push(dc);
     }
+    let series: std::collections::BTreeMap<Key, Vec<(f64, f64)>> = twins
+        .into_iter()
+        .map(|(scales, runs)| {
+            let mut points: Vec<(f64, f64)> = runs
+                .into_iter()
+                .map(|((_, vertices, _), dc)| {
+                    let x = vertices
+                        .parse()
+                        .unwrap_or_else(|_| panic!("{shown}: vertices {vertices}"));
+                    (x, dc.iter().sum::<f64>() / dc.len() as f64)
+                })
+                .collect();
+            points.sort_by(|a, b| a.0.total_cmp(&b.0));
+            (scales, points)
+        })
+        .collect();
     let names: Vec<String> = series.keys().map(|(b, s)| format!("bend ×{b}, stretch ×{s}")).collect();
     let drawn: Vec<Series<'_>> = series
         .into_values()
@@ -465,7 +558,12 @@ fn chart(path: &Path, out: &Path) {
 
 fn main() {
     match <Command as clap::Parser>::parse() {
-        Command::Run { runs, dt } => run(&runs, dt),
+        Command::Run {
+            runs,
+            dt,
+            twins,
+            jitter,
+        } => run(&runs, dt, twins, jitter),
         Command::Restart { runs } => restart(&runs),
         Command::Write { levels, out } => write(&levels, &out),
         Command::Chart { csv, out } => chart(&csv, &out),
