@@ -10,7 +10,7 @@
 //! cargo run --release --example drape_scan -- run SCENE --levels 721v,100% [--bend 1,1.35] [--stretch 2] [--dt 1e-4] [--twins 8 [--jitter 1e-6]] [--csv FILE]
 //! cargo run --release --example drape_scan -- restart SCENE --levels 1081v,721v [--bend 1,1.35] [--stretch 2] [--csv FILE]
 //! cargo run --release --example drape_scan -- write SCENE --levels 1800v --out LEVEL.obj
-//! cargo run --release --example drape_scan -- chart --csv FILE --out CHART.svg
+//! cargo run --release --example drape_scan -- chart --csv FILE[,FILE …] [--names A,B …] --out CHART.svg
 //! ```
 //!
 //! `restart` steps the scene's reference for its duration and prints, at
@@ -20,8 +20,9 @@
 //! last shape, at rest, and runs 3 s. `write` saves a level as OBJ, to be
 //! used as another scene's mesh (a reference of that resolution).
 //! `--csv` appends every run to FILE (made with its header when absent);
-//! `chart` draws its runs from rest: the DC at their end against the
-//! vertex count, one series per bend and stretch scale.
+//! `chart` draws the runs from rest of one or more such files: the DC at
+//! their end (the mean over twins) against the vertex count, one series
+//! per file, bend and stretch scale.
 //! Runs go two at a time (rayon). Measured with it: docs/results.md,
 //! "Mesh cloths".
 use std::path::{Path, PathBuf};
@@ -68,10 +69,15 @@ enum Command {
         #[arg(long)]
         out: PathBuf,
     },
-    /// Draw the runs from rest in a CSV written by --csv.
+    /// Draw the runs from rest in CSVs written by --csv (one series per
+    /// file, bend and stretch scale).
     Chart {
-        #[arg(long)]
-        csv: PathBuf,
+        #[arg(long, value_delimiter = ',', required = true)]
+        csv: Vec<PathBuf>,
+        /// Each file's name in the legend (default: its stem, when there
+        /// are several files).
+        #[arg(long, value_delimiter = ',')]
+        names: Vec<String>,
         #[arg(long)]
         out: PathBuf,
     },
@@ -471,72 +477,99 @@ fn write(args: &Levels, out: &Path) {
         .unwrap_or_else(|e| panic!("{}: {e}", out.display()));
 }
 
-/// The runs from rest in `--csv`: DC at each run's end against its vertex
-/// count (the mean over its twins), one series per bend and stretch scale.
-fn chart(path: &Path, out: &Path) {
+/// The runs from rest in the `--csv` files: DC at each run's end against
+/// its vertex count (the mean over its twins), one series per file, bend
+/// and stretch scale.
+fn chart(paths: &[PathBuf], names: &[String], out: &Path) {
+    assert!(
+        names.is_empty() || names.len() == paths.len(),
+        "--names: one per --csv file ({} files, {} names)",
+        paths.len(),
+        names.len()
+    );
     use lodcloth::output::{line_chart_svg_legend, Series, PALETTE};
     use plotters::prelude::SeriesLabelPosition;
-    let shown = path.display();
-    let mut reader = csv::Reader::from_path(path).unwrap_or_else(|e| panic!("{shown}: {e}"));
-    // (bend, stretch) → run (scene, vertices, dt, twin) → (last time, DC).
-    type Key = (String, String);
+    use std::collections::BTreeMap;
+    // (file, bend, stretch) → run (scene, vertices, dt, twin) → (last time, DC).
+    type Key = (usize, String, String);
     type RunKey = (Key, String, String, String, String);
-    let mut last: std::collections::BTreeMap<RunKey, (f64, f64)> = Default::default();
-    for row in reader.records() {
-        let row = row.unwrap_or_else(|e| panic!("{shown}: {e}"));
-        if &row[5] != "rest" {
-            continue;
-        }
-        let number = |i: usize| {
-            row[i]
-                .parse::<f64>()
-                .unwrap_or_else(|_| panic!("{shown}: column {i}: {}", &row[i]))
-        };
-        let key = (
-            (row[2].to_string(), row[3].to_string()),
-            row[0].to_string(),
-            row[1].to_string(),
-            row[4].to_string(),
-            // Files written before twins have no such column: one run each.
-            row.get(9).unwrap_or("0").to_string(),
-        );
-        let (t, dc) = (number(6), number(7));
-        let e = last.entry(key).or_insert((t, dc));
-        if t >= e.0 {
-            *e = (t, dc);
+    let mut last: BTreeMap<RunKey, (f64, f64)> = Default::default();
+    for (file, path) in paths.iter().enumerate() {
+        let shown = path.display();
+        let mut reader = csv::Reader::from_path(path).unwrap_or_else(|e| panic!("{shown}: {e}"));
+        for row in reader.records() {
+            let row = row.unwrap_or_else(|e| panic!("{shown}: {e}"));
+            if &row[5] != "rest" {
+                continue;
+            }
+            let number = |i: usize| {
+                row[i]
+                    .parse::<f64>()
+                    .unwrap_or_else(|_| panic!("{shown}: column {i}: {}", &row[i]))
+            };
+            number(1); // the vertex count, checked here to be a number
+            let key = (
+                (file, row[2].to_string(), row[3].to_string()),
+                row[0].to_string(),
+                row[1].to_string(),
+                row[4].to_string(),
+                // Files written before twins have no such column: one run each.
+                row.get(9).unwrap_or("0").to_string(),
+            );
+            let (t, dc) = (number(6), number(7));
+            let e = last.entry(key).or_insert((t, dc));
+            if t >= e.0 {
+                *e = (t, dc);
+            }
         }
     }
-    // (bend, stretch) → (scene, vertices, dt) → the twins' DC.
-    let mut twins: std::collections::BTreeMap<Key, std::collections::BTreeMap<(String, String, String), Vec<f64>>> =
-        Default::default();
-    for ((scales, scene, vertices, dt, _), (_, dc)) in last {
+    // (file, bend, stretch) → (scene, vertices, dt) → the twins' DC.
+    let mut twins: BTreeMap<Key, BTreeMap<(String, String, String), Vec<f64>>> = Default::default();
+    for ((key, scene, vertices, dt, _), (_, dc)) in last {
         twins
-            .entry(scales)
+            .entry(key)
             .or_default()
             .entry((scene, vertices, dt))
             .or_default()
             .push(dc);
     }
-    let series: std::collections::BTreeMap<Key, Vec<(f64, f64)>> = twins
+    let series: BTreeMap<Key, Vec<(f64, f64)>> = twins
         .into_iter()
-        .map(|(scales, runs)| {
+        .map(|(key, runs)| {
             let mut points: Vec<(f64, f64)> = runs
                 .into_iter()
                 .map(|((_, vertices, _), dc)| {
-                    let x = vertices
-                        .parse()
-                        .unwrap_or_else(|_| panic!("{shown}: vertices {vertices}"));
+                    let x: f64 = vertices.parse().expect("checked above");
                     (x, dc.iter().sum::<f64>() / dc.len() as f64)
                 })
                 .collect();
             points.sort_by(|a, b| a.0.total_cmp(&b.0));
-            (scales, points)
+            (key, points)
         })
         .collect();
-    let names: Vec<String> = series.keys().map(|(b, s)| format!("bend ×{b}, stretch ×{s}")).collect();
+    let labels: Vec<String> = series
+        .keys()
+        .map(|(file, b, s)| {
+            let scales = format!("bend ×{b}, stretch ×{s}");
+            let name = names.get(*file).cloned().or_else(|| {
+                (paths.len() > 1).then(|| {
+                    paths[*file]
+                        .file_stem()
+                        .unwrap_or_default()
+                        .to_string_lossy()
+                        .into_owned()
+                })
+            });
+            match name {
+                Some(name) if b == "1" && s == "1" => name,
+                Some(name) => format!("{name}: {scales}"),
+                None => scales,
+            }
+        })
+        .collect();
     let drawn: Vec<Series<'_>> = series
         .into_values()
-        .zip(&names)
+        .zip(&labels)
         .enumerate()
         .map(|(i, (points, name))| Series {
             name,
@@ -566,6 +599,6 @@ fn main() {
         } => run(&runs, dt, twins, jitter),
         Command::Restart { runs } => restart(&runs),
         Command::Write { levels, out } => write(&levels, &out),
-        Command::Chart { csv, out } => chart(&csv, &out),
+        Command::Chart { csv, names, out } => chart(&csv, &names, &out),
     }
 }
