@@ -10,7 +10,7 @@
 //! cargo run --release --example drape_scan -- run SCENE --levels 721v,100% [--bend 1,1.35] [--stretch 2] [--dt 1e-4] [--twins 8 [--jitter 1e-6]] [--csv FILE]
 //! cargo run --release --example drape_scan -- restart SCENE --levels 1081v,721v [--bend 1,1.35] [--stretch 2] [--csv FILE]
 //! cargo run --release --example drape_scan -- write SCENE --levels 1800v --out LEVEL.obj
-//! cargo run --release --example drape_scan -- chart --csv FILE[,FILE …] [--names A,B …] --out CHART.svg
+//! cargo run --release --example drape_scan -- chart --csv FILE[,FILE …] [--names A,B …] [--unscaled] --out CHART.svg
 //! ```
 //!
 //! `restart` steps the scene's reference for its duration and prints, at
@@ -78,6 +78,10 @@ enum Command {
         /// are several files).
         #[arg(long, value_delimiter = ',')]
         names: Vec<String>,
+        /// Only the runs with the scene's own coefficients (bend and
+        /// stretch ×1).
+        #[arg(long)]
+        unscaled: bool,
         #[arg(long)]
         out: PathBuf,
     },
@@ -480,7 +484,7 @@ fn write(args: &Levels, out: &Path) {
 /// The runs from rest in the `--csv` files: DC at each run's end against
 /// its vertex count (the mean over its twins), one series per file, bend
 /// and stretch scale.
-fn chart(paths: &[PathBuf], names: &[String], out: &Path) {
+fn chart(paths: &[PathBuf], names: &[String], unscaled: bool, out: &Path) {
     assert!(
         names.is_empty() || names.len() == paths.len(),
         "--names: one per --csv file ({} files, {} names)",
@@ -499,7 +503,7 @@ fn chart(paths: &[PathBuf], names: &[String], out: &Path) {
         let mut reader = csv::Reader::from_path(path).unwrap_or_else(|e| panic!("{shown}: {e}"));
         for row in reader.records() {
             let row = row.unwrap_or_else(|e| panic!("{shown}: {e}"));
-            if &row[5] != "rest" {
+            if &row[5] != "rest" || (unscaled && (&row[2] != "1" || &row[3] != "1")) {
                 continue;
             }
             let number = |i: usize| {
@@ -599,6 +603,11 @@ fn main() {
         } => run(&runs, dt, twins, jitter),
         Command::Restart { runs } => restart(&runs),
         Command::Write { levels, out } => write(&levels, &out),
-        Command::Chart { csv, names, out } => chart(&csv, &names, &out),
+        Command::Chart {
+            csv,
+            names,
+            unscaled,
+            out,
+        } => chart(&csv, &names, unscaled, &out),
     }
 }
