@@ -528,7 +528,8 @@ fn chart(paths: &[PathBuf], names: &[String], unscaled: bool, out: &Path) {
         }
     }
     // (file, bend, stretch) → (scene, vertices, dt) → the twins' DC.
-    let mut twins: BTreeMap<Key, BTreeMap<(String, String, String), Vec<f64>>> = Default::default();
+    type Twins = BTreeMap<(String, String, String), Vec<f64>>;
+    let mut twins: BTreeMap<Key, Twins> = Default::default();
     for ((key, scene, vertices, dt, _), (_, dc)) in last {
         twins
             .entry(key)
