@@ -88,10 +88,10 @@ COPY config/docker-secure.toml config/docker-secure.toml
 ENV LODCLOTH_LOG_JSON=true
 
 VOLUME ["/var/lib/lodcloth"]
-# 7450: zenoh; 7451: zenoh over mutual TLS (config/docker-secure.toml); 7460:
+# 7450: zenoh; 7451/udp: zenoh over QUIC with mutual TLS (config/docker-secure.toml); 7460:
 # /metrics and /healthz (config/docker.toml [http]). 8080 and 8765 when the same image runs `view --listen
 # 0.0.0.0:8080` or `foxglove --host 0.0.0.0` beside the daemon (README).
-EXPOSE 7450/tcp 7451/tcp 7460/tcp 8080/tcp 8765/tcp
+EXPOSE 7450/tcp 7451/udp 7460/tcp 8080/tcp 8765/tcp
 USER 10001:10001
 
 # A client session to the daemon's own endpoint; exits 0 when every instance

@@ -174,6 +174,9 @@ class Service:
     env: dict[str, str]  # image ENV + environment
     mounts: list[tuple[str, Path, str]] = field(default_factory=list)  # (target, host source, kind)
     listens: set[int] = field(default_factory=set)
+    # The ports of those that are UDP (quic/, udp/ endpoints): Docker
+    # publishes TCP unless a port says /udp.
+    udp_listens: set[int] = field(default_factory=set)
     instances: list[str] = field(default_factory=list)  # a daemon's, from its config
 
     @property
@@ -304,6 +307,11 @@ def endpoint_ports(endpoints: list[str]) -> set[int]:
     return ports
 
 
+def udp_ports(endpoints: list[str]) -> set[int]:
+    """The ports of the endpoints that run over UDP."""
+    return endpoint_ports([e for e in endpoints if e.split("/", 1)[0] in ("quic", "udp")])
+
+
 def container_file(c: Compose, s: Service, path: str) -> tuple[Path, str]:
     """Where a path the service reads comes from: (host file, kind)."""
     p = path if path.startswith("/") else c.image.workdir.rstrip("/") + "/" + path
@@ -386,7 +394,7 @@ def static_checks(c: Compose) -> None:
                 parse_duration(hc[k])
         # Ports: HOST_IP:HOST_PORT:CONTAINER_PORT on the loopback by default, unique host ports.
         for p in spec.get("ports", []):
-            m = re.fullmatch(r"(\d+\.\d+\.\d+\.\d+):(\d+):(\d+)(/tcp)?", str(p))
+            m = re.fullmatch(r"(\d+\.\d+\.\d+\.\d+):(\d+):(\d+)(/tcp|/udp)?", str(p))
             require(m is not None, f"{where}: port {p} should be HOST_IP:HOST_PORT:CONTAINER_PORT")
             require(m.group(1) == "127.0.0.1", f"{where}: port {p} is not bound to 127.0.0.1 by default")
             require(m.group(2) not in host_ports, f"{where}: host port {m.group(2)} is published twice")
@@ -408,6 +416,7 @@ def static_checks(c: Compose) -> None:
         if sub == "router":
             listen = s.option("--listen") or s.env.get("LODCLOTH_ROUTER_LISTEN") or "tcp/0.0.0.0:7447"
             s.listens = endpoint_ports(listen.split(","))
+            s.udp_listens = udp_ports(listen.split(","))
             zc = s.option("--zenoh-config")
             if zc:
                 host, _ = container_file(c, s, zc)
@@ -423,6 +432,7 @@ def static_checks(c: Compose) -> None:
             z = conf.get("zenoh", {})
             listen = s.env.get("LODCLOTH_LISTEN", "").split(",") if s.env.get("LODCLOTH_LISTEN") else z.get("listen", [])
             s.listens = endpoint_ports(listen)
+            s.udp_listens = udp_ports(listen)
             # `serve --http ADDR` (LODCLOTH_HTTP): /metrics and /healthz.
             http = s.setting("--http", "LODCLOTH_HTTP")
             if http:
@@ -457,6 +467,10 @@ def static_checks(c: Compose) -> None:
         for p in s.spec.get("ports", []):
             cport = int(str(p).split(":")[-1].split("/")[0])
             require(cport in s.listens, f"{where}: publishes {cport}, which it does not listen on ({s.listens})")
+            udp = str(p).endswith("/udp")
+            require(udp == (cport in s.udp_listens),
+                    f"{where}: publishes {p}, but {cport} is a {'UDP' if cport in s.udp_listens else 'TCP'} "
+                    f"listener (QUIC runs over UDP: publish it as …:{cport}/udp)")
     # Client endpoints name a service and a port it listens on.
     for s in c.services.values():
         for e in s.env.get("LODCLOTH_CONNECT", "").split(",") if s.env.get("LODCLOTH_CONNECT") else []:
@@ -762,7 +776,7 @@ class Topology:
 
     def router_endpoint(self, proto: str) -> str:
         s = self.c.services["router"]
-        published = int(str(s.spec["ports"][0]).split(":")[-1])
+        published = int(str(s.spec["ports"][0]).split(":")[-1].split("/")[0])
         return f"{proto}/127.0.0.1:{self.port('router', published)}"
 
     def cli(self, args: list[str], env: dict[str, str], timeout: float = 60, check: bool = True
@@ -905,7 +919,7 @@ def run_secure(c: Compose, secrets: Path) -> None:
     t = Topology(c, "secure")
     try:
         t.up()
-        base = {"LODCLOTH_CONNECT": t.router_endpoint("tls"), "LODCLOTH_CLIENT_MODE": "true",
+        base = {"LODCLOTH_CONNECT": t.router_endpoint("quic"), "LODCLOTH_CLIENT_MODE": "true",
                 "LODCLOTH_TLS_CA": str(secrets / "ca.pem")}
 
         def who(cert: str | None, user: str | None, password: str | None = None) -> dict[str, str]:

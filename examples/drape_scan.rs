@@ -29,6 +29,7 @@ use std::path::{Path, PathBuf};
 
 use lodcloth_core::drape::{drape_coefficient, fold_count, shadow_area};
 use lodcloth_core::level::GridLevel;
+use lodcloth_core::mesh::{triangle_area, TriMesh};
 use lodcloth_core::scene::{ClothLevel, Scene};
 use lodcloth_core::sim::{Material, Shape, Simulation, SpringClass, SpringKind};
 use rayon::prelude::*;
@@ -62,12 +63,21 @@ enum Command {
         #[command(flatten)]
         runs: Runs,
     },
-    /// Save the (first) level as OBJ.
+    /// Save the (first) level as OBJ, optionally remeshed in its rest
+    /// plane (to tell a level's uneven triangles from its size).
     Write {
         #[command(flatten)]
         levels: Levels,
         #[arg(long)]
         out: PathBuf,
+        /// Sweeps of tangential relaxation: every vertex off the border
+        /// moves to the area-weighted mean of its triangles' centroids (a
+        /// step towards a centroidal Voronoi tessellation).
+        #[arg(long, default_value_t = 0)]
+        relax: usize,
+        /// Delaunay edge flips in the rest plane, before and after relaxing.
+        #[arg(long)]
+        flip: bool,
     },
     /// Draw the runs from rest in CSVs written by --csv (one series per
     /// file, bend and stretch scale).
@@ -472,13 +482,180 @@ fn restart(args: &Runs) {
     append(args.csv.as_deref(), &runs);
 }
 
-fn write(args: &Levels, out: &Path) {
+fn write(args: &Levels, out: &Path, relax: usize, flip: bool) {
     let setup = Setup::new(args);
     let level = setup.levels.first().expect("one level");
-    let mesh = &level.mesh.as_ref().expect("a mesh level").mesh;
-    let comment = format!("level {} of {}", level.level, args.scene.display());
-    std::fs::write(out, lodcloth_core::mesh::generate::to_obj(mesh, &comment))
+    let mut mesh = level.mesh.as_ref().expect("a mesh level").mesh.clone();
+    let mut comment = format!("level {} of {}", level.level, args.scene.display());
+    if relax > 0 || flip {
+        let before = Shapes::of(&mesh);
+        let flips = remesh(&mut mesh, relax, flip);
+        let after = Shapes::of(&mesh);
+        comment += &format!(", remeshed in its rest plane: {relax} relaxation sweeps, {flips} Delaunay flips");
+        println!("{comment}\n  before: {before}\n  after:  {after}");
+    }
+    std::fs::write(out, lodcloth_core::mesh::generate::to_obj(&mesh, &comment))
         .unwrap_or_else(|e| panic!("{}: {e}", out.display()));
+}
+
+/// How even a mesh's triangles are: the CV of their areas, the 10th
+/// percentile and median of their quality (4√3·A / Σ edge², 1 for an
+/// equilateral triangle) and the interior vertices' valences.
+struct Shapes {
+    area_cv: f64,
+    quality: [f64; 2],
+    valence: [usize; 2],
+}
+
+impl Shapes {
+    fn of(mesh: &TriMesh) -> Shapes {
+        let p = &mesh.positions;
+        let areas: Vec<f64> = mesh.triangles.iter().map(|&t| triangle_area(p, t)).collect();
+        let mean = areas.iter().sum::<f64>() / areas.len() as f64;
+        let var = areas.iter().map(|a| (a - mean).powi(2)).sum::<f64>() / areas.len() as f64;
+        let d2 = |a: u32, b: u32| {
+            (0..3)
+                .map(|c| (p[a as usize][c] - p[b as usize][c]).powi(2))
+                .sum::<f64>()
+        };
+        let mut quality: Vec<f64> = mesh
+            .triangles
+            .iter()
+            .zip(&areas)
+            .map(|(&[a, b, c], area)| 4.0 * 3f64.sqrt() * area / (d2(a, b) + d2(b, c) + d2(c, a)))
+            .collect();
+        quality.sort_by(f64::total_cmp);
+        let border = mesh.border();
+        let mut valence = vec![0usize; mesh.vertices()];
+        for t in &mesh.triangles {
+            for &i in t {
+                valence[i as usize] += 1;
+            }
+        }
+        let interior = || valence.iter().zip(&border).filter(|(_, &b)| !b).map(|(&v, _)| v);
+        Shapes {
+            area_cv: var.sqrt() / mean,
+            quality: [quality[quality.len() / 10], quality[quality.len() / 2]],
+            valence: [interior().min().unwrap_or(0), interior().max().unwrap_or(0)],
+        }
+    }
+}
+
+impl std::fmt::Display for Shapes {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "area CV {:.3}, quality p10 {:.3} median {:.3}, interior valences {}-{}",
+            self.area_cv, self.quality[0], self.quality[1], self.valence[0], self.valence[1]
+        )
+    }
+}
+
+/// Remesh a flat `mesh` in its rest plane, border fixed: Delaunay flips
+/// (when `flip`), `sweeps` of tangential relaxation, flips again. Returns
+/// the flips made. Panics if a triangle turns over.
+fn remesh(mesh: &mut TriMesh, sweeps: usize, flip: bool) -> usize {
+    let normal = |p: &[[f64; 3]], [a, b, c]: [u32; 3]| {
+        let (a, b, c) = (p[a as usize], p[b as usize], p[c as usize]);
+        let (u, v) = (sub(b, a), sub(c, a));
+        [
+            u[1] * v[2] - u[2] * v[1],
+            u[2] * v[0] - u[0] * v[2],
+            u[0] * v[1] - u[1] * v[0],
+        ]
+    };
+    let up = mesh
+        .triangles
+        .iter()
+        .fold([0.0; 3], |s, &t| add(s, normal(&mesh.positions, t)));
+    let mut flips = if flip { delaunay_flips(mesh) } else { 0 };
+    let border = mesh.border();
+    let n = mesh.vertices();
+    for _ in 0..sweeps {
+        let mut sum = vec![[0.0; 3]; n];
+        let mut weight = vec![0.0; n];
+        for &t in &mesh.triangles {
+            let area = triangle_area(&mesh.positions, t);
+            let c = t.iter().fold([0.0; 3], |s, &i| add(s, mesh.positions[i as usize]));
+            for &i in &t {
+                sum[i as usize] = add(sum[i as usize], c.map(|x| x * area / 3.0));
+                weight[i as usize] += area;
+            }
+        }
+        for i in (0..n).filter(|&i| !border[i] && weight[i] > 0.0) {
+            mesh.positions[i] = sum[i].map(|x| x / weight[i]);
+        }
+    }
+    if flip {
+        flips += delaunay_flips(mesh);
+    }
+    for &t in &mesh.triangles {
+        let m = normal(&mesh.positions, t);
+        assert!(
+            m[0] * up[0] + m[1] * up[1] + m[2] * up[2] > 0.0,
+            "triangle {t:?} turned over"
+        );
+    }
+    flips
+}
+
+fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+fn add(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
+}
+
+/// Lawson's flips until every interior edge is locally Delaunay (the two
+/// angles facing it sum to at most π). Returns the flips made.
+fn delaunay_flips(mesh: &mut TriMesh) -> usize {
+    use std::collections::{HashMap, HashSet};
+    let angle = |p: &[[f64; 3]], at: u32, a: u32, b: u32| {
+        let (u, v) = (sub(p[a as usize], p[at as usize]), sub(p[b as usize], p[at as usize]));
+        let dot = u[0] * v[0] + u[1] * v[1] + u[2] * v[2];
+        let norm = (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt() * (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+        (dot / norm).clamp(-1.0, 1.0).acos()
+    };
+    let mut total = 0;
+    loop {
+        // Directed edge a→b → (its triangle, the vertex facing it).
+        let mut facing: HashMap<(u32, u32), (usize, u32)> = HashMap::new();
+        let mut edges: HashSet<(u32, u32)> = HashSet::new();
+        for (k, &[a, b, c]) in mesh.triangles.iter().enumerate() {
+            for (x, y, z) in [(a, b, c), (b, c, a), (c, a, b)] {
+                facing.insert((x, y), (k, z));
+                edges.insert((x.min(y), x.max(y)));
+            }
+        }
+        let mut touched = vec![false; mesh.triangles.len()];
+        let mut flips = 0;
+        let mut directed: Vec<(u32, u32)> = facing.keys().copied().filter(|&(a, b)| a < b).collect();
+        directed.sort_unstable();
+        for (a, b) in directed {
+            let (Some(&(t1, c)), Some(&(t2, d))) = (facing.get(&(a, b)), facing.get(&(b, a))) else {
+                continue;
+            };
+            if touched[t1] || touched[t2] || edges.contains(&(c.min(d), c.max(d))) {
+                continue;
+            }
+            let p = &mesh.positions;
+            if angle(p, c, a, b) + angle(p, d, b, a) <= std::f64::consts::PI + 1e-9 {
+                continue;
+            }
+            // a→b→c and b→a→d counter-clockwise: the quad is a, d, b, c.
+            mesh.triangles[t1] = [a, d, c];
+            mesh.triangles[t2] = [d, b, c];
+            edges.insert((c.min(d), c.max(d)));
+            touched[t1] = true;
+            touched[t2] = true;
+            flips += 1;
+        }
+        if flips == 0 {
+            return total;
+        }
+        total += flips;
+    }
 }
 
 /// The runs from rest in the `--csv` files: DC at each run's end against
@@ -603,7 +780,12 @@ fn main() {
             jitter,
         } => run(&runs, dt, twins, jitter),
         Command::Restart { runs } => restart(&runs),
-        Command::Write { levels, out } => write(&levels, &out),
+        Command::Write {
+            levels,
+            out,
+            relax,
+            flip,
+        } => write(&levels, &out, relax, flip),
         Command::Chart {
             csv,
             names,

@@ -44,7 +44,7 @@ pub struct Connect {
     /// Password of --user; prefer the environment variable to the command line.
     #[arg(long, env = "LODCLOTH_PASSWORD", hide_env_values = true)]
     pub password: Option<String>,
-    /// PEM of the CA that signed the daemon's certificate (tls/ endpoints).
+    /// PEM of the CA that signed the daemon's certificate (quic/ and tls/ endpoints).
     #[arg(long, env = "LODCLOTH_TLS_CA")]
     pub tls_ca: Option<PathBuf>,
     /// This client's PEM certificate, for a daemon that requires mTLS.
@@ -142,6 +142,7 @@ pub fn router(args: RouterArgs) -> Result<()> {
             .insert_json5(key, value)
             .map_err(|e| anyhow::anyhow!("{key}: {e}"))?;
     }
+    lodcloth::service::security::warn_if_tls(&config);
     runtime()?.block_on(async {
         let session = zenoh::open(config).await.map_err(|e| anyhow::anyhow!("zenoh: {e}"))?;
         tracing::info!(zid = %session.zid(), listen = ?args.listen, "zenoh router running");

@@ -115,7 +115,9 @@ impl Client {
 
     /// Open a session (see [`client_config`]).
     pub async fn open(options: &ClientOptions, prefix: &str) -> Result<Client, ClientError> {
-        let session = zenoh::open(client_config(options)?).await.map_err(zerr)?;
+        let config = client_config(options)?;
+        super::security::warn_if_tls(&config);
+        let session = zenoh::open(config).await.map_err(zerr)?;
         Ok(Client {
             session,
             prefix: prefix.to_string(),

@@ -960,14 +960,14 @@ fn zenoh_problems(z: &RawZenoh) -> Vec<String> {
         .iter()
         .chain(&z.connect)
         .flatten()
-        .any(|e| e.starts_with("tls/"));
+        .any(|e| e.starts_with("tls/") || e.starts_with("quic/"));
     if tls_endpoint
         && z.tls
             .as_ref()
             .is_none_or(|t| t.certificate.is_none() && t.root_ca.is_none())
     {
         p.push(
-            "zenoh: a tls/ endpoint needs [zenoh.tls] (certificate and private_key to listen, root_ca to connect)"
+            "zenoh: a quic/ or tls/ endpoint needs [zenoh.tls] (certificate and private_key to listen, root_ca to connect)"
                 .into(),
         );
     }

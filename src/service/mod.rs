@@ -175,7 +175,9 @@ struct Context {
 
 /// Open the zenoh session from `config` and serve until `shutdown` completes.
 pub async fn run(config: ServiceConfig, shutdown: impl Future<Output = ()>) -> Result<(), ServiceError> {
-    let session = zenoh::open(config.zenoh_config()?).await.map_err(zerr)?;
+    let zenoh_config = config.zenoh_config()?;
+    security::warn_if_tls(&zenoh_config);
+    let session = zenoh::open(zenoh_config).await.map_err(zerr)?;
     tracing::info!(zid = %session.zid(), "zenoh session open");
     let result = serve(config, &session, shutdown).await;
     if let Err(e) = session.close().await {

@@ -15,7 +15,7 @@
 //! - everything else on this session is denied.
 //!
 //! Who is *admitted* is the transports' business: with a user dictionary
-//! every session must authenticate; with `mutual = true` a `tls/` endpoint
+//! every session must authenticate; with `mutual = true` a `quic/` or `tls/` endpoint
 //! admits only certificates signed by `root_ca`, while a plain `tcp/`
 //! endpoint beside it stays open to anonymous observers.
 
@@ -26,7 +26,7 @@ use serde_json::json;
 
 use super::keys;
 
-/// TLS on `tls/` endpoints (`[zenoh.tls]`).
+/// TLS on `quic/` and `tls/` endpoints (`[zenoh.tls]`).
 #[derive(Debug, Clone, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct RawTls {
@@ -36,7 +36,7 @@ pub struct RawTls {
     pub certificate: Option<PathBuf>,
     /// PEM private key of `certificate`.
     pub private_key: Option<PathBuf>,
-    /// Require and verify a client certificate on `tls/` endpoints (mTLS).
+    /// Require and verify a client certificate on `quic/` and `tls/` endpoints (mTLS).
     #[serde(default)]
     pub mutual: bool,
 }
@@ -160,7 +160,7 @@ fn set(config: &mut zenoh::Config, key: &str, value: serde_json::Value) -> Resul
         .map_err(|e| format!("{key}: {e}"))
 }
 
-/// The daemon's side: its certificate for `tls/` listeners (and for the
+/// The daemon's side: its certificate for `quic/` and `tls/` listeners (and for the
 /// endpoints it connects to), the user dictionary, the access policy.
 pub fn apply_daemon(
     config: &mut zenoh::Config,
@@ -253,7 +253,7 @@ pub fn access_control(prefix: &str, access: &RawAccess) -> serde_json::Value {
 pub struct ClientSecurity {
     pub user: Option<String>,
     pub password: Option<String>,
-    /// CA that signed the daemon's certificate (for `tls/` endpoints).
+    /// CA that signed the daemon's certificate (for `quic/` and `tls/` endpoints).
     pub tls_root_ca: Option<PathBuf>,
     /// This client's certificate and key, for a daemon that requires mTLS.
     pub tls_certificate: Option<PathBuf>,
@@ -299,5 +299,71 @@ impl ClientSecurity {
             set(config, "transport/auth/usrpwd/password", json!(p))?;
         }
         Ok(())
+    }
+}
+
+/// The endpoints of `config` (listen and connect, for any mode) that use
+/// zenoh's `tls/` link.
+///
+/// zenoh-link-tls 1.10.2 hands one rustls connection to a link's reader and
+/// writer at once (eclipse-zenoh/zenoh#2557): when a peer goes away while
+/// a batch is written, the writer can read what the reader is storing, and
+/// the process aborts (docs/deployment.md, "QUIC, not `tls/`"). `quic/`
+/// reads the same `[zenoh.tls]` settings and is sound.
+pub fn tls_endpoints(config: &zenoh::Config) -> Vec<String> {
+    fn collect(v: &serde_json::Value, out: &mut Vec<String>) {
+        match v {
+            serde_json::Value::String(s) if s.starts_with("tls/") => out.push(s.clone()),
+            serde_json::Value::Array(a) => a.iter().for_each(|v| collect(v, out)),
+            serde_json::Value::Object(o) => o.values().for_each(|v| collect(v, out)),
+            _ => {}
+        }
+    }
+    let mut out = Vec::new();
+    for key in ["listen/endpoints", "connect/endpoints"] {
+        if let Some(v) = config.get_json(key).ok().and_then(|j| serde_json::from_str(&j).ok()) {
+            collect(&v, &mut out);
+        }
+    }
+    out
+}
+
+/// Log a warning when `config` uses `tls/` endpoints ([`tls_endpoints`]).
+pub fn warn_if_tls(config: &zenoh::Config) {
+    let tls = tls_endpoints(config);
+    if !tls.is_empty() {
+        tracing::warn!(
+            endpoints = ?tls,
+            "zenoh's tls/ link is unsound in zenoh 1.10.2 (eclipse-zenoh/zenoh#2557): a peer that goes away \
+             mid-write can abort this process; use quic/ (TLS 1.3 over UDP, the same [zenoh.tls] settings)"
+        );
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn tls_endpoints_are_found_in_listen_and_connect_for_any_mode() {
+        let mut config = zenoh::Config::default();
+        set(
+            &mut config,
+            "listen/endpoints",
+            json!({"router": ["tls/0.0.0.0:7447", "quic/0.0.0.0:7448"], "peer": ["tcp/0.0.0.0:7449"]}),
+        )
+        .unwrap();
+        set(
+            &mut config,
+            "connect/endpoints",
+            json!(["tls/router:7447", "tcp/router:7446"]),
+        )
+        .unwrap();
+        let mut found = tls_endpoints(&config);
+        found.sort();
+        assert_eq!(found, ["tls/0.0.0.0:7447", "tls/router:7447"]);
+        set(&mut config, "listen/endpoints", json!(["quic/0.0.0.0:7447"])).unwrap();
+        set(&mut config, "connect/endpoints", json!(["quic/router:7447"])).unwrap();
+        assert!(tls_endpoints(&config).is_empty());
     }
 }

@@ -34,7 +34,7 @@ class ConnectOptions:
     multicast. ``client_mode``: zenoh ``client`` mode, one connection through
     a router (re-established when the router restarts), instead of a peer.
     ``user``/``password``: for a daemon that authenticates. ``tls_ca``: PEM of
-    the CA that signed the daemon's certificate (``tls/`` endpoints);
+    the CA that signed the daemon's certificate (``quic/`` and ``tls/`` endpoints);
     ``tls_cert``/``tls_key``: this client's certificate and key, for a
     daemon that requires mTLS.
     """
