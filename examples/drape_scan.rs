@@ -9,7 +9,7 @@
 //! ```text
 //! cargo run --release --example drape_scan -- run SCENE --levels 721v,100% [--bend 1,1.35] [--stretch 2] [--dt 1e-4] [--twins 8 [--jitter 1e-6]] [--csv FILE]
 //! cargo run --release --example drape_scan -- restart SCENE --levels 1081v,721v [--bend 1,1.35] [--stretch 2] [--csv FILE]
-//! cargo run --release --example drape_scan -- write SCENE --levels 1800v --out LEVEL.obj
+//! cargo run --release --example drape_scan -- write SCENE --levels 1800v [--relax 20 --flip] --out LEVEL.obj
 //! cargo run --release --example drape_scan -- chart --csv FILE[,FILE …] [--names A,B …] [--unscaled] --out CHART.svg
 //! ```
 //!
@@ -18,7 +18,10 @@
 //! reference's own vertices (a level's vertices are reference vertices)
 //! against the reference's; then each level starts from the reference's
 //! last shape, at rest, and runs 3 s. `write` saves a level as OBJ, to be
-//! used as another scene's mesh (a reference of that resolution).
+//! used as another scene's mesh (a reference of that resolution), and can
+//! remesh it in its rest plane first (Delaunay flips, tangential
+//! relaxation; border fixed; flat meshes only), printing how even its
+//! triangles were and are.
 //! `--csv` appends every run to FILE (made with its header when absent);
 //! `chart` draws the runs from rest of one or more such files: the DC at
 //! their end (the mean over twins) against the vertex count, one series
@@ -568,6 +571,15 @@ fn remesh(mesh: &mut TriMesh, sweeps: usize, flip: bool) -> usize {
         .triangles
         .iter()
         .fold([0.0; 3], |s, &t| add(s, normal(&mesh.positions, t)));
+    let norm = |v: [f64; 3]| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+    for &t in &mesh.triangles {
+        let m = normal(&mesh.positions, t);
+        let dot = m[0] * up[0] + m[1] * up[1] + m[2] * up[2];
+        assert!(
+            dot > (1.0 - 1e-9) * norm(m) * norm(up),
+            "--relax/--flip need a flat rest shape: triangle {t:?} is tilted"
+        );
+    }
     let mut flips = if flip { delaunay_flips(mesh) } else { 0 };
     let border = mesh.border();
     let n = mesh.vertices();
