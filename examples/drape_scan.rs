@@ -34,6 +34,7 @@ use lodcloth_core::drape::{drape_coefficient, fold_count, shadow_area};
 use lodcloth_core::level::GridLevel;
 use lodcloth_core::mesh::{triangle_area, TriMesh};
 use lodcloth_core::scene::{ClothLevel, Scene};
+use lodcloth_core::sim::vec3::{add, cross, dist, dot, norm, scale, sub};
 use lodcloth_core::sim::{Material, Shape, Simulation, SpringClass, SpringKind};
 use rayon::prelude::*;
 
@@ -516,11 +517,7 @@ impl Shapes {
         let areas: Vec<f64> = mesh.triangles.iter().map(|&t| triangle_area(p, t)).collect();
         let mean = areas.iter().sum::<f64>() / areas.len() as f64;
         let var = areas.iter().map(|a| (a - mean).powi(2)).sum::<f64>() / areas.len() as f64;
-        let d2 = |a: u32, b: u32| {
-            (0..3)
-                .map(|c| (p[a as usize][c] - p[b as usize][c]).powi(2))
-                .sum::<f64>()
-        };
+        let d2 = |a: u32, b: u32| dist(p[a as usize], p[b as usize]).powi(2);
         let mut quality: Vec<f64> = mesh
             .triangles
             .iter()
@@ -559,24 +556,17 @@ impl std::fmt::Display for Shapes {
 /// the flips made. Panics if a triangle turns over.
 fn remesh(mesh: &mut TriMesh, sweeps: usize, flip: bool) -> usize {
     let normal = |p: &[[f64; 3]], [a, b, c]: [u32; 3]| {
-        let (a, b, c) = (p[a as usize], p[b as usize], p[c as usize]);
-        let (u, v) = (sub(b, a), sub(c, a));
-        [
-            u[1] * v[2] - u[2] * v[1],
-            u[2] * v[0] - u[0] * v[2],
-            u[0] * v[1] - u[1] * v[0],
-        ]
+        let a = p[a as usize];
+        cross(sub(p[b as usize], a), sub(p[c as usize], a))
     };
     let up = mesh
         .triangles
         .iter()
         .fold([0.0; 3], |s, &t| add(s, normal(&mesh.positions, t)));
-    let norm = |v: [f64; 3]| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
     for &t in &mesh.triangles {
         let m = normal(&mesh.positions, t);
-        let dot = m[0] * up[0] + m[1] * up[1] + m[2] * up[2];
         assert!(
-            dot > (1.0 - 1e-9) * norm(m) * norm(up),
+            dot(m, up) > (1.0 - 1e-9) * norm(m) * norm(up),
             "--relax/--flip need a flat rest shape: triangle {t:?} is tilted"
         );
     }
@@ -590,7 +580,7 @@ fn remesh(mesh: &mut TriMesh, sweeps: usize, flip: bool) -> usize {
             let area = triangle_area(&mesh.positions, t);
             let c = t.iter().fold([0.0; 3], |s, &i| add(s, mesh.positions[i as usize]));
             for &i in &t {
-                sum[i as usize] = add(sum[i as usize], c.map(|x| x * area / 3.0));
+                sum[i as usize] = add(sum[i as usize], scale(c, area / 3.0));
                 weight[i as usize] += area;
             }
         }
@@ -603,20 +593,9 @@ fn remesh(mesh: &mut TriMesh, sweeps: usize, flip: bool) -> usize {
     }
     for &t in &mesh.triangles {
         let m = normal(&mesh.positions, t);
-        assert!(
-            m[0] * up[0] + m[1] * up[1] + m[2] * up[2] > 0.0,
-            "triangle {t:?} turned over"
-        );
+        assert!(dot(m, up) > 0.0, "triangle {t:?} turned over");
     }
     flips
-}
-
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-fn add(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
 }
 
 /// Lawson's flips until every interior edge is locally Delaunay (the two
@@ -625,9 +604,7 @@ fn delaunay_flips(mesh: &mut TriMesh) -> usize {
     use std::collections::{HashMap, HashSet};
     let angle = |p: &[[f64; 3]], at: u32, a: u32, b: u32| {
         let (u, v) = (sub(p[a as usize], p[at as usize]), sub(p[b as usize], p[at as usize]));
-        let dot = u[0] * v[0] + u[1] * v[1] + u[2] * v[2];
-        let norm = (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt() * (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
-        (dot / norm).clamp(-1.0, 1.0).acos()
+        (dot(u, v) / (norm(u) * norm(v))).clamp(-1.0, 1.0).acos()
     };
     let mut total = 0;
     loop {
