@@ -7,9 +7,9 @@
 //! of the stretch springs over the overhang.
 //!
 //! ```text
-//! cargo run --release --example drape_scan -- run SCENE --levels 721v,100% [--bend 1,1.35] [--stretch 2] [--dt 1e-4] [--twins 8 [--jitter 1e-6]] [--csv FILE]
+//! cargo run --release --example drape_scan -- run SCENE --levels 721v,100% [--bend 1,1.35] [--stretch 2] [--dt 1e-4] [--twins 8 [--jitter 1e-6]] [--stencils-from MESH.obj] [--csv FILE]
 //! cargo run --release --example drape_scan -- restart SCENE --levels 1081v,721v [--bend 1,1.35] [--stretch 2] [--csv FILE]
-//! cargo run --release --example drape_scan -- write SCENE --levels 1800v [--relax 20 --flip] --out LEVEL.obj
+//! cargo run --release --example drape_scan -- write SCENE --levels 1800v [--relax 20 --flip] [--shuffle 0.05 [--seed 1]] --out LEVEL.obj
 //! cargo run --release --example drape_scan -- chart --csv FILE[,FILE …] [--names A,B …] [--unscaled] --out CHART.svg
 //! ```
 //!
@@ -20,8 +20,11 @@
 //! last shape, at rest, and runs 3 s. `write` saves a level as OBJ, to be
 //! used as another scene's mesh (a reference of that resolution), and can
 //! remesh it in its rest plane first (Delaunay flips, tangential
-//! relaxation; border fixed; flat meshes only), printing how even its
-//! triangles were and are.
+//! relaxation; border fixed; flat meshes only) or flip a share of its
+//! edges at random with its vertices kept (`--shuffle`), printing how even
+//! its triangles and valences were and are. `run --stencils-from` bends a
+//! mesh with another triangulation's stencils over the same vertices, to
+//! tell the springs' connectivity from the stencils'.
 //! `--csv` appends every run to FILE (made with its header when absent);
 //! `chart` draws the runs from rest of one or more such files: the DC at
 //! their end (the mean over twins) against the vertex count, one series
@@ -61,6 +64,12 @@ enum Command {
         /// The twins' vertical jitter's standard deviation (m).
         #[arg(long, default_value_t = 1e-6)]
         jitter: f64,
+        /// Bend with the stencils of this mesh instead of the level's own:
+        /// an OBJ with the level's vertices (as `write` makes them) and
+        /// other triangles. Springs, masses and shadow stay the level's.
+        /// Tells the springs' connectivity from the stencils'.
+        #[arg(long)]
+        stencils_from: Option<PathBuf>,
     },
     /// Step the reference, then each level from its last shape, at rest.
     Restart {
@@ -82,6 +91,17 @@ enum Command {
         /// Delaunay edge flips in the rest plane, before and after relaxing.
         #[arg(long)]
         flip: bool,
+        /// Flip this share of the interior edges, drawn at random, with
+        /// every vertex kept where it is (after any --relax/--flip): a
+        /// mesh's connectivity made irregular, its vertices not. A flip is
+        /// taken only where the two triangles make a convex quad, neither
+        /// triangle was flipped already, and valences stay 4–9 inside and
+        /// ≥ 2 triangles on the border.
+        #[arg(long, default_value_t = 0.0)]
+        shuffle: f64,
+        /// The seed of --shuffle's draw.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
     },
     /// Draw the runs from rest in CSVs written by --csv (one series per
     /// file, bend and stretch scale).
@@ -315,12 +335,18 @@ fn overhang_strain(sim: &Simulation, support_radius: f64) -> String {
     )
 }
 
-fn run(args: &Runs, dt: Option<f64>, twins: u64, jitter: f64) {
+fn run(args: &Runs, dt: Option<f64>, twins: u64, jitter: f64, stencils_from: Option<&Path>) {
     assert!(
         jitter.is_finite() && jitter >= 0.0,
         "--jitter must be a length ≥ 0, got {jitter}"
     );
-    let setup = Setup::new(&args.levels);
+    let mut setup = Setup::new(&args.levels);
+    if let Some(path) = stencils_from {
+        let other = lodcloth_core::mesh::load(path).unwrap_or_else(|e| failed(path, e));
+        for cloth in &mut setup.levels {
+            *cloth = bent_by(cloth, &other).unwrap_or_else(|e| failed(path, e));
+        }
+    }
     let (bends, stretch) = (&args.bend, args.stretch);
     let support_radius = (setup.support / std::f64::consts::PI).sqrt();
     let jobs: Vec<_> = setup
@@ -370,6 +396,61 @@ fn run(args: &Runs, dt: Option<f64>, twins: u64, jitter: f64) {
         spread(&runs);
     }
     append(args.csv.as_deref(), &runs);
+}
+
+/// `cloth` bending with `other`'s stencils: a mesh of the level's
+/// vertices, at the same positions (bit for bit, as `write` makes them),
+/// in any order.
+fn bent_by(cloth: &ClothLevel, other: &TriMesh) -> Result<ClothLevel, String> {
+    let rest = &cloth.topology.rest_positions;
+    if other.vertices() != rest.len() {
+        return Err(format!(
+            "{} vertices, the level {} has {}",
+            other.vertices(),
+            cloth.level,
+            rest.len()
+        ));
+    }
+    let bits = |p: [f64; 3]| p.map(f64::to_bits);
+    let at: std::collections::HashMap<[u64; 3], u32> = (0..rest.len()).map(|i| (bits(rest[i]), i as u32)).collect();
+    let index = other
+        .positions
+        .iter()
+        .enumerate()
+        .map(|(k, &p)| {
+            at.get(&bits(p))
+                .copied()
+                .ok_or_else(|| format!("vertex {k} at {p:?} is not one of the level's"))
+        })
+        .collect::<Result<Vec<u32>, String>>()?;
+    // `other` renumbered as the level.
+    let mut other = other.clone();
+    other.positions = rest.clone();
+    for t in &mut other.triangles {
+        *t = t.map(|k| index[k as usize]);
+    }
+    let mut topology = (*cloth.topology).clone();
+    topology.bending = lodcloth_core::mesh::bending_stencils(&other, &[])?;
+    println!(
+        "{}: bending with {} stencils of another triangulation ({} triangles, {} shared with the level's)",
+        cloth.level,
+        other.vertices(),
+        other.triangles.len(),
+        {
+            let sorted = |t: &[u32; 3]| {
+                let mut t = *t;
+                t.sort_unstable();
+                t
+            };
+            let own: std::collections::HashSet<[u32; 3]> = topology.triangles.iter().map(sorted).collect();
+            other.triangles.iter().filter(|t| own.contains(&sorted(t))).count()
+        }
+    );
+    Ok(ClothLevel {
+        level: cloth.level,
+        topology: std::sync::Arc::new(topology),
+        mesh: cloth.mesh.clone(),
+    })
 }
 
 /// Each vertex of `sim`'s state raised or lowered (y) by a normal draw of
@@ -486,18 +567,40 @@ fn restart(args: &Runs) {
     append(args.csv.as_deref(), &runs);
 }
 
-fn write(args: &Levels, out: &Path, relax: usize, flip: bool) {
+/// `write`'s remeshing.
+struct Remesh {
+    relax: usize,
+    flip: bool,
+    shuffle: f64,
+    seed: u64,
+}
+
+fn write(args: &Levels, out: &Path, how: &Remesh) {
+    assert!(
+        (0.0..=1.0).contains(&how.shuffle),
+        "--shuffle must be a share in [0, 1], got {}",
+        how.shuffle
+    );
     let setup = Setup::new(args);
     let level = setup.levels.first().expect("one level");
     let mut mesh = level.mesh.as_ref().expect("a mesh level").mesh.clone();
     let mut comment = format!("level {} of {}", level.level, args.scene.display());
-    if relax > 0 || flip {
-        let before = Shapes::of(&mesh);
-        let flips = remesh(&mut mesh, relax, flip);
-        let after = Shapes::of(&mesh);
-        comment += &format!(", remeshed in its rest plane: {relax} relaxation sweeps, {flips} Delaunay flips");
-        println!("{comment}\n  before: {before}\n  after:  {after}");
+    let before = Shapes::of(&mesh);
+    if how.relax > 0 || how.flip {
+        let flips = remesh(&mut mesh, how.relax, how.flip);
+        comment += &format!(
+            ", remeshed in its rest plane: {} relaxation sweeps, {flips} Delaunay flips",
+            how.relax
+        );
     }
+    if how.shuffle > 0.0 {
+        let (flips, interior) = shuffled(&mut mesh, how.shuffle, how.seed);
+        comment += &format!(
+            ", {flips} of its {interior} interior edges flipped at random (seed {}), vertices kept",
+            how.seed
+        );
+    }
+    println!("{comment}\n  before: {before}\n  after:  {}", Shapes::of(&mesh));
     std::fs::write(out, lodcloth_core::mesh::generate::to_obj(&mesh, &comment))
         .unwrap_or_else(|e| panic!("{}: {e}", out.display()));
 }
@@ -509,6 +612,8 @@ struct Shapes {
     area_cv: f64,
     quality: [f64; 2],
     valence: [usize; 2],
+    /// The interior valences' standard deviation (0 on a regular mesh).
+    valence_sd: f64,
 }
 
 impl Shapes {
@@ -533,10 +638,13 @@ impl Shapes {
             }
         }
         let interior = || valence.iter().zip(&border).filter(|(_, &b)| !b).map(|(&v, _)| v);
+        let count = interior().count().max(1) as f64;
+        let valence_mean = interior().sum::<usize>() as f64 / count;
         Shapes {
             area_cv: var.sqrt() / mean,
             quality: [quality[quality.len() / 10], quality[quality.len() / 2]],
             valence: [interior().min().unwrap_or(0), interior().max().unwrap_or(0)],
+            valence_sd: (interior().map(|v| (v as f64 - valence_mean).powi(2)).sum::<f64>() / count).sqrt(),
         }
     }
 }
@@ -545,8 +653,8 @@ impl std::fmt::Display for Shapes {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(
             f,
-            "area CV {:.3}, quality p10 {:.3} median {:.3}, interior valences {}-{}",
-            self.area_cv, self.quality[0], self.quality[1], self.valence[0], self.valence[1]
+            "area CV {:.3}, quality p10 {:.3} median {:.3}, interior valences {}-{} (sd {:.2})",
+            self.area_cv, self.quality[0], self.quality[1], self.valence[0], self.valence[1], self.valence_sd
         )
     }
 }
@@ -645,6 +753,88 @@ fn delaunay_flips(mesh: &mut TriMesh) -> usize {
         }
         total += flips;
     }
+}
+
+/// Flip `share` of `mesh`'s interior edges, drawn at random (seeded), its
+/// vertices kept: each edge once, in a seeded shuffle, where its two
+/// triangles make a convex quad (the new edge inside it), neither was
+/// flipped already, the new edge is not one already, and valences stay
+/// 4–9 inside and ≥ 2 on the border. Returns the flips made and the
+/// interior edges.
+fn shuffled(mesh: &mut TriMesh, share: f64, seed: u64) -> (usize, usize) {
+    use std::collections::{HashMap, HashSet};
+    let mut facing: HashMap<(u32, u32), (usize, u32)> = HashMap::new();
+    let mut edges: HashSet<(u32, u32)> = HashSet::new();
+    for (k, &[a, b, c]) in mesh.triangles.iter().enumerate() {
+        for (x, y, z) in [(a, b, c), (b, c, a), (c, a, b)] {
+            facing.insert((x, y), (k, z));
+            edges.insert((x.min(y), x.max(y)));
+        }
+    }
+    let mut interior: Vec<(u32, u32)> = facing
+        .keys()
+        .copied()
+        .filter(|&(a, b)| a < b && facing.contains_key(&(b, a)))
+        .collect();
+    interior.sort_unstable();
+    let mut rng = lodcloth_core::points::generate::SplitMix(seed);
+    for i in (1..interior.len()).rev() {
+        interior.swap(i, (rng.next_u64() % (i as u64 + 1)) as usize);
+    }
+    let border = mesh.border();
+    let mut valence = vec![0usize; mesh.vertices()];
+    for t in &mesh.triangles {
+        for &i in t {
+            valence[i as usize] += 1;
+        }
+    }
+    let up = mesh.triangles.iter().fold([0.0; 3], |s, &[a, b, c]| {
+        let p = &mesh.positions;
+        add(
+            s,
+            cross(sub(p[b as usize], p[a as usize]), sub(p[c as usize], p[a as usize])),
+        )
+    });
+    let turns = |p: &[[f64; 3]], [a, b, c]: [u32; 3]| {
+        dot(
+            cross(sub(p[b as usize], p[a as usize]), sub(p[c as usize], p[a as usize])),
+            up,
+        ) > 0.0
+    };
+    let target = (share * interior.len() as f64).round() as usize;
+    let mut touched = vec![false; mesh.triangles.len()];
+    let mut flips = 0;
+    for &(a, b) in &interior {
+        if flips == target {
+            break;
+        }
+        let (t1, c) = facing[&(a, b)];
+        let (t2, d) = facing[&(b, a)];
+        let loses = |v: u32| valence[v as usize] - 1 >= if border[v as usize] { 2 } else { 4 };
+        let gains = |v: u32| border[v as usize] || valence[v as usize] < 9;
+        if touched[t1]
+            || touched[t2]
+            || edges.contains(&(c.min(d), c.max(d)))
+            || !(loses(a) && loses(b) && gains(c) && gains(d))
+        {
+            continue;
+        }
+        // a→b→c and b→a→d counter-clockwise: the quad is a, d, b, c.
+        let (n1, n2) = ([a, d, c], [d, b, c]);
+        if !(turns(&mesh.positions, n1) && turns(&mesh.positions, n2)) {
+            continue;
+        }
+        mesh.triangles[t1] = n1;
+        mesh.triangles[t2] = n2;
+        edges.insert((c.min(d), c.max(d)));
+        touched[t1] = true;
+        touched[t2] = true;
+        for (v, by) in [(a, -1), (b, -1), (c, 1), (d, 1)] {
+            valence[v as usize] = valence[v as usize].wrapping_add_signed(by);
+        }
+        flips += 1;
+    }
+    (flips, interior.len())
 }
 
 /// The runs from rest in the `--csv` files: DC at each run's end against
@@ -767,14 +957,26 @@ fn main() {
             dt,
             twins,
             jitter,
-        } => run(&runs, dt, twins, jitter),
+            stencils_from,
+        } => run(&runs, dt, twins, jitter, stencils_from.as_deref()),
         Command::Restart { runs } => restart(&runs),
         Command::Write {
             levels,
             out,
             relax,
             flip,
-        } => write(&levels, &out, relax, flip),
+            shuffle,
+            seed,
+        } => write(
+            &levels,
+            &out,
+            &Remesh {
+                relax,
+                flip,
+                shuffle,
+                seed,
+            },
+        ),
         Command::Chart {
             csv,
             names,

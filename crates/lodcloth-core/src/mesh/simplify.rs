@@ -60,8 +60,9 @@ pub struct Simplified {
 /// any change that makes another level from the same mesh and count, so no
 /// cached estimate or instance snapshot of the old level is taken for the
 /// new one (1: meshoptimizer regularised, border priority, pins locked;
-/// 2: rim slivers dropped).
-pub const CHAIN_VERSION: u32 = 2;
+/// 2: rim slivers dropped; 3: narrow bending stencils, which bend the same
+/// level differently).
+pub const CHAIN_VERSION: u32 = 3;
 
 /// An ear (module docs) whose triangle is under this share of the level's
 /// mean triangle area is a sliver and is removed.
