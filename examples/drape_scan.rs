@@ -31,6 +31,7 @@
 //! per file, bend and stretch scale.
 //! Runs go two at a time (rayon). Measured with it: docs/results.md,
 //! "Mesh cloths".
+use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
 
 use lodcloth_core::drape::{drape_coefficient, fold_count, shadow_area};
@@ -412,7 +413,7 @@ fn bent_by(cloth: &ClothLevel, other: &TriMesh) -> Result<ClothLevel, String> {
         ));
     }
     let bits = |p: [f64; 3]| p.map(f64::to_bits);
-    let at: std::collections::HashMap<[u64; 3], u32> = (0..rest.len()).map(|i| (bits(rest[i]), i as u32)).collect();
+    let at: HashMap<[u64; 3], u32> = (0..rest.len()).map(|i| (bits(rest[i]), i as u32)).collect();
     let index = other
         .positions
         .iter()
@@ -442,7 +443,7 @@ fn bent_by(cloth: &ClothLevel, other: &TriMesh) -> Result<ClothLevel, String> {
                 t.sort_unstable();
                 t
             };
-            let own: std::collections::HashSet<[u32; 3]> = topology.triangles.iter().map(sorted).collect();
+            let own: HashSet<[u32; 3]> = topology.triangles.iter().map(sorted).collect();
             other.triangles.iter().filter(|t| own.contains(&sorted(t))).count()
         }
     );
@@ -706,25 +707,33 @@ fn remesh(mesh: &mut TriMesh, sweeps: usize, flip: bool) -> usize {
     flips
 }
 
+/// Directed edge a→b → (its triangle, the vertex facing it).
+type Facing = HashMap<(u32, u32), (usize, u32)>;
+
+/// Each directed edge of `mesh`'s triangles with its triangle and the
+/// vertex facing it, and the undirected edges (lower index first).
+fn adjacency(mesh: &TriMesh) -> (Facing, HashSet<(u32, u32)>) {
+    let mut facing = HashMap::new();
+    let mut edges = HashSet::new();
+    for (k, &[a, b, c]) in mesh.triangles.iter().enumerate() {
+        for (x, y, z) in [(a, b, c), (b, c, a), (c, a, b)] {
+            facing.insert((x, y), (k, z));
+            edges.insert((x.min(y), x.max(y)));
+        }
+    }
+    (facing, edges)
+}
+
 /// Lawson's flips until every interior edge is locally Delaunay (the two
 /// angles facing it sum to at most π). Returns the flips made.
 fn delaunay_flips(mesh: &mut TriMesh) -> usize {
-    use std::collections::{HashMap, HashSet};
     let angle = |p: &[[f64; 3]], at: u32, a: u32, b: u32| {
         let (u, v) = (sub(p[a as usize], p[at as usize]), sub(p[b as usize], p[at as usize]));
         (dot(u, v) / (norm(u) * norm(v))).clamp(-1.0, 1.0).acos()
     };
     let mut total = 0;
     loop {
-        // Directed edge a→b → (its triangle, the vertex facing it).
-        let mut facing: HashMap<(u32, u32), (usize, u32)> = HashMap::new();
-        let mut edges: HashSet<(u32, u32)> = HashSet::new();
-        for (k, &[a, b, c]) in mesh.triangles.iter().enumerate() {
-            for (x, y, z) in [(a, b, c), (b, c, a), (c, a, b)] {
-                facing.insert((x, y), (k, z));
-                edges.insert((x.min(y), x.max(y)));
-            }
-        }
+        let (facing, mut edges) = adjacency(mesh);
         let mut touched = vec![false; mesh.triangles.len()];
         let mut flips = 0;
         let mut directed: Vec<(u32, u32)> = facing.keys().copied().filter(|&(a, b)| a < b).collect();
@@ -762,15 +771,7 @@ fn delaunay_flips(mesh: &mut TriMesh) -> usize {
 /// 4–9 inside and ≥ 2 on the border. Returns the flips made and the
 /// interior edges.
 fn shuffled(mesh: &mut TriMesh, share: f64, seed: u64) -> (usize, usize) {
-    use std::collections::{HashMap, HashSet};
-    let mut facing: HashMap<(u32, u32), (usize, u32)> = HashMap::new();
-    let mut edges: HashSet<(u32, u32)> = HashSet::new();
-    for (k, &[a, b, c]) in mesh.triangles.iter().enumerate() {
-        for (x, y, z) in [(a, b, c), (b, c, a), (c, a, b)] {
-            facing.insert((x, y), (k, z));
-            edges.insert((x.min(y), x.max(y)));
-        }
-    }
+    let (facing, mut edges) = adjacency(mesh);
     let mut interior: Vec<(u32, u32)> = facing
         .keys()
         .copied()
@@ -810,7 +811,8 @@ fn shuffled(mesh: &mut TriMesh, share: f64, seed: u64) -> (usize, usize) {
         }
         let (t1, c) = facing[&(a, b)];
         let (t2, d) = facing[&(b, a)];
-        let loses = |v: u32| valence[v as usize] - 1 >= if border[v as usize] { 2 } else { 4 };
+        // After losing a triangle: ≥ 4 neighbours inside, ≥ 2 triangles on the border.
+        let loses = |v: u32| valence[v as usize] > if border[v as usize] { 2 } else { 4 };
         let gains = |v: u32| border[v as usize] || valence[v as usize] < 9;
         if touched[t1]
             || touched[t2]
