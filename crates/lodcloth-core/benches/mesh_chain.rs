@@ -7,13 +7,15 @@
 //! `cargo bench -p lodcloth-core --bench mesh_chain -- [--vertices 20000]`
 //!
 //! Per level: simplification (meshoptimizer, pins locked), springs and
-//! masses ([`mesh_topology`], [`mesh_material`]), and the correlation both
-//! ways (reference → level, level → reference: closest points on the rest
-//! surface). Single-threaded; each figure is the best of three runs.
+//! masses ([`mesh_topology`], [`mesh_material`]), the bending stencils a
+//! flat mesh gets with a bending rigidity ([`bending_stencils`]; the disc
+//! only, a skirt is not flat), and the correlation both ways (reference →
+//! level, level → reference: closest points on the rest surface).
+//! Single-threaded; each figure is the best of three runs.
 use std::time::Instant;
 
 use lodcloth_core::lod::Correlation;
-use lodcloth_core::mesh::{generate, mesh_material, mesh_topology, simplify, TriMesh};
+use lodcloth_core::mesh::{bending_stencils, generate, mesh_material, mesh_topology, simplify, TriMesh};
 use lodcloth_core::sim::{Membrane, Moduli};
 
 fn arg<'a>(args: &'a [String], name: &str) -> Option<&'a str> {
@@ -58,11 +60,21 @@ fn chain(name: &str, reference: &TriMesh, locked: &[bool]) {
         locked.iter().filter(|&&l| l).count()
     );
     println!(
-        "| level (vertices) | simplify (ms) | springs (ms) | correlate ↓ (ms) | correlate ↑ (ms) | level total (ms) |"
+        "| level (vertices) | simplify (ms) | springs (ms) | stencils (ms) | correlate ↓ (ms) | correlate ↑ (ms) | level total (ms) |"
     );
-    println!("|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|");
+    // The stencils' time when the mesh is flat (0 when it is not).
+    let stencils = |mesh: &TriMesh, pinned: &[bool]| {
+        let (t, made) = best(|| bending_stencils(mesh, pinned).is_ok());
+        if made {
+            t
+        } else {
+            0.0
+        }
+    };
     let (t_ref, fine) = best(|| mesh_topology(reference));
-    let mut total = t_ref;
+    let t_ref_stencils = stencils(reference, locked);
+    let mut total = t_ref + t_ref_stencils;
     for share in [0.40, 0.15, 0.05] {
         let target = (n as f64 * share).round() as usize;
         let (t_s, level) = best(|| simplify(reference, target, locked, name).expect("simplifies"));
@@ -71,23 +83,27 @@ fn chain(name: &str, reference: &TriMesh, locked: &[bool]) {
             let material = mesh_material(&membrane(), &topo, None);
             (topo, material)
         });
+        let pinned: Vec<bool> = level.source.iter().map(|&k| locked[k as usize]).collect();
+        let t_b = stencils(&level.mesh, &pinned);
         let (t_down, _) = best(|| Correlation::between(&fine, &coarse.0).expect("correlates"));
         let (t_up, _) = best(|| Correlation::between(&coarse.0, &fine).expect("correlates"));
-        let sum = t_s + t_t + t_down + t_up;
+        let sum = t_s + t_t + t_b + t_down + t_up;
         total += sum;
         println!(
-            "| {} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} |",
+            "| {} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} |",
             level.mesh.vertices(),
             1e3 * t_s,
             1e3 * t_t,
+            1e3 * t_b,
             1e3 * t_down,
             1e3 * t_up,
             1e3 * sum
         );
     }
     println!(
-        "{name}: reference springs {:.1} ms; the whole chain (three levels) {:.3} s (target ≤ 2 s)",
+        "{name}: reference springs {:.1} ms, stencils {:.1} ms; the whole chain (three levels) {:.3} s (target ≤ 2 s)",
         1e3 * t_ref,
+        1e3 * t_ref_stencils,
         total
     );
 }
