@@ -432,20 +432,18 @@ fn bent_by(cloth: &ClothLevel, other: &TriMesh) -> Result<ClothLevel, String> {
     }
     let mut topology = (*cloth.topology).clone();
     topology.bending = lodcloth_core::mesh::bending_stencils(&other, &[])?;
+    let sorted = |t: &[u32; 3]| {
+        let mut t = *t;
+        t.sort_unstable();
+        t
+    };
+    let own: HashSet<[u32; 3]> = topology.triangles.iter().map(sorted).collect();
+    let shared = other.triangles.iter().filter(|t| own.contains(&sorted(t))).count();
     println!(
-        "{}: bending with {} stencils of another triangulation ({} triangles, {} shared with the level's)",
+        "{}: bending with {} stencils of another triangulation ({} triangles, {shared} shared with the level's)",
         cloth.level,
         other.vertices(),
         other.triangles.len(),
-        {
-            let sorted = |t: &[u32; 3]| {
-                let mut t = *t;
-                t.sort_unstable();
-                t
-            };
-            let own: HashSet<[u32; 3]> = topology.triangles.iter().map(sorted).collect();
-            other.triangles.iter().filter(|t| own.contains(&sorted(t))).count()
-        }
     );
     Ok(ClothLevel {
         level: cloth.level,

@@ -24,9 +24,9 @@
 //! edge) within 16 times a regular hexagonal ring's, since points nearly on
 //! a conic fit a quadratic with huge weights (unbounded, and on the border
 //! too, the Cusick disc's 757-vertex level could step no longer than
-//! 2.3 µs instead of 200 µs). A quadratic fitted
-//! over two rings smooths away the curvature of a fold a few edges wide,
-//! so such a vertex bends too easily: on a regular disc with one interior
+//! 2.3 µs instead of 200 µs). A quadratic fitted over two rings smooths
+//! away the curvature of a fold a few edges wide, so such a vertex bends
+//! too easily: on a regular disc with one interior
 //! edge in 20 flipped (vertices kept), a fold three edges wide stored 0.74
 //! of the regular connectivity's energy with whole rings and 0.92 with
 //! narrow ones (`tests/bending.rs`). Border vertices keep the whole ring:
