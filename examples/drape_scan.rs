@@ -34,7 +34,7 @@
 use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
 
-use lodcloth_core::drape::{drape_coefficient, fold_count, shadow_area};
+use lodcloth_core::drape::{drape_coefficient, fold_count, jitter_heights, shadow_area};
 use lodcloth_core::level::GridLevel;
 use lodcloth_core::mesh::{triangle_area, TriMesh};
 use lodcloth_core::scene::{ClothLevel, Scene};
@@ -367,7 +367,7 @@ fn run(args: &Runs, dt: Option<f64>, twins: u64, jitter: f64, stencils_from: Opt
                 .build_on(cloth, setup.material(cloth, bend, stretch))
                 .expect("builds");
             if twin > 0 {
-                jittered(&mut sim, twin, jitter);
+                jitter_heights(&mut sim, twin, jitter);
             }
             let dc = setup.stepped(&mut sim, setup.scene.duration.round() as usize);
             let folds = fold_count(&sim.topology().rest_positions, &sim.state().pos, [0.0, 0.0]);
@@ -450,18 +450,6 @@ fn bent_by(cloth: &ClothLevel, other: &TriMesh) -> Result<ClothLevel, String> {
         topology: std::sync::Arc::new(topology),
         mesh: cloth.mesh.clone(),
     })
-}
-
-/// Each vertex of `sim`'s state raised or lowered (y) by a normal draw of
-/// standard deviation `jitter`, seeded by `twin`; pins are put back.
-fn jittered(sim: &mut Simulation, twin: u64, jitter: f64) {
-    let mut rng = lodcloth_core::points::generate::SplitMix(twin);
-    let mut state = sim.state().clone();
-    let n = sim.topology().n_nodes;
-    for y in &mut state.pos[n..2 * n] {
-        *y += jitter * rng.gaussian();
-    }
-    sim.set_state(state).expect("same size");
 }
 
 /// Per level and bend scale: the twins' DC at the end (mean, sample

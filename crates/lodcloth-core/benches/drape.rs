@@ -4,7 +4,7 @@
 //! `lodcloth_core::drape`). The support is the scene's first collider
 //! seen from above (a box's top, a sphere's or capsule's widest section).
 //!
-//! `cargo bench -p lodcloth-core --bench drape -- [--scene FILE] [--levels 16,24,32,40] [--methods same,bcd] [--out DIR]`
+//! `cargo bench -p lodcloth-core --bench drape -- [--scene FILE] [--levels 16,24,32,40] [--methods same,bcd] [--twins N] [--short-tolerance R] [--out DIR]`
 //!
 //! Levels as the experiments take them: N or NXxNY on a grid cloth, Nv or
 //! P% on a mesh cloth (default 60%,40%,25%,15%).
@@ -20,16 +20,26 @@
 //! largest difference of a ring, % of O_max) at the end; and the folds
 //! counted on the rim's outline at the end (`lodcloth_core::drape`).
 //! `drape.svg` draws each drape at the end from above, as a tester sees it.
+//!
+//! `--twins N` runs each level and method N times more or less: the run
+//! above and N − 1 twins with every node raised or lowered by a seeded
+//! normal draw of 1 µm (`lodcloth_core::drape::jitter_heights`), and
+//! prints the mean and spread of their DC at the end (`twins.csv`): one
+//! run of a drape is one draw of its coefficient. The reference is one run.
 use std::path::Path;
 
-use lodcloth_core::drape::{drape_coefficient, fold_count, ring_profile, shadow_area};
-use lodcloth_core::estimate::{no_progress, FitOptions, Method, RecordSpec};
+use lodcloth_core::drape::{drape_coefficient, fold_count, jitter_heights, ring_profile, shadow_area};
+use lodcloth_core::estimate::{no_progress, Details, FitOptions, Method, RecordSpec};
 use lodcloth_core::level::{GridLevel, Level};
 use lodcloth_core::plan::{default_problem, record_reference};
 use lodcloth_core::scene::Scene;
-use lodcloth_core::sim::{Shape, Simulation};
+use lodcloth_core::sim::{Shape, Simulation, SpringClass};
+use rayon::prelude::*;
 
 const PIXEL: f64 = 1e-3;
+
+/// The vertical jitter of a twin (m), as `drape_scan`'s.
+const TWIN_JITTER: f64 = 1e-6;
 
 fn arg<'a>(args: &'a [String], name: &str) -> Option<&'a str> {
     args.iter()
@@ -178,6 +188,15 @@ fn main() {
                 .expect("a level of this scene")
         })
         .collect();
+    // `--short-tolerance X`: the fit guard's short-horizon ratio (default
+    // 1.05; `inf` turns that check off, to see what the guard stops).
+    let fit_options = FitOptions {
+        short_tolerance: arg(&args, "--short-tolerance").map_or(FitOptions::default().short_tolerance, |t| {
+            t.parse().expect("--short-tolerance: a ratio")
+        }),
+        ..FitOptions::default()
+    };
+    let twins: u64 = arg(&args, "--twins").map_or(1, |t| t.parse().expect("--twins: a count ≥ 1"));
     let methods: Vec<Method> = arg(&args, "--methods")
         .unwrap_or("same,bcd")
         .split(',')
@@ -219,6 +238,8 @@ fn main() {
         reference_drape.folds
     )];
     let mut csv = String::from("level,method,time_s,drape_coefficient,reference,difference\n");
+    let mut twins_csv = String::from("level,method,twin,drape_coefficient_at_end\n");
+    let mut twin_rows: Vec<String> = Vec::new();
     println!(
         "scene {} (reference {}), support {:.4} m², cloth {:.4} m², shadow pixels {PIXEL} m",
         scene.name,
@@ -252,11 +273,64 @@ fn main() {
         let label = format!("{level} ({} nodes)", problem.topology().n_nodes);
         for &method in &methods {
             let est = problem
-                .estimate(method, &FitOptions::default(), &mut no_progress)
+                .estimate(method, &fit_options, &mut |p| {
+                    if p.stage == "fit" {
+                        eprintln!("{label} {}: iteration {}/{}", method.name(), p.done, p.total);
+                    }
+                })
                 .expect("estimates");
+            if let Details::Fit(r) = &est.details {
+                let same = problem.same_material();
+                let scales: Vec<String> = SpringClass::ALL
+                    .iter()
+                    .map(|c| {
+                        let (a, b) = (est.material.springs[c.index()], same.springs[c.index()]);
+                        format!("{c:?} K×{:.3} C×{:.3}", a.k / b.k, a.c / b.c)
+                    })
+                    .collect();
+                eprintln!(
+                    "{label} {}: from {} ({:.3}% → {:.3}% training rms, {} runs, {}; short horizon {:.3}% → {:.3}%){}: {}",
+                    method.name(),
+                    r.start,
+                    100.0 * r.start_rms,
+                    100.0 * r.rms,
+                    r.evaluations,
+                    r.stop,
+                    100.0 * r.short_start,
+                    100.0 * r.short_fitted,
+                    r.kept_start.as_ref().map_or(String::new(), |k| format!(" — {k}")),
+                    scales.join(", ")
+                );
+            }
             let sim = problem.simulation(est.material).expect("builds");
             let (dc, drape) = over_time(sim, &times, cloth, support, axis);
             row(&label, method.name(), &dc, &mut csv);
+            if twins > 1 {
+                // The run above is twin 0; the others start 1 µm apart.
+                let mut ends = vec![*dc.last().expect("a time")];
+                ends.extend(
+                    (1..twins)
+                        .into_par_iter()
+                        .map(|twin| {
+                            let mut sim = problem.simulation(est.material).expect("builds");
+                            jitter_heights(&mut sim, twin, TWIN_JITTER);
+                            let end = [*times.last().expect("a time")];
+                            over_time(sim, &end, cloth, support, axis).0[0]
+                        })
+                        .collect::<Vec<f64>>(),
+                );
+                for (twin, d) in ends.iter().enumerate() {
+                    twins_csv.push_str(&format!("{level},{},{twin},{d:.5}\n", method.name()));
+                }
+                let mean = ends.iter().sum::<f64>() / ends.len() as f64;
+                let sd = (ends.iter().map(|d| (d - mean).powi(2)).sum::<f64>() / (ends.len() - 1) as f64).sqrt();
+                twin_rows.push(format!(
+                    "| {label} | {} | {mean:.3} ± {sd:.3} | {:.3}–{:.3} |",
+                    method.name(),
+                    ends.iter().copied().fold(f64::INFINITY, f64::min),
+                    ends.iter().copied().fold(0.0, f64::max)
+                ));
+            }
             let eq9 = problem
                 .score(est.material, 0..problem.frames(), &mut no_progress)
                 .expect("scores");
@@ -278,6 +352,16 @@ fn main() {
             ));
             drapes.push((format!("{level} {}", method.name()), drape));
         }
+    }
+    if twins > 1 {
+        println!();
+        println!("| level | method | DC at the end over {twins} twins, mean ± sd | range |");
+        println!("|---|---|---|---|");
+        for r in &twin_rows {
+            println!("{r}");
+        }
+        std::fs::create_dir_all(&out).expect("output directory");
+        std::fs::write(out.join("twins.csv"), &twins_csv).expect("twins.csv");
     }
     println!();
     println!("| level | method | eq. 9 mean % | last quarter % | sag: largest ring difference, % of O_max | folds |");

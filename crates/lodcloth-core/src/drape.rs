@@ -191,3 +191,18 @@ pub fn ring_profile(rest: &[[f64; 3]], pos: &[f64], axis: [f64; 2], rings: usize
         .map(|&(s, c)| if c > 0 { s / c as f64 } else { f64::NAN })
         .collect()
 }
+
+/// A twin of `sim`'s run: every node of its state raised or lowered (y) by
+/// a normal draw of standard deviation `jitter` (m), seeded by `seed`.
+/// Where a symmetric drape breaks into folds is decided by rounding, so one
+/// run is one draw of its drape coefficient; runs from a few such twins
+/// give its spread (results.md, "One run is one draw of the drape").
+pub fn jitter_heights(sim: &mut crate::sim::Simulation, seed: u64, jitter: f64) {
+    let mut rng = crate::points::generate::SplitMix(seed);
+    let mut state = sim.state().clone();
+    let n = sim.topology().n_nodes;
+    for y in &mut state.pos[n..2 * n] {
+        *y += jitter * rng.gaussian();
+    }
+    sim.set_state(state).expect("the simulation's own state");
+}

@@ -151,6 +151,95 @@ fn fit_recovers_known_coefficients_from_a_wrong_start() {
 }
 
 #[test]
+fn shape_quantiles_are_the_mass_weighted_quantile_function() {
+    use lodcloth::estimate::fit::{shape_quantiles, ShapeScratch, SHAPE_QUANTILES};
+    let q = |k: usize| (k as f64 + 0.5) / SHAPE_QUANTILES as f64;
+    let mut scratch = ShapeScratch::default();
+    // Equal masses on the values 0 … n−1 in a shuffled order: node j's
+    // centre is at (j + ½)/n, so the quantile at q is q·n − ½, clamped.
+    let n = 10;
+    let perm = [3usize, 7, 0, 9, 1, 8, 2, 6, 4, 5];
+    let mut pos = vec![0.0; 3 * n];
+    for (i, &v) in perm.iter().enumerate() {
+        pos[i] = v as f64; // x: the values
+        pos[n + i] = 2.0; // y: all equal
+        pos[2 * n + i] = -(v as f64); // z: mirrored
+    }
+    let mut out = Vec::new();
+    shape_quantiles(&pos, &vec![0.5; n], &mut scratch, &mut out);
+    assert_eq!(out.len(), 3 * SHAPE_QUANTILES);
+    for k in 0..SHAPE_QUANTILES {
+        let want = (q(k) * n as f64 - 0.5).clamp(0.0, (n - 1) as f64);
+        assert!(
+            (out[k] - want).abs() < 1e-12,
+            "x quantile {k}: {} against {want}",
+            out[k]
+        );
+        assert_eq!(out[SHAPE_QUANTILES + k], 2.0);
+        let mirrored = -out[SHAPE_QUANTILES - 1 - k];
+        assert!((out[2 * SHAPE_QUANTILES + k] - mirrored).abs() < 1e-12, "z mirrors x");
+    }
+    // Masses 1 and 3 at 0 and 1: centres at 1/8 and 5/8, linear between.
+    let mut out = Vec::new();
+    shape_quantiles(&[1.0, 0.0, 0.0, 0.0, 0.0, 0.0], &[3.0, 1.0], &mut scratch, &mut out);
+    for k in 0..SHAPE_QUANTILES {
+        let want = ((q(k) - 0.125) / 0.5).clamp(0.0, 1.0);
+        assert!(
+            (out[k] - want).abs() < 1e-12,
+            "weighted quantile {k}: {} against {want}",
+            out[k]
+        );
+    }
+}
+
+#[test]
+fn shape_fit_recovers_known_coefficients_from_a_wrong_start() {
+    // As `fit_recovers_known_coefficients_from_a_wrong_start`, matching the
+    // distribution of positions instead of every node: the pulled cloth's
+    // spread in x, y and z over 0.5 s still tells every class's stiffness.
+    let s = scene(8, "symplectic_euler", 2e-4);
+    let reference = record(&s, 2500, 10, 10);
+    let p = own_resolution(&s, &reference);
+    let truth = reference.material;
+    let factors = [1.3, 0.7, 0.8, 1.25, 0.85, 0.75, 0.75, 1.3, 0.8, 0.8];
+    let start = Material {
+        springs: std::array::from_fn(|t| SpringCoeffs {
+            k: truth.springs[t].k * factors[t],
+            c: truth.springs[t].c * factors[t + 5],
+        }),
+    };
+    let options = FitOptions {
+        train: Some(0..p.frames()),
+        start: Some(start),
+        max_iterations: 25,
+        tolerance: 1e-9,
+        ..FitOptions::default()
+    };
+    let est = p.estimate(Method::Shape, &options, &mut no_progress).unwrap();
+    let Details::Fit(report) = &est.details else {
+        panic!("fit details")
+    };
+    let err = relative_errors(&est.material, &truth);
+    eprintln!(
+        "shape: {} iterations, rms {:.3e} → {:.3e}, errors {err:?}",
+        report.iterations, report.start_rms, report.rms
+    );
+    assert!(report.kept_start.is_none(), "{:?}", report.kept_start);
+    // Within 3 % (1.9 % measured on an AVX-512 Xeon). The damping is not
+    // asserted: a distribution of positions tells it poorly here (0.2–0.9
+    // off), as the shape of a cloth depends little on how fast it moves.
+    assert!(
+        err[..5].iter().all(|&e| e < 0.03),
+        "stiffness errors {:?} after {} iterations ({}), rms {} → {}",
+        &err[..5],
+        report.iterations,
+        report.stop,
+        report.start_rms,
+        report.rms
+    );
+}
+
+#[test]
 fn coarse_fit_beats_same_and_gkd_on_held_out_frames() {
     let s = scene(16, "symplectic_euler", 2e-4);
     let reference = record(&s, 4000, 10, 20);

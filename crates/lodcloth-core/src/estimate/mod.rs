@@ -32,7 +32,7 @@ use std::fmt;
 use std::ops::Range;
 use std::sync::Arc;
 
-pub use fit::{FitOptions, FitReport};
+pub use fit::{FitOptions, FitReport, FitTarget};
 pub use inverse::{Distribution, InverseEstimate, LsqEstimate, Reading, Rejections};
 pub use metric::{ErrorAccumulator, ErrorReport};
 pub use reference::{RecordSpec, Reference, ReferenceError, Sample};
@@ -83,17 +83,24 @@ pub enum Method {
     /// Coefficients fitted so the coarse run tracks the reference
     /// (Levenberg–Marquardt on the eq. 9 residuals).
     Fit,
+    /// Coefficients fitted so the coarse run takes the reference's shape:
+    /// the same Levenberg–Marquardt fit on the distribution of the cloth's
+    /// positions (mass-weighted quantiles of each coordinate) instead of
+    /// node by node ([`fit::FitTarget::Shape`]), for scenes whose folds form
+    /// where rounding decides (a drape).
+    Shape,
 }
 
 impl Method {
     /// Every method, cheapest first.
-    pub const ALL: [Method; 6] = [
+    pub const ALL: [Method; 7] = [
         Method::Same,
         Method::SameSpring,
         Method::Bcd,
         Method::Gkd,
         Method::Lsq,
         Method::Fit,
+        Method::Shape,
     ];
 
     /// Name used in config files, CLI and CSV.
@@ -105,6 +112,7 @@ impl Method {
             Method::Gkd => "gkd",
             Method::Lsq => "lsq",
             Method::Fit => "fit",
+            Method::Shape => "shape",
         }
     }
 
@@ -416,6 +424,32 @@ impl LodProblem {
         window: usize,
         progress: ProgressFn<'_>,
     ) -> Result<ErrorReport, EstimateError> {
+        let n = self.topology.n_nodes;
+        let reference = &self.reference;
+        let mut acc = ErrorAccumulator::new(reference.o_max, n, frames.len());
+        let mut mapped = vec![0.0; 3 * n];
+        let diverged = self.windows(material, frames, window, progress, &mut |f, pos| {
+            self.correlation.map(&reference.frames[f], &mut mapped);
+            acc.push(reference.frame_times[f], &mapped, pos);
+        })?;
+        if diverged {
+            acc.mark_diverged();
+        }
+        Ok(acc.report())
+    }
+
+    /// The runs of [`LodProblem::score_windows`]: `each(f, positions)` at
+    /// every metric frame `f` of `frames`, the coarse cloth restarted from
+    /// the reference before each window. True when the run diverged (the
+    /// frames after it are not visited).
+    pub(crate) fn windows(
+        &self,
+        material: Material,
+        frames: Range<usize>,
+        window: usize,
+        progress: ProgressFn<'_>,
+        each: &mut dyn FnMut(usize, &[f64]),
+    ) -> Result<bool, EstimateError> {
         self.check_range(&frames)?;
         if window == 0 {
             return Err(EstimateError::Window);
@@ -423,7 +457,6 @@ impl LodProblem {
         let n = self.topology.n_nodes;
         let reference = &self.reference;
         let interval = reference.dt * reference.spec.metric_stride as f64;
-        let mut acc = ErrorAccumulator::new(reference.o_max, n, frames.len());
         let mut mapped = vec![0.0; 3 * n];
         let mut before = vec![0.0; 3 * n];
         let mut sim = self.simulation(material)?;
@@ -456,12 +489,10 @@ impl LodProblem {
                     sim.step();
                 }
                 if sim.diverged() {
-                    acc.mark_diverged();
-                    return Ok(acc.report());
+                    return Ok(true);
                 }
                 if f >= start {
-                    self.correlation.map(&reference.frames[f], &mut mapped);
-                    acc.push(reference.frame_times[f], &mapped, &sim.state().pos);
+                    each(f, &sim.state().pos);
                 }
             }
             progress(Progress {
@@ -471,7 +502,7 @@ impl LodProblem {
             });
             start = end;
         }
-        Ok(acc.report())
+        Ok(false)
     }
 
     fn check_range(&self, frames: &Range<usize>) -> Result<(), EstimateError> {
@@ -523,6 +554,14 @@ impl LodProblem {
                 Details::Lsq(inverse::lsq_estimate(&same, &self.topology, &obs, progress))
             }
             Method::Fit => Details::Fit(fit::fit(self, options, progress)?),
+            Method::Shape => {
+                let options = FitOptions {
+                    target: FitTarget::Shape,
+                    fd_step: options.fd_step.max(fit::SHAPE_FD_STEP),
+                    ..options.clone()
+                };
+                Details::Fit(fit::fit(self, &options, progress)?)
+            }
         };
         let material = match &details {
             Details::Same if method == Method::SameSpring => self.reference.material,
