@@ -1,58 +1,40 @@
-//! Scratch probe: the quantile (shape) distance and eq. 9 of a level against
-//! its reference, and its DC, as its bend class is scaled.
-//! `cargo run --release -p lodcloth-core --example shape_probe -- SCENE LEVEL SCALES`
+//! The landscape of a `shape` fit along one coefficient: a level of a
+//! Cusick scene run from rest with its bend class (K and C) scaled by each
+//! factor, and its shape error (the RMS of the mass-weighted quantile
+//! differences per coordinate, % of O_max) and mean eq. 9 error against
+//! the reference, over the training half and the whole run, every 20th
+//! metric frame, and its drape coefficient at the end. What
+//! `estimate/fit.rs`'s `BEND_LADDER` and `SHAPE_FD_STEP` are chosen from.
+//!
+//! `cargo run --release -p lodcloth-core --example shape_probe -- config/scenes/cusick-drape.toml 60% 0.7,1,1.2,1.35,1.5,2`
 use lodcloth_core::drape::{drape_coefficient, shadow_area};
+use lodcloth_core::estimate::fit::{shape_quantiles, ShapeScratch, SHAPE_QUANTILES};
 use lodcloth_core::estimate::RecordSpec;
 use lodcloth_core::level::GridLevel;
 use lodcloth_core::plan::{default_problem, record_reference};
 use lodcloth_core::scene::Scene;
-use lodcloth_core::sim::{SpringClass, SpringKind};
+use lodcloth_core::sim::{Shape, SpringClass, SpringKind};
 use rayon::prelude::*;
 
-const Q: usize = 64;
-
-fn quantiles(values: &[f64], weights: &[f64], out: &mut Vec<f64>) {
-    let mut order: Vec<usize> = (0..values.len()).collect();
-    order.sort_by(|&a, &b| values[a].total_cmp(&values[b]));
-    let total: f64 = weights.iter().sum();
-    let mut mids = Vec::with_capacity(values.len());
-    let mut acc = 0.0;
-    for &i in &order {
-        mids.push((acc + 0.5 * weights[i]) / total);
-        acc += weights[i];
-    }
-    let mut j = 0;
-    for k in 0..Q {
-        let q = (k as f64 + 0.5) / Q as f64;
-        while j + 1 < mids.len() && mids[j + 1] < q {
-            j += 1;
-        }
-        let v = if q <= mids[0] {
-            values[order[0]]
-        } else if j + 1 >= mids.len() {
-            values[order[mids.len() - 1]]
-        } else {
-            let t = (q - mids[j]) / (mids[j + 1] - mids[j]);
-            values[order[j]] + t * (values[order[j + 1]] - values[order[j]])
-        };
-        out.push(v);
-    }
-}
-
+/// The mass-weighted quantiles of each coordinate (the `shape` fit's).
 fn shape(pos: &[f64], masses: &[f64]) -> Vec<f64> {
-    let n = masses.len();
-    let mut out = Vec::with_capacity(3 * Q);
-    for c in 0..3 {
-        quantiles(&pos[c * n..(c + 1) * n], masses, &mut out);
-    }
+    let mut out = Vec::with_capacity(3 * SHAPE_QUANTILES);
+    shape_quantiles(pos, masses, &mut ShapeScratch::default(), &mut out);
     out
 }
 
 fn main() {
+    const USAGE: &str = "usage: shape_probe SCENE LEVEL SCALE[,SCALE…]";
     let args: Vec<String> = std::env::args().collect();
-    let scene = Scene::load(std::path::Path::new(&args[1])).expect("scene");
-    let level: GridLevel = args[2].parse().expect("level");
-    let scales: Vec<f64> = args[3].split(',').map(|s| s.parse().unwrap()).collect();
+    let [_, scene, level, scales] = args.as_slice() else {
+        panic!("{USAGE}")
+    };
+    let scene = Scene::load(std::path::Path::new(scene)).expect("the scene");
+    let level: GridLevel = level.parse().expect("LEVEL: N, NXxNY, Nv or P%");
+    let scales: Vec<f64> = scales
+        .split(',')
+        .map(|s| s.parse().expect("SCALES: numbers, comma-separated"))
+        .collect();
     let spec = RecordSpec {
         frames: scene.steps(),
         ..RecordSpec::PAPER
@@ -75,7 +57,10 @@ fn main() {
         })
         .collect();
     let cloth = scene.mesh.as_ref().unwrap().area;
-    let support = std::f64::consts::PI * 0.09 * 0.09;
+    let support = match scene.colliders().first().map(|b| b.shape) {
+        Some(Shape::Cylinder { radius, .. }) => std::f64::consts::PI * radius * radius,
+        other => panic!("a Cusick scene's support is a cylinder, not {other:?}"),
+    };
     let o = reference.o_max;
     let rows: Vec<String> = scales
         .par_iter()
