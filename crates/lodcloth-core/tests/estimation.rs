@@ -101,6 +101,25 @@ fn lsq_recovers_known_coefficients_from_a_same_resolution_reference() {
     assert_lsq_recovers_the_scenes_springs(&scene(10, "symplectic_euler", 2e-4));
 }
 
+/// Fit options that train on every frame of `p`, from `truth` with every
+/// K and C off by 15–30 % (K per class, C per kind: what the fit moves).
+fn from_a_wrong_start(p: &LodProblem, truth: &Material) -> FitOptions {
+    let factors = [1.3, 0.7, 0.8, 1.25, 0.85, 0.75, 0.75, 1.3, 0.8, 0.8];
+    let start = Material {
+        springs: std::array::from_fn(|t| SpringCoeffs {
+            k: truth.springs[t].k * factors[t],
+            c: truth.springs[t].c * factors[t + 5],
+        }),
+    };
+    FitOptions {
+        train: Some(0..p.frames()),
+        start: Some(start),
+        max_iterations: 25,
+        tolerance: 1e-9,
+        ..FitOptions::default()
+    }
+}
+
 #[test]
 fn fit_recovers_known_coefficients_from_a_wrong_start() {
     let s = scene(8, "symplectic_euler", 2e-4);
@@ -116,21 +135,7 @@ fn fit_recovers_known_coefficients_from_a_wrong_start() {
     )
     .unwrap();
     let truth = reference.material;
-    // K per class, C per kind (what the fit moves).
-    let factors = [1.3, 0.7, 0.8, 1.25, 0.85, 0.75, 0.75, 1.3, 0.8, 0.8];
-    let start = Material {
-        springs: std::array::from_fn(|t| SpringCoeffs {
-            k: truth.springs[t].k * factors[t],
-            c: truth.springs[t].c * factors[t + 5],
-        }),
-    };
-    let options = FitOptions {
-        train: Some(0..p.frames()),
-        start: Some(start),
-        max_iterations: 25,
-        tolerance: 1e-9,
-        ..FitOptions::default()
-    };
+    let options = from_a_wrong_start(&p, &truth);
     let est = p.estimate(Method::Fit, &options, &mut no_progress).unwrap();
     let Details::Fit(report) = &est.details else {
         panic!("fit details")
@@ -201,20 +206,7 @@ fn shape_fit_recovers_known_coefficients_from_a_wrong_start() {
     let reference = record(&s, 2500, 10, 10);
     let p = own_resolution(&s, &reference);
     let truth = reference.material;
-    let factors = [1.3, 0.7, 0.8, 1.25, 0.85, 0.75, 0.75, 1.3, 0.8, 0.8];
-    let start = Material {
-        springs: std::array::from_fn(|t| SpringCoeffs {
-            k: truth.springs[t].k * factors[t],
-            c: truth.springs[t].c * factors[t + 5],
-        }),
-    };
-    let options = FitOptions {
-        train: Some(0..p.frames()),
-        start: Some(start),
-        max_iterations: 25,
-        tolerance: 1e-9,
-        ..FitOptions::default()
-    };
+    let options = from_a_wrong_start(&p, &truth);
     let est = p.estimate(Method::Shape, &options, &mut no_progress).unwrap();
     let Details::Fit(report) = &est.details else {
         panic!("fit details")
