@@ -281,8 +281,10 @@ fn main() {
                 .expect("estimates");
             if let Details::Fit(r) = &est.details {
                 let same = problem.same_material();
+                // The classes the level has (a mesh cloth has no shear).
                 let scales: Vec<String> = SpringClass::ALL
                     .iter()
+                    .filter(|c| same.springs[c.index()].k > 0.0)
                     .map(|c| {
                         let (a, b) = (est.material.springs[c.index()], same.springs[c.index()]);
                         format!("{c:?} K×{:.3} C×{:.3}", a.k / b.k, a.c / b.c)
@@ -328,7 +330,7 @@ fn main() {
                     "| {label} | {} | {mean:.3} ± {sd:.3} | {:.3}–{:.3} |",
                     method.name(),
                     ends.iter().copied().fold(f64::INFINITY, f64::min),
-                    ends.iter().copied().fold(0.0, f64::max)
+                    ends.iter().copied().fold(f64::NEG_INFINITY, f64::max)
                 ));
             }
             let eq9 = problem
