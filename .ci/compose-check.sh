@@ -13,9 +13,11 @@
 # secrets under out/ci-compose/; the CLI asserts that `list` through the
 # router sees both daemons' instances, that `watch`/`record` get metrics and
 # states from an instance of each, that the view lists them, that a switch
-# of an instance daemon-b owns succeeds (and, secured, that an observer's is
-# refused, and sessions without a certificate, account or right password
-# are not admitted); everything is stopped with SIGTERM and must exit 0.
+# of an instance daemon-b owns succeeds and an input to one of its cloths
+# reaches it and a later recorder (and, secured, that an observer's switch
+# and input are refused, and sessions without a certificate, account or
+# right password are not admitted); everything is stopped with SIGTERM and
+# must exit 0.
 #
 # Not checked without Docker: that the image builds, the container's
 # filesystem, users and permissions (uid 10001 reading the mounted files,

@@ -894,6 +894,24 @@ def exercise(t: Topology, client_env: dict[str, str], secure: dict | None) -> No
         switches = f'lodcloth_switches_total{{instance="{target}"}} 1'
         require((switches in text) == (target in insts), f"{d} /metrics: {switches!r} {'missing' if target in insts else 'present'}")
         log(f"{d}: /healthz ok for {', '.join(insts)}; /metrics counts {'the' if target in insts else 'no'} switch")
+    # 6. An operator touches a cloth of daemon-b's (the wind input; an
+    # observer's gets no reply, secured), and a recorder started after it
+    # gets that input from the daemon's episode log (`episode_inputs`).
+    cloth = next(i for i in by_daemon["daemon-b"] if i != "sphere")
+    wind = ["input", cloth, "wind", "--velocity", "1.5,0,0.5"]
+    if secure:
+        r = t.cli(wind, secure["observer"], timeout=60, check=False)
+        require(r.returncode != 0 and "no reply" in r.stderr,
+                f"an observer's input to {cloth} was not refused:\n{r.stdout}{r.stderr}")
+        log(f"an observer's input to {cloth} got no reply (the router's policy)")
+    r = t.cli(wind, op, timeout=60)
+    log(f"input: {r.stdout.strip().splitlines()[0] if r.stdout.strip() else '(answered)'}")
+    out = t.dir / f"record-{cloth}-touched.lct"
+    r = t.cli(["record", cloth, "--seconds", "1", "--out", str(out)], client_env, timeout=60)
+    m = re.search(r"with (\d+) inputs \((\d+) from before the recording began\)", r.stdout)
+    require(m is not None and int(m.group(2)) >= 1 and "warning" not in r.stderr,
+            f"record {cloth} after an input did not get it from the daemon:\n{r.stdout}{r.stderr}")
+    log(f"record {cloth} after the input: {m.group(2)} input(s) from before it began")
     if secure:
         for label, env in secure["refused"].items():
             r = t.cli(["list"], env, timeout=60, check=False)

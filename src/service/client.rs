@@ -17,8 +17,8 @@ pub enum ClientError {
     #[error("zenoh: {0}")]
     Zenoh(String),
     #[error(
-        "no reply to {what} within {seconds} s; is a daemon running and reachable (and, for switch or \
-         control on a secured daemon, are you one of its operators)?"
+        "no reply to {what} within {seconds} s; is a daemon running and reachable (and, for switch, \
+         control or input on a secured daemon, are you one of its operators)?"
     )]
     NoReply { what: String, seconds: f64 },
     #[error("{code}: {message}")]

@@ -366,4 +366,122 @@ mod tests {
         set(&mut config, "connect/endpoints", json!(["quic/router:7447"])).unwrap();
         assert!(tls_endpoints(&config).is_empty());
     }
+
+    /// The roles of the compose deployment's router policy: the subjects a
+    /// session of each role matches there.
+    const OBSERVER: &[&str] = &["anyone"];
+    const OPERATOR: &[&str] = &["anyone", "operators"];
+
+    /// Whether `acl` (zenoh's `access_control` section) lets a session
+    /// matching `subjects` send or receive (`flow`) `message` on every key
+    /// of `key` (`includes`), or on any of them (`!includes`: intersects).
+    fn allows(
+        acl: &serde_json::Value,
+        subjects: &[&str],
+        flow: &str,
+        message: &str,
+        key: &str,
+        includes: bool,
+    ) -> bool {
+        use zenoh::key_expr::KeyExpr;
+        let key = KeyExpr::try_from(key).unwrap();
+        let list = |v: &serde_json::Value, name: &str| -> Vec<String> {
+            v[name]
+                .as_array()
+                .map(|a| a.iter().filter_map(|x| x.as_str().map(String::from)).collect())
+                .unwrap_or_default()
+        };
+        let rules = acl["rules"].as_array().unwrap();
+        acl["policies"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|p| list(p, "subjects").iter().any(|s| subjects.contains(&s.as_str())))
+            .flat_map(|p| list(p, "rules"))
+            .filter_map(|id| rules.iter().find(|r| r["id"] == id.as_str()))
+            .filter(|r| r["permission"] == "allow")
+            .filter(|r| list(r, "flows").iter().any(|f| f == flow))
+            .filter(|r| list(r, "messages").iter().any(|m| m == message))
+            .flat_map(|r| list(r, "key_exprs"))
+            .any(|k| {
+                let k = KeyExpr::try_from(k.as_str()).unwrap();
+                if includes {
+                    k.includes(&key)
+                } else {
+                    k.intersects(&key)
+                }
+            })
+    }
+
+    /// config/compose-router-secure.json5 holds its own copy of the
+    /// observe-for-all, operate-for-operators policy (the daemons behind the
+    /// router only ever see the router): every query the daemons' policy
+    /// lets observers or operators make, with the queryable it needs to
+    /// reach them, the router must let them make too, and what only
+    /// operators may ask, no observer may. (It once lacked `input` and
+    /// `episode_inputs`: nobody could touch a cloth through it.)
+    #[test]
+    fn the_compose_routers_policy_grants_what_the_daemons_policy_grants() {
+        let router = zenoh::Config::from_json5(include_str!("../../config/compose-router-secure.json5")).unwrap();
+        let acl: serde_json::Value = serde_json::from_str(&router.get_json("access_control").unwrap()).unwrap();
+        let daemons = access_control(
+            "lodcloth",
+            &RawAccess {
+                operator_usernames: vec!["operator".into()],
+                operator_certificates: vec![],
+            },
+        );
+        let mut checked = 0;
+        for rule in daemons["rules"].as_array().unwrap() {
+            let id = rule["id"].as_str().unwrap();
+            let (role, others): (&[&str], Option<&[&str]>) = match id {
+                "observe" | "ask" => (OBSERVER, None),
+                "operate" => (OPERATOR, Some(OBSERVER)),
+                other => panic!("the daemons' policy has a rule '{other}' this test does not know"),
+            };
+            let messages: Vec<&str> = rule["messages"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|m| m.as_str().unwrap())
+                .collect();
+            for key in rule["key_exprs"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|k| k.as_str().unwrap())
+            {
+                // What a client sends comes into the router (ingress from
+                // its session); what a daemon sends goes out to it (egress).
+                // Clients' own puts stay refused there: publishing under the
+                // prefix is the daemons' alone.
+                for (message, flow) in [
+                    ("query", "ingress"),
+                    ("declare_subscriber", "ingress"),
+                    ("declare_liveliness_subscriber", "ingress"),
+                    ("liveliness_query", "ingress"),
+                    ("reply", "egress"),
+                    ("declare_queryable", "egress"),
+                    ("put", "egress"),
+                    ("liveliness_token", "egress"),
+                ] {
+                    if !messages.contains(&message) {
+                        continue;
+                    }
+                    assert!(
+                        allows(&acl, role, flow, message, key, true),
+                        "the daemons' rule '{id}' lets {role:?} {flow} '{message}' on {key}; the compose router does not"
+                    );
+                    checked += 1;
+                }
+                if let Some(observer) = others {
+                    assert!(
+                        !allows(&acl, observer, "ingress", "query", key, false),
+                        "the compose router lets an observer query {key}, which only operators may"
+                    );
+                }
+            }
+        }
+        assert!(checked >= 10, "only {checked} grants checked");
+    }
 }

@@ -48,7 +48,7 @@ class NoReplyError(LodclothError):
         if detail:
             text += f" (zenoh: {detail})"
         text += (
-            "; is a daemon running and reachable (and, for switch or control on a secured"
+            "; is a daemon running and reachable (and, for switch, control or input on a secured"
             " daemon, are you one of its operators)? An unprepared level may need a longer timeout."
         )
         super().__init__(text)
