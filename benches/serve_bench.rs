@@ -82,7 +82,7 @@ fn trial(n: usize, integrator: Integrator, precision: SpringPrecision, count: us
             // The frame count read below is refreshed with the metrics: at
             // 100 Hz it is at most 10 ms stale, 0.3 % of a trial.
             metrics_hz: 100.0,
-            background: || {},
+            replay_class: || {},
         },
     )
     .expect("engine");

@@ -42,7 +42,7 @@ fn a_split_cloth_in_the_engine_steps_exactly_as_on_one_thread() {
                 max_substeps: 64,
                 max_lag: 0.25,
                 metrics_hz: 10.0,
-                background: || {},
+                replay_class: || {},
             },
         )
         .expect("engine");
@@ -96,7 +96,7 @@ fn an_engine_dropped_without_stop_stops_its_threads() {
             max_substeps: 64,
             max_lag: 0.25,
             metrics_hz: 10.0,
-            background: || {},
+            replay_class: || {},
         },
     )
     .expect("engine");

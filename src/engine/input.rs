@@ -155,7 +155,7 @@ impl Runner {
         if self.replica.as_ref().is_some_and(|r| r.replays(&problem)) {
             return;
         }
-        match Replica::start(&self.name, &problem, &self.episode_inputs, self.settings.background) {
+        match Replica::start(&self.name, &problem, &self.episode_inputs, self.settings.replay_class) {
             Ok(r) => self.replica = Some(r),
             Err(e) => {
                 tracing::warn!(instance = %self.name, "no reference replay for the touched episode ({e}): no live error");

@@ -120,10 +120,11 @@ pub struct EngineSettings {
     pub max_lag: f64,
     /// Metrics published per second per instance.
     pub metrics_hz: f64,
-    /// Called first on every background thread the engine starts (a
-    /// touched episode's reference replay), to put it below stepping (the
-    /// service's `lower_priority`).
-    pub background: fn(),
+    /// Called first on the thread of a touched episode's reference replay,
+    /// to put it below stepping but above background preparation: the
+    /// touching client watches the live error it gives (the service's
+    /// `client_priority`).
+    pub replay_class: fn(),
 }
 
 /// The running engine.

@@ -5,10 +5,15 @@
 //! Stepping never waits for it. The stepping thread hands over each input
 //! and, once per reference frame interval, a copy of the level's positions
 //! (into one of [`BUFFERS`] reused buffers; with none free, that interval is
-//! skipped). The replica thread runs in the background class the service
-//! chose (`EngineSettings::background`: `SCHED_IDLE` by default), so it
-//! takes only time no stepping thread wants; it lags, and each error it
-//! returns carries the simulated time it is of.
+//! skipped). The replica thread runs in the class the service chose for
+//! it (`EngineSettings::replay_class`: nice 19, the class of work a client
+//! waits for), so a waking stepping thread preempts it and it takes a
+//! contended core's time mostly from `SCHED_IDLE` preparation: a touching
+//! client watches its live error, which background predictions (both
+//! cores' idle time) otherwise held up to 1.5 s behind on 2 cores. Its
+//! work is bounded by real time (it never runs past the level's time). It
+//! may still lag, and each error it returns carries the simulated time it
+//! is of.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{self, Receiver, Sender, TryRecvError};
@@ -54,14 +59,15 @@ pub(super) enum Polled {
 }
 
 impl Replica {
-    /// Start replaying `problem`'s reference from rest under `inputs`
-    /// (the episode's so far, (time, input) in time order) on a thread
-    /// that first calls `background`.
+    /// Start replaying `problem`'s reference under `inputs` (the episode's
+    /// so far, (time, input) in time order), from its last recorded
+    /// checkpoint before the first of them, on a thread that first calls
+    /// `class`.
     pub(super) fn start(
         name: &str,
         problem: &Arc<LodProblem>,
         inputs: &[(f64, Input)],
-        background: fn(),
+        class: fn(),
     ) -> std::io::Result<Replica> {
         let (to, rx) = mpsc::channel();
         let (tx, from) = mpsc::channel();
@@ -72,11 +78,12 @@ impl Replica {
         }
         let problem_t = problem.clone();
         let stop_t = stop.clone();
+        let first = inputs.first().map_or(0.0, |(t, _)| *t);
         std::thread::Builder::new()
             .name(format!("lodcloth-replica-{name}"))
             .spawn(move || {
-                background();
-                replay(&problem_t, &rx, &tx, &stop_t);
+                class();
+                replay(&problem_t, first, &rx, &tx, &stop_t);
             })?;
         Ok(Replica {
             to,
@@ -141,10 +148,11 @@ impl Drop for Replica {
     }
 }
 
-/// The replica thread: inputs queued, comparisons answered in order.
-fn replay(problem: &LodProblem, rx: &Receiver<ToReplica>, tx: &Sender<FromReplica>, stop: &AtomicBool) {
+/// The replica thread, from the reference's checkpoint before `first` (the
+/// episode's first input): inputs queued, comparisons answered in order.
+fn replay(problem: &LodProblem, first: f64, rx: &Receiver<ToReplica>, tx: &Sender<FromReplica>, stop: &AtomicBool) {
     let stopped = || stop.load(Ordering::Relaxed);
-    let mut reference = match ReplayedReference::new(problem) {
+    let mut reference = match ReplayedReference::starting_before(problem, first) {
         Ok(r) => r,
         Err(e) => {
             let _ = tx.send(FromReplica::Failed(e));

@@ -547,9 +547,7 @@ impl ServiceConfig {
                 max_substeps: e.max_substeps,
                 max_lag: e.max_lag,
                 metrics_hz: e.metrics_hz,
-                background: || {
-                    super::lower_priority();
-                },
+                replay_class: super::client_priority,
             },
             estimation: EstimationPlan {
                 spec: RecordSpec {

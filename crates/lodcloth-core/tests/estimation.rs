@@ -584,12 +584,27 @@ fn a_replayed_reference_is_the_recording_without_inputs_and_the_touched_scene_wi
         },
         impulse: [0.0, 0.0, 0.02],
     };
+    // The same from the recording's checkpoint before the strike (the
+    // daemon's replica starts there, not from rest): it must be the same
+    // run to the bit, so the checkpoint must be the state of its time.
     let mut replay = ReplayedReference::new(&problem).unwrap();
     replay.push_input(0.1, strike).unwrap();
+    let mut resumed = ReplayedReference::starting_before(&problem, 0.1).unwrap();
+    let resumed_at = resumed.time();
+    assert!(
+        resumed_at > 0.0 && resumed_at <= 0.1 + 1e-4,
+        "the replay before 0.1 s resumes at t = {resumed_at}, not at the checkpoint before it"
+    );
+    let later = ReplayedReference::starting_before(&problem, 0.25).unwrap().time();
+    assert!(
+        later > 0.25 - lodcloth::estimate::CHECKPOINT_SECONDS && later <= 0.25 + 1e-4,
+        "the replay before 0.25 s resumes at t = {later}"
+    );
+    resumed.push_input(0.1, strike).unwrap();
     let mut truth = s.build().unwrap();
     let mut touch = Touch::new(&s);
     let mut struck = false;
-    let (mut away, mut mismatch) = (0.0f64, 0.0f64);
+    let (mut away, mut mismatch, mut resumed_mismatch) = (0.0f64, 0.0f64, 0.0f64);
     for (t, frame) in reference.frame_times.iter().zip(&reference.frames) {
         while truth.state().time < t - 1e-4 {
             if !struck && truth.state().time > 0.1 - 1e-4 {
@@ -600,11 +615,18 @@ fn a_replayed_reference_is_the_recording_without_inputs_and_the_touched_scene_wi
         }
         problem.correlation().map(&truth.state().pos, &mut mapped);
         mismatch = mismatch.max(replay.error_at(*t, &problem, &mapped, &never).unwrap());
+        if *t >= resumed_at {
+            resumed_mismatch = resumed_mismatch.max(resumed.error_at(*t, &problem, &mapped, &never).unwrap());
+        }
         problem.correlation().map(frame, &mut mapped);
         away = away.max(replay.error_at(*t, &problem, &mapped, &never).unwrap());
     }
     assert!(struck);
     assert_eq!(mismatch, 0.0, "the replay is not the scene struck at 0.1 s");
+    assert_eq!(
+        resumed_mismatch, 0.0,
+        "the replay resumed at t = {resumed_at} is not the scene struck at 0.1 s"
+    );
     assert!(
         away > 1e-3,
         "the strike moved the replay only {away} from the recording"

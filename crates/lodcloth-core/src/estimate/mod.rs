@@ -35,7 +35,7 @@ use std::sync::Arc;
 pub use fit::{FitOptions, FitReport, FitTarget};
 pub use inverse::{Distribution, InverseEstimate, LsqEstimate, Reading, Rejections};
 pub use metric::{ErrorAccumulator, ErrorReport};
-pub use reference::{RecordSpec, Reference, ReferenceError, Sample};
+pub use reference::{RecordSpec, Reference, ReferenceError, Sample, CHECKPOINT_SECONDS};
 pub use replayed::{ReplayError, ReplayedReference};
 pub use touched::{eased_drag, probes, record_touched, Probe, TouchedError, TouchedReference, TouchedScore, PROBES};
 

@@ -69,7 +69,19 @@ impl ReplayedReference {
     /// The reference of `problem` at rest at t = 0, with its integrator,
     /// step and material (the scene's).
     pub fn new(problem: &LodProblem) -> Result<ReplayedReference, ReplayError> {
-        let sim = problem.scene.build().map_err(|e| ReplayError::Build(e.to_string()))?;
+        Self::starting_before(problem, 0.0)
+    }
+
+    /// The reference of `problem` at its last recorded checkpoint before
+    /// simulated time `t` (at rest when there is none), to replay inputs
+    /// from `t` on: the steps from the checkpoint are those of a replay from
+    /// rest, so every later position is the same to the bit.
+    pub fn starting_before(problem: &LodProblem, t: f64) -> Result<ReplayedReference, ReplayError> {
+        let mut sim = problem.scene.build().map_err(|e| ReplayError::Build(e.to_string()))?;
+        if let Some(state) = problem.reference.checkpoint_before(t) {
+            sim.set_state(state.clone())
+                .map_err(|e| ReplayError::Build(e.to_string()))?;
+        }
         Ok(ReplayedReference {
             reference: problem.reference.clone(),
             touch: Touch::new(&problem.scene),
