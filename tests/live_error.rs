@@ -107,7 +107,7 @@ async fn while_a_client_drags_the_live_error_is_the_reference_replaying_the_same
     let reply = within(5, "grab", c.input("live", &grab)).await.expect("grab");
     // The replica runs in the class of work a client waits for (nice 19),
     // above the SCHED_IDLE predictions under input that start with the
-    // touch: in that class it fell a second behind on 2 cores.
+    // touch and take both cores' idle time.
     #[cfg(target_os = "linux")]
     {
         let mut classes = Vec::new();

@@ -5,15 +5,16 @@
 //! Stepping never waits for it. The stepping thread hands over each input
 //! and, once per reference frame interval, a copy of the level's positions
 //! (into one of [`BUFFERS`] reused buffers; with none free, that interval is
-//! skipped). The replica thread runs in the class the service chose for
-//! it (`EngineSettings::replay_class`: nice 19, the class of work a client
-//! waits for), so a waking stepping thread preempts it and it takes a
-//! contended core's time mostly from `SCHED_IDLE` preparation: a touching
-//! client watches its live error, which background predictions (both
-//! cores' idle time) otherwise held up to 1.5 s behind on 2 cores. Its
-//! work is bounded by real time (it never runs past the level's time). It
-//! may still lag, and each error it returns carries the simulated time it
-//! is of.
+//! skipped). The replica starts from the recording's last checkpoint
+//! before the episode's first input, so it does not re-run the untouched
+//! part (from rest, that alone put it a second behind on 2 cores). Its
+//! thread runs in the class the service chose for it
+//! (`EngineSettings::replay_class`: nice 19, the class of work a client
+//! waits for): a waking stepping thread preempts it, and the `SCHED_IDLE`
+//! predictions under input, which take both cores' idle time from the
+//! touch on, do not share its core. Its work is bounded by real time (it
+//! never runs past the level's time). It may still lag, and each error it
+//! returns carries the simulated time it is of.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{self, Receiver, Sender, TryRecvError};

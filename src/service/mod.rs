@@ -321,11 +321,12 @@ pub enum Background {
 static BACKGROUND: AtomicU8 = AtomicU8::new(Background::Idle as u8);
 
 /// Put the calling thread in the class of work a client waits for (a
-/// switch's preparation, a touched episode's reference replay): nice 19. Below the stepping threads (CFS gives a
-/// nice-19 thread 15/1024 of a nice-0 one's share, and a waking stepping
-/// thread preempts it), above `SCHED_IDLE` background work, which then
-/// gets only what the client's work leaves (weight 3 against 15), so a
-/// switch does not queue behind the start-up's preparation. Where
+/// switch's preparation, a touched episode's reference replay): nice 19.
+/// Below the stepping threads (CFS gives a nice-19 thread 15/1024 of a
+/// nice-0 one's share, and a waking stepping thread preempts it), above
+/// `SCHED_IDLE` background work, which then gets only what the client's
+/// work leaves (weight 3 against 15), so a switch does not queue behind
+/// the start-up's preparation. Where
 /// background work is `nice` (10), the client's is too.
 pub fn client_priority() {
     let nice = if BACKGROUND.load(Ordering::Relaxed) == Background::Idle as u8 {
