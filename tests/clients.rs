@@ -609,21 +609,37 @@ async fn dragging_the_cloth_in_the_page_pulls_the_grabbed_point_after_the_pointe
 
     // A grab the level cannot take is refused, and the page says why
     // (pressed on the paused cloth, which swings after the release).
-    pause_drawn(&c, &mut browser, &states).await;
     browser
         .eval("(() => { document.querySelector('#drag-stiffness').value = '1e9'; return true; })()")
         .await;
-    // Somewhere on the canvas: the released cloth swings, the top rows
-    // least (the top edge is pinned).
-    let mut at = None;
-    for v in [0.25, 0.5, 0.75] {
-        let p = pixel(&browser.eval(&format!("window.lodclothProject({u}, {v})")).await);
-        if (left + 20.0..left + width - 20.0).contains(&p[0]) && (top + 20.0..top + height - 20.0).contains(&p[1]) {
-            at = Some(p);
-            break;
+    // Somewhere on the canvas, framed again: the released cloth swings
+    // wide (a CI run paused it with (0.5, 0.25), (0.5, 0.5) and (0.5, 0.75)
+    // all off the canvas of the view framed before the drag).
+    let mut attempt = 0;
+    let at = loop {
+        pause_drawn(&c, &mut browser, &states).await;
+        browser.click("#reset-view").await;
+        let mut drawn = Vec::new();
+        for v in [0.25, 0.5, 0.75] {
+            drawn.push(pixel(&browser.eval(&format!("window.lodclothProject({u}, {v})")).await));
         }
-    }
-    let at = at.expect("a point of the cloth on the canvas");
+        let on_canvas = drawn.iter().find(|p| {
+            (left + 20.0..left + width - 20.0).contains(&p[0]) && (top + 20.0..top + height - 20.0).contains(&p[1])
+        });
+        if let Some(&p) = on_canvas {
+            break p;
+        }
+        attempt += 1;
+        assert!(
+            attempt < 20,
+            "in 20 pauses no point (0.5, v) of the cloth was drawn on the canvas: {drawn:?}"
+        );
+        eprintln!("paused with no point of the cloth on the canvas ({drawn:?}); pausing again later");
+        within(5, "resume", c.control("drag-a", Action::Resume))
+            .await
+            .expect("resumed");
+        tokio::time::sleep(Duration::from_millis(170)).await;
+    };
     browser.mouse_press(at[0], at[1]).await;
     let deadline = Instant::now() + Duration::from_secs(10);
     while browser
