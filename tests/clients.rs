@@ -357,6 +357,18 @@ async fn pause_drawn(
     still.expect("the paused state on the bus")
 }
 
+/// After a pause that did not show what the drag test needs (`why`), let
+/// the cloth swing on for 170 ms before the next; at most 20 pauses.
+async fn resume_briefly(c: &lodcloth::service::client::Client, attempt: &mut u32, why: &str) {
+    *attempt += 1;
+    assert!(*attempt < 20, "in 20 pauses: {why}");
+    eprintln!("paused with {why}; pausing again later");
+    within(5, "resume", c.control("drag-a", Action::Resume))
+        .await
+        .expect("resumed");
+    tokio::time::sleep(Duration::from_millis(170)).await;
+}
+
 /// The drag spring of the browser drag test (N/m), set in the page's field.
 const DRAG_STIFFNESS: f64 = 100.0;
 
@@ -439,16 +451,8 @@ async fn dragging_the_cloth_in_the_page_pulls_the_grabbed_point_after_the_pointe
         if let Some(&(v, press)) = room {
             break (still, camera, v, press);
         }
-        attempt += 1;
-        assert!(
-            attempt < 20,
-            "in 20 pauses no material point (0.5, v ≥ 0.5) was drawn at least 50 px below the canvas top: {candidates:?}"
-        );
-        eprintln!("paused with no room for the drag ({candidates:?}); pausing again later");
-        within(5, "resume", c.control("drag-a", Action::Resume))
-            .await
-            .expect("resumed");
-        tokio::time::sleep(Duration::from_millis(170)).await;
+        let why = format!("no material point (0.5, v ≥ 0.5) drawn at least 50 px below the canvas top: {candidates:?}");
+        resume_briefly(&c, &mut attempt, &why).await;
     };
     let [left, top, width, height] = camera.rect;
     let daemon_uv = camera.project(material_point(&scene, &still, u, v));
@@ -629,16 +633,8 @@ async fn dragging_the_cloth_in_the_page_pulls_the_grabbed_point_after_the_pointe
         if let Some(&p) = on_canvas {
             break p;
         }
-        attempt += 1;
-        assert!(
-            attempt < 20,
-            "in 20 pauses no point (0.5, v) of the cloth was drawn on the canvas: {drawn:?}"
-        );
-        eprintln!("paused with no point of the cloth on the canvas ({drawn:?}); pausing again later");
-        within(5, "resume", c.control("drag-a", Action::Resume))
-            .await
-            .expect("resumed");
-        tokio::time::sleep(Duration::from_millis(170)).await;
+        let why = format!("no point (0.5, v) of the cloth drawn on the canvas: {drawn:?}");
+        resume_briefly(&c, &mut attempt, &why).await;
     };
     browser.mouse_press(at[0], at[1]).await;
     let deadline = Instant::now() + Duration::from_secs(10);
