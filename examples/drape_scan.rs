@@ -7,9 +7,9 @@
 //! of the stretch springs over the overhang.
 //!
 //! ```text
-//! cargo run --release --example drape_scan -- run SCENE --levels 721v,100% [--bend 1,1.35] [--stretch 2] [--dt 1e-4] [--twins 8 [--jitter 1e-6]] [--stencils-from MESH.obj] [--csv FILE]
+//! cargo run --release --example drape_scan -- run SCENE --levels 721v,100% [--bend 1,1.35] [--stretch 2] [--dt 1e-4] [--twins 8 [--jitter 1e-6]] [--stencils-from MESH.obj | --stencils triangle] [--csv FILE]
 //! cargo run --release --example drape_scan -- restart SCENE --levels 1081v,721v [--bend 1,1.35] [--stretch 2] [--csv FILE]
-//! cargo run --release --example drape_scan -- write SCENE --levels 1800v [--relax 20 --flip] [--shuffle 0.05 [--seed 1]] --out LEVEL.obj
+//! cargo run --release --example drape_scan -- write SCENE --levels 1800v [--relax 20 --flip] [--shuffle 0.05 [--seed 1]] [--top-radius 0.08 [--top-vertices 40]] --out LEVEL.obj
 //! cargo run --release --example drape_scan -- chart --csv FILE[,FILE …] [--names A,B …] [--unscaled] --out CHART.svg
 //! ```
 //!
@@ -24,7 +24,12 @@
 //! edges at random with its vertices kept (`--shuffle`), printing how even
 //! its triangles and valences were and are. `run --stencils-from` bends a
 //! mesh with another triangulation's stencils over the same vertices, to
-//! tell the springs' connectivity from the stencils'.
+//! tell the springs' connectivity from the stencils', and `run --stencils`
+//! bends every level with another of the core's stencil rules
+//! (`lodcloth_core::mesh::Stencils`). `write --top-radius` grades a level
+//! by hand: the cloth inside that radius (the support's top, which stays
+//! flat) is collapsed to a few vertices first, so the level's count is
+//! spent on the overhang.
 //! `--csv` appends every run to FILE (made with its header when absent);
 //! `chart` draws the runs from rest of one or more such files: the DC at
 //! their end (the mean over twins) against the vertex count, one series
@@ -71,6 +76,11 @@ enum Command {
         /// Tells the springs' connectivity from the stencils'.
         #[arg(long)]
         stencils_from: Option<PathBuf>,
+        /// How the levels' curvature is read (`vertex`, the scenes' own;
+        /// `triangle`, six-point patches; `quartic`, a quartic over two
+        /// rings at every interior vertex).
+        #[arg(long, value_parser = ["vertex", "triangle", "quartic"], default_value = "vertex")]
+        stencils: String,
     },
     /// Step the reference, then each level from its last shape, at rest.
     Restart {
@@ -103,6 +113,13 @@ enum Command {
         /// The seed of --shuffle's draw.
         #[arg(long, default_value_t = 1)]
         seed: u64,
+        /// Collapse the cloth inside this radius (m, in the rest plane)
+        /// to --top-vertices first, every vertex outside it locked, then
+        /// simplify the rest to the level's count: a level graded by hand.
+        #[arg(long)]
+        top_radius: Option<f64>,
+        #[arg(long, default_value_t = 40)]
+        top_vertices: usize,
     },
     /// Draw the runs from rest in CSVs written by --csv (one series per
     /// file, bend and stretch scale).
@@ -336,7 +353,7 @@ fn overhang_strain(sim: &Simulation, support_radius: f64) -> String {
     )
 }
 
-fn run(args: &Runs, dt: Option<f64>, twins: u64, jitter: f64, stencils_from: Option<&Path>) {
+fn run(args: &Runs, dt: Option<f64>, twins: u64, jitter: f64, stencils_from: Option<&Path>, stencils: &str) {
     assert!(
         jitter.is_finite() && jitter >= 0.0,
         "--jitter must be a length ≥ 0, got {jitter}"
@@ -346,6 +363,24 @@ fn run(args: &Runs, dt: Option<f64>, twins: u64, jitter: f64, stencils_from: Opt
         let other = lodcloth_core::mesh::load(path).unwrap_or_else(|e| failed(path, e));
         for cloth in &mut setup.levels {
             *cloth = bent_by(cloth, &other).unwrap_or_else(|e| failed(path, e));
+        }
+    }
+    let how = match stencils {
+        "triangle" => Some(lodcloth_core::mesh::Stencils::Triangle),
+        "quartic" => Some(lodcloth_core::mesh::Stencils::Quartic),
+        _ => None,
+    };
+    if let Some(how) = how {
+        for cloth in &mut setup.levels {
+            let mesh = &cloth.mesh.as_ref().expect("a mesh level").mesh;
+            let mut topology = (*cloth.topology).clone();
+            topology.bending = lodcloth_core::mesh::bending_stencils_by(mesh, &[], how).expect("a flat mesh");
+            println!(
+                "{}: bending with {} {stencils} stencils",
+                cloth.level,
+                topology.bending.len() / 3
+            );
+            cloth.topology = std::sync::Arc::new(topology);
         }
     }
     let (bends, stretch) = (&args.bend, args.stretch);
@@ -560,6 +595,7 @@ struct Remesh {
     flip: bool,
     shuffle: f64,
     seed: u64,
+    top: Option<(f64, usize)>,
 }
 
 fn write(args: &Levels, out: &Path, how: &Remesh) {
@@ -572,6 +608,24 @@ fn write(args: &Levels, out: &Path, how: &Remesh) {
     let level = setup.levels.first().expect("one level");
     let mut mesh = level.mesh.as_ref().expect("a mesh level").mesh.clone();
     let mut comment = format!("level {} of {}", level.level, args.scene.display());
+    if let Some((radius, top)) = how.top {
+        let cloth = setup.scene.mesh.as_ref().expect("a mesh scene");
+        let r = &cloth.reference;
+        let outside: Vec<bool> = r
+            .positions
+            .iter()
+            .zip(&cloth.locked)
+            .map(|(p, &l)| l || p[0].hypot(p[2]) >= radius)
+            .collect();
+        let kept = outside.iter().filter(|&&o| o).count();
+        let first = lodcloth_core::mesh::simplify(r, kept + top, &outside, "top").expect("simplifies");
+        let locked: Vec<bool> = first.source.iter().map(|&j| cloth.locked[j as usize]).collect();
+        let target = mesh.vertices();
+        mesh = lodcloth_core::mesh::simplify(&first.mesh, target, &locked, "graded")
+            .expect("simplifies")
+            .mesh;
+        comment += &format!(", graded: inside r = {radius} m collapsed to {top} vertices first");
+    }
     let before = Shapes::of(&mesh);
     if how.relax > 0 || how.flip {
         let flips = remesh(&mut mesh, how.relax, how.flip);
@@ -946,7 +1000,8 @@ fn main() {
             twins,
             jitter,
             stencils_from,
-        } => run(&runs, dt, twins, jitter, stencils_from.as_deref()),
+            stencils,
+        } => run(&runs, dt, twins, jitter, stencils_from.as_deref(), &stencils),
         Command::Restart { runs } => restart(&runs),
         Command::Write {
             levels,
@@ -955,6 +1010,8 @@ fn main() {
             flip,
             shuffle,
             seed,
+            top_radius,
+            top_vertices,
         } => write(
             &levels,
             &out,
@@ -963,6 +1020,7 @@ fn main() {
                 flip,
                 shuffle,
                 seed,
+                top: top_radius.map(|r| (r, top_vertices)),
             },
         ),
         Command::Chart {

@@ -57,6 +57,21 @@
 //! strip sagged 9× the beam; the edge hinges of Bergou et al. 2006 read
 //! 20 % more on the 504-vertex level than on the disc. Both blow up on
 //! meshoptimizer's slivers (a 0.07° triangle); least squares does not.
+//!
+//! Other rules ([`Stencils`], for measuring; the scenes use the vertex
+//! rule above). A fold a few edges wide is where the vertex rule reads
+//! far less than the plate: on a regular 10 mm disc, 0.40–0.46 of the
+//! plate's energy for a fold three edges wide and 0.59–0.64 at four, so
+//! a coarser mesh, whose folds span fewer edges, bends more easily.
+//! `Triangle` reads each triangle's curvature from the quadratic through
+//! its three vertices and the three across its edges (six points
+//! whatever the valences; Oñate & Zárate's rotation-free plate triangle,
+//! 2000): 0.51–0.69 of the plate there, stiffer on an irregular
+//! connectivity than on a regular one. `Quartic` fits a quartic over an
+//! interior vertex's two rings: 0.90–1.34 of the plate, the irregular
+//! connectivity within 3 % of the regular, but its fits on a simplified
+//! level are near-singular (unbounded gains: the 757-vertex Cusick level
+//! could step no longer than 2.3 µs). `tests/bending.rs` measures both.
 
 use super::TriMesh;
 use crate::sim::vec3::{cross, dot, norm, normalize, sub, tangent_basis};
@@ -73,6 +88,32 @@ const FLAT: f64 = 1e-3;
 /// The first interior edge whose two triangles are not coplanar at rest
 /// (the stencils bend about a flat rest shape), or a degenerate triangle.
 pub fn bending_stencils(mesh: &TriMesh, pinned: &[bool]) -> Result<Bending, String> {
+    bending_stencils_by(mesh, pinned, Stencils::Vertex)
+}
+
+/// Where a mesh's curvature is read.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Stencils {
+    /// At every vertex, from its ring (module docs).
+    #[default]
+    Vertex,
+    /// On every triangle, from the quadratic through its three vertices
+    /// and the three across its edges (Oñate & Zárate's rotation-free
+    /// plate triangle, 2000): six points whatever the valences.
+    Triangle,
+    /// At every interior vertex, from a least-squares quartic over the
+    /// nearest points of its rings (at least 19: two regular rings); at
+    /// the border, whose one-sided quartics are wild, the quadratic over
+    /// the nearest seven. Not usable on simplified levels yet (module
+    /// docs).
+    Quartic,
+}
+
+/// [`bending_stencils`] read as `how` says.
+///
+/// # Errors
+/// As [`bending_stencils`].
+pub fn bending_stencils_by(mesh: &TriMesh, pinned: &[bool], how: Stencils) -> Result<Bending, String> {
     let p = &mesh.positions;
     for ((a, b), ts) in mesh.edges() {
         let [t0, t1] = match ts.as_slice() {
@@ -97,7 +138,175 @@ pub fn bending_stencils(mesh: &TriMesh, pinned: &[bool]) -> Result<Bending, Stri
             ));
         }
     }
-    Ok(hessian_stencils(mesh, pinned))
+    Ok(match how {
+        Stencils::Vertex => hessian_stencils(mesh, pinned),
+        Stencils::Triangle => triangle_stencils(mesh, pinned),
+        Stencils::Quartic => quartic_stencils(mesh, pinned),
+    })
+}
+
+/// Three stencils per vertex from a least-squares quartic over its two
+/// rings (more where they do not determine one), scaled as the
+/// quadratic's. Clamps as [`hessian_stencils`].
+fn quartic_stencils(mesh: &TriMesh, pinned: &[bool]) -> Bending {
+    let p = &mesh.positions;
+    let n = mesh.vertices();
+    let areas = mesh.vertex_areas();
+    let clamp = clamp_factors(mesh, pinned, &areas);
+    let neighbours = neighbours(mesh);
+    let (t1, t2) = rest_axes(mesh);
+    let border = mesh.border();
+    let mut rows: Vec<Vec<(u32, f64)>> = Vec::with_capacity(3 * n);
+    for i in 0..n {
+        if clamp[i] == 0.0 {
+            continue;
+        }
+        // Rings out to depth 4, nearest first.
+        let mut seen = std::collections::BTreeSet::from([i as u32]);
+        let mut frontier = vec![i as u32];
+        for _ in 0..4 {
+            let mut next = Vec::new();
+            for &k in &frontier {
+                for &j in &neighbours[k as usize] {
+                    if seen.insert(j) {
+                        next.push(j);
+                    }
+                }
+            }
+            frontier = next;
+        }
+        let d2 = |j: u32| {
+            let d = sub(p[j as usize], p[i]);
+            dot(d, d)
+        };
+        let mut near: Vec<u32> = seen.into_iter().filter(|&j| j != i as u32).collect();
+        near.sort_by(|&a, &b| d2(a).total_cmp(&d2(b)).then(a.cmp(&b)));
+        let mut ring = vec![i as u32];
+        let mut fit = None;
+        // Border vertices: a one-sided quartic is wild; the quadratic.
+        let (enough, quartic) = if border[i] { (7, false) } else { (19, true) };
+        for j in near {
+            ring.push(j);
+            if ring.len() >= enough {
+                fit = fit_second_derivatives(p, i, &ring, t1, t2, quartic);
+                if fit.is_some() {
+                    break;
+                }
+            }
+        }
+        let Some(r) = fit else { continue };
+        for (row, weight) in r.iter().zip([1.0, 2.0, 1.0]) {
+            let s = (weight * clamp[i] * areas[i]).sqrt();
+            rows.push(ring.iter().zip(row).map(|(&j, &w)| (j, w * s)).collect());
+        }
+    }
+    Bending::from_rows(rows.iter().map(Vec::as_slice))
+}
+
+/// Three stencils per triangle: the second derivatives of the quadratic
+/// through its vertices and the vertices across its edges, scaled by
+/// `√A_t`, `√(2A_t)`, `√A_t`. A border triangle (or one whose six points
+/// nearly lie on a conic) takes its vertices' other neighbours, nearest
+/// its centroid first, until the fit is well posed with a regular patch's
+/// gain bound. A triangle of pinned vertices stores nothing.
+fn triangle_stencils(mesh: &TriMesh, pinned: &[bool]) -> Bending {
+    let p = &mesh.positions;
+    let n = mesh.vertices();
+    let is_pinned = |i: u32| pinned.get(i as usize).copied().unwrap_or(false);
+    let mut neighbours: Vec<Vec<u32>> = vec![Vec::new(); n];
+    let mut across: Vec<[Option<u32>; 3]> = vec![[None; 3]; mesh.triangles.len()];
+    for ((a, b), ts) in mesh.edges() {
+        neighbours[a as usize].push(b);
+        neighbours[b as usize].push(a);
+        if let [t0, t1] = ts.as_slice() {
+            for (t, other) in [(*t0, *t1), (*t1, *t0)] {
+                let tri = mesh.triangles[t];
+                let far = mesh.triangles[other]
+                    .into_iter()
+                    .find(|&v| v != a && v != b)
+                    .expect("two triangles share an edge");
+                let e = (0..3)
+                    .find(|&e| {
+                        let (x, y) = (tri[e], tri[(e + 1) % 3]);
+                        (x == a && y == b) || (x == b && y == a)
+                    })
+                    .expect("the triangle has the edge");
+                across[t][e] = Some(far);
+            }
+        }
+    }
+    let (t1, t2) = rest_axes(mesh);
+    let regular = regular_triangle_gain();
+    let mut rows: Vec<Vec<(u32, f64)>> = Vec::with_capacity(3 * mesh.triangles.len());
+    for (t, &tri) in mesh.triangles.iter().enumerate() {
+        if tri.iter().all(|&i| is_pinned(i)) {
+            continue;
+        }
+        let edge = (0..3)
+            .map(|e| norm(sub(p[tri[e] as usize], p[tri[(e + 1) % 3] as usize])))
+            .sum::<f64>()
+            / 3.0;
+        let mut points: Vec<u32> = tri.to_vec();
+        points.extend(across[t].iter().flatten());
+        let centroid = tri.iter().fold([0.0; 3], |s, &i| {
+            let q = p[i as usize];
+            [s[0] + q[0] / 3.0, s[1] + q[1] / 3.0, s[2] + q[2] / 3.0]
+        });
+        let mut more: Vec<u32> = tri
+            .iter()
+            .flat_map(|&i| neighbours[i as usize].iter().copied())
+            .filter(|j| !points.contains(j))
+            .collect();
+        more.sort_unstable();
+        more.dedup();
+        let d2 = |j: u32| {
+            let d = sub(p[j as usize], centroid);
+            dot(d, d)
+        };
+        more.sort_by(|&a, &b| d2(a).total_cmp(&d2(b)).then(a.cmp(&b)));
+        let mut extra = more.into_iter();
+        let mut fit = None;
+        let mut wide = None;
+        loop {
+            if points.len() >= 6 {
+                let candidate = second_derivatives(p, tri[0] as usize, &points, t1, t2);
+                if candidate.as_ref().is_some_and(|r| gain(r, edge) <= MAX_GAIN * regular) {
+                    fit = candidate;
+                    break;
+                }
+                if candidate.is_some() {
+                    wide = candidate;
+                }
+            }
+            match extra.next() {
+                Some(j) => points.push(j),
+                None => break,
+            }
+        }
+        let Some(r) = fit.or(wide) else { continue };
+        let area = super::triangle_area(p, tri);
+        for (row, weight) in r.iter().zip([1.0, 2.0, 1.0]) {
+            let s = (weight * area).sqrt();
+            rows.push(points.iter().zip(row).map(|(&j, &w)| (j, w * s)).collect());
+        }
+    }
+    Bending::from_rows(rows.iter().map(Vec::as_slice))
+}
+
+/// The gain of a regular triangle's six-point stencil (unit edges).
+fn regular_triangle_gain() -> f64 {
+    let h = 3f64.sqrt() / 2.0;
+    let p = vec![
+        [0.0, 0.0, 0.0],
+        [1.0, 0.0, 0.0],
+        [0.5, 0.0, h],
+        [1.5, 0.0, h],
+        [-0.5, 0.0, h],
+        [0.5, 0.0, -h],
+    ];
+    let ring: Vec<u32> = (0..6).collect();
+    let rows = second_derivatives(&p, 0, &ring, [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]).expect("a regular patch fits");
+    gain(&rows, 1.0)
 }
 
 /// Each vertex's energy factor for a clamp (module docs, "Clamps"): 1, or
@@ -139,21 +348,8 @@ fn hessian_stencils(mesh: &TriMesh, pinned: &[bool]) -> Bending {
     let n = mesh.vertices();
     let areas = mesh.vertex_areas();
     let clamp = clamp_factors(mesh, pinned, &areas);
-    let mut neighbours: Vec<Vec<u32>> = vec![Vec::new(); n];
-    for ((a, b), _) in mesh.edges() {
-        neighbours[a as usize].push(b);
-        neighbours[b as usize].push(a);
-    }
-    // The rest plane's axes (the mesh is flat: any triangle's normal).
-    let normal = mesh
-        .triangles
-        .iter()
-        .find_map(|t| {
-            let q = t.map(|i| p[i as usize]);
-            normalize(cross(sub(q[1], q[0]), sub(q[2], q[0])))
-        })
-        .unwrap_or([0.0, 1.0, 0.0]);
-    let (t1, t2) = tangent_basis(normal);
+    let neighbours = neighbours(mesh);
+    let (t1, t2) = rest_axes(mesh);
     let mut rows: Vec<Vec<(u32, f64)>> = Vec::with_capacity(3 * n);
     let mut ring: Vec<u32> = Vec::new();
     let mut seen = vec![false; n];
@@ -240,6 +436,30 @@ fn hessian_stencils(mesh: &TriMesh, pinned: &[bool]) -> Bending {
     Bending::from_rows(rows.iter().map(Vec::as_slice))
 }
 
+/// Every vertex's neighbours along the mesh's edges.
+fn neighbours(mesh: &TriMesh) -> Vec<Vec<u32>> {
+    let mut neighbours: Vec<Vec<u32>> = vec![Vec::new(); mesh.vertices()];
+    for ((a, b), _) in mesh.edges() {
+        neighbours[a as usize].push(b);
+        neighbours[b as usize].push(a);
+    }
+    neighbours
+}
+
+/// The rest plane's axes (the mesh is flat: any triangle's normal).
+fn rest_axes(mesh: &TriMesh) -> ([f64; 3], [f64; 3]) {
+    let p = &mesh.positions;
+    let normal = mesh
+        .triangles
+        .iter()
+        .find_map(|t| {
+            let q = t.map(|i| p[i as usize]);
+            normalize(cross(sub(q[1], q[0]), sub(q[2], q[0])))
+        })
+        .unwrap_or([0.0, 1.0, 0.0]);
+    tangent_basis(normal)
+}
+
 /// A stencil's gain: `ℓ⁴·Σ w²` over its three rows, `ℓ` the vertex's mean
 /// edge. How much it amplifies its points' motion, so how stiff its
 /// vertex's bending is (the stable step goes as its inverse square root).
@@ -275,6 +495,18 @@ const MIN_POINTS: usize = 7;
 /// 3–5 of the pseudo-inverse of the quadratic design matrix. None when the
 /// points do not determine a quadratic (reciprocal condition under 1e-10).
 fn second_derivatives(p: &[[f64; 3]], i: usize, ring: &[u32], t1: [f64; 3], t2: [f64; 3]) -> Option<[Vec<f64>; 3]> {
+    fit_second_derivatives(p, i, ring, t1, t2, false)
+}
+
+/// [`second_derivatives`] of a least-squares quadratic, or quartic.
+fn fit_second_derivatives(
+    p: &[[f64; 3]],
+    i: usize,
+    ring: &[u32],
+    t1: [f64; 3],
+    t2: [f64; 3],
+    quartic: bool,
+) -> Option<[Vec<f64>; 3]> {
     use nalgebra::{DMatrix, SMatrix};
     let local: Vec<[f64; 2]> = ring
         .iter()
@@ -289,6 +521,43 @@ fn second_derivatives(p: &[[f64; 3]], i: usize, ring: &[u32], t1: [f64; 3], t2: 
         return None;
     }
     let m = ring.len();
+    if quartic {
+        let terms = |u: f64, v: f64| {
+            [
+                1.0,
+                u,
+                v,
+                0.5 * u * u,
+                u * v,
+                0.5 * v * v,
+                u * u * u,
+                u * u * v,
+                u * v * v,
+                v * v * v,
+                u.powi(4),
+                u * u * u * v,
+                u * u * v * v,
+                u * v * v * v,
+                v.powi(4),
+            ]
+        };
+        if m < 15 {
+            return None;
+        }
+        let phi = DMatrix::from_fn(m, 15, |r, c| terms(local[r][0] / h, local[r][1] / h)[c]);
+        let normal = phi.transpose() * &phi;
+        let eig = normal.clone().symmetric_eigenvalues();
+        let (lo, hi) = eig
+            .iter()
+            .fold((f64::INFINITY, 0.0f64), |(lo, hi), &e| (lo.min(e), hi.max(e)));
+        if !(lo > 1e-12 * hi) {
+            return None;
+        }
+        let inverse = normal.try_inverse()?;
+        let weights = &inverse * phi.transpose();
+        let row = |r: usize| (0..m).map(|c| weights[(r, c)] / (h * h)).collect::<Vec<f64>>();
+        return Some([row(3), row(4), row(5)]);
+    }
     let phi = DMatrix::from_fn(m, 6, |r, c| {
         let (u, v) = (local[r][0] / h, local[r][1] / h);
         [1.0, u, v, 0.5 * u * u, u * v, 0.5 * v * v][c]
