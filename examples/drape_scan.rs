@@ -7,7 +7,7 @@
 //! of the stretch springs over the overhang.
 //!
 //! ```text
-//! cargo run --release --example drape_scan -- run SCENE --levels 721v,100% [--bend 1,1.35] [--stretch 2] [--dt 1e-4] [--twins 8 [--jitter 1e-6]] [--stencils-from MESH.obj | --stencils triangle] [--csv FILE]
+//! cargo run --release --example drape_scan -- run SCENE --levels 721v,100% [--bend 1,1.35] [--stretch 2] [--dt 1e-4] [--twins 8 [--jitter 1e-6]] [--stencils-from MESH.obj | --stencils triangle|quartic] [--csv FILE]
 //! cargo run --release --example drape_scan -- restart SCENE --levels 1081v,721v [--bend 1,1.35] [--stretch 2] [--csv FILE]
 //! cargo run --release --example drape_scan -- write SCENE --levels 1800v [--relax 20 --flip] [--shuffle 0.05 [--seed 1]] [--top-radius 0.08 [--top-vertices 40]] --out LEVEL.obj
 //! cargo run --release --example drape_scan -- chart --csv FILE[,FILE …] [--names A,B …] [--unscaled] --out CHART.svg
@@ -77,8 +77,9 @@ enum Command {
         #[arg(long)]
         stencils_from: Option<PathBuf>,
         /// How the levels' curvature is read (`vertex`, the scenes' own;
-        /// `triangle`, six-point patches; `quartic`, a quartic over two
-        /// rings at every interior vertex).
+        /// `triangle`, six-point patches; `quartic`, a quartic over the
+        /// nearest 19 or more points at every interior vertex;
+        /// `lodcloth_core::mesh::Stencils`).
         #[arg(long, value_parser = ["vertex", "triangle", "quartic"], default_value = "vertex")]
         stencils: String,
     },

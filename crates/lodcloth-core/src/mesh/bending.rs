@@ -60,18 +60,18 @@
 //!
 //! Other rules ([`Stencils`], for measuring; the scenes use the vertex
 //! rule above). A fold a few edges wide is where the vertex rule reads
-//! far less than the plate: on a regular 10 mm disc, 0.40–0.46 of the
-//! plate's energy for a fold three edges wide and 0.59–0.64 at four, so
-//! a coarser mesh, whose folds span fewer edges, bends more easily.
-//! `Triangle` reads each triangle's curvature from the quadratic through
-//! its three vertices and the three across its edges (six points
-//! whatever the valences; Oñate & Zárate's rotation-free plate triangle,
-//! 2000): 0.51–0.69 of the plate there, stiffer on an irregular
-//! connectivity than on a regular one. `Quartic` fits a quartic over an
-//! interior vertex's two rings: 0.90–1.34 of the plate, the irregular
-//! connectivity within 3 % of the regular, but its fits on a simplified
-//! level are near-singular (unbounded gains: the 757-vertex Cusick level
-//! could step no longer than 2.3 µs). `tests/bending.rs` measures both.
+//! far less than the plate: on a regular 10 mm disc, away from its rim,
+//! 0.42–0.48 of the plate's energy for a fold three edges wide, 0.61–0.66
+//! at four and 0.80–0.83 at six, so a coarser mesh, whose folds span fewer
+//! edges, bends more easily. `Triangle` reads each triangle's curvature
+//! from the quadratic through its three vertices and the three across its
+//! edges (six points whatever the valences; Oñate & Zárate's
+//! rotation-free plate triangle, 2000): 0.52–0.85 of the plate there, and
+//! more on an irregular connectivity than on a regular one. `Quartic`
+//! fits a quartic over the nearest 19 or more points: 0.48–0.96, the same
+//! on any connectivity of the same points. Neither brings the Cusick
+//! levels' drape to the reference's (docs/results.md, "Mesh cloths");
+//! `tests/bending.rs` measures both.
 
 use super::TriMesh;
 use crate::sim::vec3::{cross, dot, norm, normalize, sub, tangent_basis};
@@ -102,10 +102,9 @@ pub enum Stencils {
     /// plate triangle, 2000): six points whatever the valences.
     Triangle,
     /// At every interior vertex, from a least-squares quartic over the
-    /// nearest points of its rings (at least 19: two regular rings); at
-    /// the border, whose one-sided quartics are wild, the quadratic over
-    /// the nearest seven. Not usable on simplified levels yet (module
-    /// docs).
+    /// nearest points (at least 19: two regular rings), whatever the
+    /// edges; at the border, whose one-sided quartics are wild, a
+    /// quadratic.
     Quartic,
 }
 
@@ -145,9 +144,12 @@ pub fn bending_stencils_by(mesh: &TriMesh, pinned: &[bool], how: Stencils) -> Re
     })
 }
 
-/// Three stencils per vertex from a least-squares quartic over its two
-/// rings (more where they do not determine one), scaled as the
-/// quadratic's. Clamps as [`hessian_stencils`].
+/// Three stencils per vertex from a least-squares quartic over the
+/// nearest points (by distance, within four rings): at least 19, more
+/// until its gain is within [`QUARTIC_GAIN`] of a regular lattice's two
+/// rings; at the border, or where no quartic is, the quadratic over the
+/// nearest points with the narrow stencils' gain bound. Scaled as the
+/// quadratic's; clamps as [`hessian_stencils`].
 fn quartic_stencils(mesh: &TriMesh, pinned: &[bool]) -> Bending {
     let p = &mesh.positions;
     let n = mesh.vertices();
@@ -156,6 +158,7 @@ fn quartic_stencils(mesh: &TriMesh, pinned: &[bool]) -> Bending {
     let neighbours = neighbours(mesh);
     let (t1, t2) = rest_axes(mesh);
     let border = mesh.border();
+    let (regular, regular_quartic) = (regular_gain(), regular_quartic_gain());
     let mut rows: Vec<Vec<(u32, f64)>> = Vec::with_capacity(3 * n);
     for i in 0..n {
         if clamp[i] == 0.0 {
@@ -181,20 +184,37 @@ fn quartic_stencils(mesh: &TriMesh, pinned: &[bool]) -> Bending {
         };
         let mut near: Vec<u32> = seen.into_iter().filter(|&j| j != i as u32).collect();
         near.sort_by(|&a, &b| d2(a).total_cmp(&d2(b)).then(a.cmp(&b)));
-        let mut ring = vec![i as u32];
-        let mut fit = None;
-        // Border vertices: a one-sided quartic is wild; the quadratic.
-        let (enough, quartic) = if border[i] { (7, false) } else { (19, true) };
-        for j in near {
-            ring.push(j);
-            if ring.len() >= enough {
-                fit = fit_second_derivatives(p, i, &ring, t1, t2, quartic);
-                if fit.is_some() {
-                    break;
+        let edge = neighbours[i]
+            .iter()
+            .map(|&j| norm(sub(p[j as usize], p[i])))
+            .sum::<f64>()
+            / neighbours[i].len().max(1) as f64;
+        // The nearest points whose fit is within `bound` of a regular
+        // lattice's gain, else the first well-posed one.
+        let nearest = |quartic: bool, enough: usize, bound: f64| {
+            let mut first = None;
+            for k in enough..=near.len() + 1 {
+                let ring: Vec<u32> = std::iter::once(i as u32).chain(near[..k - 1].iter().copied()).collect();
+                if let Some(r) = fit_second_derivatives(p, i, &ring, t1, t2, quartic) {
+                    if gain(&r, edge) <= bound {
+                        return Some((ring, r));
+                    }
+                    first.get_or_insert((ring, r));
                 }
             }
-        }
-        let Some(r) = fit else { continue };
+            first
+        };
+        // Border vertices: a one-sided quartic is wild; the quadratic.
+        // Interior ones whose quartics are all near-singular too.
+        let quartic = if border[i] {
+            None
+        } else {
+            nearest(true, 19, QUARTIC_GAIN * regular_quartic)
+                .filter(|(_, r)| gain(r, edge) <= QUARTIC_GAIN * regular_quartic)
+        };
+        let Some((ring, r)) = quartic.or_else(|| nearest(false, 7, MAX_GAIN * regular)) else {
+            continue;
+        };
         for (row, weight) in r.iter().zip([1.0, 2.0, 1.0]) {
             let s = (weight * clamp[i] * areas[i]).sqrt();
             rows.push(ring.iter().zip(row).map(|(&j, &w)| (j, w * s)).collect());
@@ -291,6 +311,29 @@ fn triangle_stencils(mesh: &TriMesh, pinned: &[bool]) -> Bending {
         }
     }
     Bending::from_rows(rows.iter().map(Vec::as_slice))
+}
+
+/// A quartic fit is taken when its gain is at most this many times a
+/// regular lattice's two-ring quartic's.
+const QUARTIC_GAIN: f64 = 4.0;
+
+/// The gain of a quartic over a regular triangular lattice's two rings
+/// (19 points, unit edges).
+fn regular_quartic_gain() -> f64 {
+    let h = 3f64.sqrt() / 2.0;
+    let mut p = Vec::new();
+    for a in -3i32..=3 {
+        for b in -3i32..=3 {
+            let q = [a as f64 + 0.5 * b as f64, 0.0, h * b as f64];
+            if q[0] * q[0] + q[2] * q[2] <= 4.0 + 1e-9 {
+                p.push(q);
+            }
+        }
+    }
+    p.sort_by(|x, y| (x[0] * x[0] + x[2] * x[2]).total_cmp(&(y[0] * y[0] + y[2] * y[2])));
+    let ring: Vec<u32> = (0..p.len() as u32).collect();
+    let rows = fit_second_derivatives(&p, 0, &ring, [1.0, 0.0, 0.0], [0.0, 0.0, 1.0], true).expect("a lattice fits");
+    gain(&rows, 1.0)
 }
 
 /// The gain of a regular triangle's six-point stencil (unit edges).
