@@ -153,8 +153,7 @@ pub fn bending_stencils_by(mesh: &TriMesh, pinned: &[bool], how: Stencils) -> Re
 fn quartic_stencils(mesh: &TriMesh, pinned: &[bool]) -> Bending {
     let p = &mesh.positions;
     let n = mesh.vertices();
-    let areas = mesh.vertex_areas();
-    let clamp = clamp_factors(mesh, pinned, &areas);
+    let (areas, clamp) = areas_and_clamps(mesh, pinned);
     let neighbours = neighbours(mesh);
     let (t1, t2) = rest_axes(mesh);
     let border = mesh.border();
@@ -215,10 +214,7 @@ fn quartic_stencils(mesh: &TriMesh, pinned: &[bool]) -> Bending {
         let Some((ring, r)) = quartic.or_else(|| nearest(false, 7, MAX_GAIN * regular)) else {
             continue;
         };
-        for (row, weight) in r.iter().zip([1.0, 2.0, 1.0]) {
-            let s = (weight * clamp[i] * areas[i]).sqrt();
-            rows.push(ring.iter().zip(row).map(|(&j, &w)| (j, w * s)).collect());
-        }
+        push_rows(&mut rows, &ring, &r, clamp[i] * areas[i]);
     }
     Bending::from_rows(rows.iter().map(Vec::as_slice))
 }
@@ -305,10 +301,7 @@ fn triangle_stencils(mesh: &TriMesh, pinned: &[bool]) -> Bending {
         }
         let Some(r) = fit.or(wide) else { continue };
         let area = super::triangle_area(p, tri);
-        for (row, weight) in r.iter().zip([1.0, 2.0, 1.0]) {
-            let s = (weight * area).sqrt();
-            rows.push(points.iter().zip(row).map(|(&j, &w)| (j, w * s)).collect());
-        }
+        push_rows(&mut rows, &points, &r, area);
     }
     Bending::from_rows(rows.iter().map(Vec::as_slice))
 }
@@ -389,8 +382,7 @@ fn clamp_factors(mesh: &TriMesh, pinned: &[bool], areas: &[f64]) -> Vec<f64> {
 fn hessian_stencils(mesh: &TriMesh, pinned: &[bool]) -> Bending {
     let p = &mesh.positions;
     let n = mesh.vertices();
-    let areas = mesh.vertex_areas();
-    let clamp = clamp_factors(mesh, pinned, &areas);
+    let (areas, clamp) = areas_and_clamps(mesh, pinned);
     let neighbours = neighbours(mesh);
     let (t1, t2) = rest_axes(mesh);
     let mut rows: Vec<Vec<(u32, f64)>> = Vec::with_capacity(3 * n);
@@ -471,12 +463,25 @@ fn hessian_stencils(mesh: &TriMesh, pinned: &[bool]) -> Bending {
         // A vertex with no well-posed fit within MAX_RINGS (a tiny mesh)
         // adds no stencil.
         let Some(r) = fit else { continue };
-        for (row, weight) in r.iter().zip([1.0, 2.0, 1.0]) {
-            let s = (weight * clamp[i] * areas[i]).sqrt();
-            rows.push(ring.iter().zip(row).map(|(&j, &w)| (j, w * s)).collect());
-        }
+        push_rows(&mut rows, &ring, &r, clamp[i] * areas[i]);
     }
     Bending::from_rows(rows.iter().map(Vec::as_slice))
+}
+
+/// The three rows `x_uu`, `x_uv`, `x_vv` of a fit over `points`, scaled
+/// by `√a`, `√(2a)`, `√a` for the area `a` they stand for.
+fn push_rows(rows: &mut Vec<Vec<(u32, f64)>>, points: &[u32], fit: &[Vec<f64>; 3], a: f64) {
+    for (row, weight) in fit.iter().zip([1.0, 2.0, 1.0]) {
+        let s = (weight * a).sqrt();
+        rows.push(points.iter().zip(row).map(|(&j, &w)| (j, w * s)).collect());
+    }
+}
+
+/// Every vertex's lumped area and clamp factor.
+fn areas_and_clamps(mesh: &TriMesh, pinned: &[bool]) -> (Vec<f64>, Vec<f64>) {
+    let areas = mesh.vertex_areas();
+    let clamp = clamp_factors(mesh, pinned, &areas);
+    (areas, clamp)
 }
 
 /// Every vertex's neighbours along the mesh's edges.
