@@ -99,7 +99,9 @@ pub enum Stencils {
     Vertex,
     /// On every triangle, from the quadratic through its three vertices
     /// and the three across its edges (Oñate & Zárate's rotation-free
-    /// plate triangle, 2000): six points whatever the valences.
+    /// plate triangle, 2000): six points whatever the valences. Pinned
+    /// regions are not read as clamps: a triangle of pinned vertices
+    /// stores nothing, every other one as a free sheet's.
     Triangle,
     /// At every interior vertex, from a least-squares quartic over the
     /// nearest points (at least 19: two regular rings), whatever the
