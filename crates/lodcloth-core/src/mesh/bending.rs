@@ -229,13 +229,10 @@ fn quartic_stencils(mesh: &TriMesh, pinned: &[bool]) -> Bending {
 /// gain bound. A triangle of pinned vertices stores nothing.
 fn triangle_stencils(mesh: &TriMesh, pinned: &[bool]) -> Bending {
     let p = &mesh.positions;
-    let n = mesh.vertices();
     let is_pinned = |i: u32| pinned.get(i as usize).copied().unwrap_or(false);
-    let mut neighbours: Vec<Vec<u32>> = vec![Vec::new(); n];
+    let neighbours = neighbours(mesh);
     let mut across: Vec<[Option<u32>; 3]> = vec![[None; 3]; mesh.triangles.len()];
     for ((a, b), ts) in mesh.edges() {
-        neighbours[a as usize].push(b);
-        neighbours[b as usize].push(a);
         if let [t0, t1] = ts.as_slice() {
             for (t, other) in [(*t0, *t1), (*t1, *t0)] {
                 let tri = mesh.triangles[t];
@@ -596,11 +593,7 @@ fn fit_second_derivatives(
         }
         let phi = DMatrix::from_fn(m, 15, |r, c| terms(local[r][0] / h, local[r][1] / h)[c]);
         let normal = phi.transpose() * &phi;
-        let eig = normal.clone().symmetric_eigenvalues();
-        let (lo, hi) = eig
-            .iter()
-            .fold((f64::INFINITY, 0.0f64), |(lo, hi), &e| (lo.min(e), hi.max(e)));
-        if !(lo > 1e-12 * hi) {
+        if !well_conditioned(normal.clone().symmetric_eigenvalues().iter(), 1e-12) {
             return None;
         }
         let inverse = normal.try_inverse()?;
@@ -613,15 +606,19 @@ fn fit_second_derivatives(
         [1.0, u, v, 0.5 * u * u, u * v, 0.5 * v * v][c]
     });
     let normal: SMatrix<f64, 6, 6> = (phi.transpose() * &phi).fixed_view::<6, 6>(0, 0).into();
-    let eig = normal.symmetric_eigenvalues();
-    let (lo, hi) = eig
-        .iter()
-        .fold((f64::INFINITY, 0.0f64), |(lo, hi), &e| (lo.min(e), hi.max(e)));
-    if !(lo > 1e-10 * hi) {
+    if !well_conditioned(normal.symmetric_eigenvalues().iter(), 1e-10) {
         return None;
     }
     let inverse = normal.try_inverse()?;
     let weights = DMatrix::from_fn(6, m, |r, c| (0..6).map(|k| inverse[(r, k)] * phi[(c, k)]).sum::<f64>());
     let row = |r: usize| (0..m).map(|c| weights[(r, c)] / (h * h)).collect::<Vec<f64>>();
     Some([row(3), row(4), row(5)])
+}
+
+/// Whether a normal matrix with these eigenvalues is invertible to
+/// working precision: its smallest eigenvalue above `tolerance` times
+/// its largest.
+fn well_conditioned<'a>(eigenvalues: impl Iterator<Item = &'a f64>, tolerance: f64) -> bool {
+    let (lo, hi) = eigenvalues.fold((f64::INFINITY, 0.0f64), |(lo, hi), &e| (lo.min(e), hi.max(e)));
+    lo > tolerance * hi
 }
