@@ -88,6 +88,23 @@ enum Command {
         #[command(flatten)]
         runs: Runs,
     },
+    /// The spectrum of each level's bending operator on its flat rest
+    /// shape: the lowest eigenvalues λ of W z = λ M z (W the stencils'
+    /// quadratic form for a vertical displacement z, M the lumped areas),
+    /// printed as wavenumbers λ^¼ (1/m) and against the first level's. A
+    /// plate's ∫|∇²z|² has three zero modes (the affine ones); any more, or
+    /// smooth modes that come out lower than the first level's, are folds
+    /// a level makes for less than its fabric's rigidity.
+    Spectrum {
+        #[command(flatten)]
+        levels: Levels,
+        /// How many of the lowest modes to print.
+        #[arg(long, default_value_t = 24)]
+        modes: usize,
+        /// The levels' stencil rule, as `run --stencils`.
+        #[arg(long, value_parser = ["vertex", "triangle", "quartic"], default_value = "vertex")]
+        stencils: String,
+    },
     /// Save the (first) level as OBJ, optionally remeshed in its rest
     /// plane (to tell a level's uneven triangles from its size).
     Write {
@@ -354,6 +371,53 @@ fn overhang_strain(sim: &Simulation, support_radius: f64) -> String {
     )
 }
 
+/// How far the cloth's edges cut into the support between their nodes
+/// (contact holds only nodes out): over every stretch spring, the deepest
+/// of 15 points along it below the support's surface, as the number of
+/// springs that reach inside the solid and the deepest (mm); the nodes
+/// themselves stay `clearance` out.
+fn cut(sim: &Simulation, scene: &Scene) -> String {
+    let body = scene.colliders().first().expect("a support");
+    let topo = sim.topology();
+    let (pos, n, t) = (&sim.state().pos, topo.n_nodes, sim.state().time);
+    let at = |k: usize| [pos[k], pos[n + k], pos[2 * n + k]];
+    let (mut inside, mut deepest) = (0usize, 0.0f64);
+    for g in topo.groups.iter().filter(|g| g.class.kind() == SpringKind::Structural) {
+        for s in 0..g.len() {
+            let (a, b) = (at(g.a[s] as usize), at(g.b[s] as usize));
+            let depth = (1..16)
+                .map(|j| body.distance(add(a, scale(sub(b, a), j as f64 / 16.0)), t))
+                .fold(f64::INFINITY, f64::min);
+            if depth < 0.0 {
+                inside += 1;
+                deepest = deepest.max(-depth);
+            }
+        }
+    }
+    format!("; {inside} edges cut into the support, deepest {:.2} mm", 1e3 * deepest)
+}
+
+/// Every level of `setup` bent by the `stencils` rule instead of its own
+/// (`vertex`: left as it is).
+fn restencil(setup: &mut Setup, stencils: &str) {
+    let how = match stencils {
+        "triangle" => lodcloth_core::mesh::Stencils::Triangle,
+        "quartic" => lodcloth_core::mesh::Stencils::Quartic,
+        _ => return,
+    };
+    for cloth in &mut setup.levels {
+        let mesh = &cloth.mesh.as_ref().expect("a mesh level").mesh;
+        let mut topology = (*cloth.topology).clone();
+        topology.bending = lodcloth_core::mesh::bending_stencils_by(mesh, &[], how).expect("a flat mesh");
+        println!(
+            "{}: bending with {} {stencils} stencils",
+            cloth.level,
+            topology.bending.len() / 3
+        );
+        cloth.topology = std::sync::Arc::new(topology);
+    }
+}
+
 fn run(args: &Runs, dt: Option<f64>, twins: u64, jitter: f64, stencils_from: Option<&Path>, stencils: &str) {
     assert!(
         jitter.is_finite() && jitter >= 0.0,
@@ -366,24 +430,7 @@ fn run(args: &Runs, dt: Option<f64>, twins: u64, jitter: f64, stencils_from: Opt
             *cloth = bent_by(cloth, &other).unwrap_or_else(|e| failed(path, e));
         }
     }
-    let how = match stencils {
-        "triangle" => Some(lodcloth_core::mesh::Stencils::Triangle),
-        "quartic" => Some(lodcloth_core::mesh::Stencils::Quartic),
-        _ => None,
-    };
-    if let Some(how) = how {
-        for cloth in &mut setup.levels {
-            let mesh = &cloth.mesh.as_ref().expect("a mesh level").mesh;
-            let mut topology = (*cloth.topology).clone();
-            topology.bending = lodcloth_core::mesh::bending_stencils_by(mesh, &[], how).expect("a flat mesh");
-            println!(
-                "{}: bending with {} {stencils} stencils",
-                cloth.level,
-                topology.bending.len() / 3
-            );
-            cloth.topology = std::sync::Arc::new(topology);
-        }
-    }
+    restencil(&mut setup, stencils);
     let (bends, stretch) = (&args.bend, args.stretch);
     let support_radius = (setup.support / std::f64::consts::PI).sqrt();
     let jobs: Vec<_> = setup
@@ -423,7 +470,7 @@ fn run(args: &Runs, dt: Option<f64>, twins: u64, jitter: f64, stencils_from: Opt
                 cloth.level,
                 run.dt,
                 run.cells(),
-                overhang_strain(&sim, support_radius),
+                overhang_strain(&sim, support_radius) + &cut(&sim, &setup.scene),
                 clock.elapsed().as_secs_f64()
             );
             run
@@ -568,6 +615,7 @@ fn restart(args: &Runs) {
             }
             sim.set_state(state).expect("same size");
             let first = setup.dc(&sim);
+            let departure = departure(&setup, cloth, bend, stretch, &mut sim);
             let run = Run {
                 scene: setup.name(),
                 vertices: m,
@@ -580,14 +628,255 @@ fn restart(args: &Runs) {
                 twin: 0,
             };
             println!(
-                "{} bend ×{bend} stretch ×{stretch}, from the reference's last shape: DC {first:.4} →{}",
+                "{} bend ×{bend} stretch ×{stretch}, from the reference's last shape: DC {first:.4} →{}{}\n{departure}",
                 cloth.level,
-                run.cells()
+                run.cells(),
+                cut(&sim, &setup.scene)
             );
             run
         })
         .collect();
     append(args.csv.as_deref(), &runs);
+}
+
+/// Rest-radius bands of the Cusick specimen (m): the support's top, its
+/// edge, the overhang and the rim's last 10 mm.
+const BANDS: [(&str, f64, f64); 4] = [
+    ("top", 0.0, 0.085),
+    ("edge", 0.085, 0.10),
+    ("overhang", 0.10, 0.14),
+    ("rim", 0.14, f64::INFINITY),
+];
+
+/// Why a level leaves the shape `sim` holds (at rest): each force's
+/// acceleration there, split into gravity, the stretch springs and the
+/// bending stencils (a twin built with bending off tells the last two
+/// apart; contact is a velocity projection, in none of them), and the
+/// work each does on the displacement of the next 0.2 s, Σ m·a·d, per
+/// rest-radius band: the force with the largest positive work is what
+/// moves the level off the shape. Also the strain of the level's stretch
+/// springs on the shape, radial (within 30° of the rest radius) and hoop.
+/// Leaves `sim` where it was.
+fn departure(setup: &Setup, cloth: &ClothLevel, bend: f64, stretch: f64, sim: &mut Simulation) -> String {
+    let start = sim.state().clone();
+    let mut flat = setup
+        .scene
+        .build_on(cloth, setup.material(cloth, 0.0, stretch))
+        .expect("builds");
+    let _ = bend;
+    flat.set_state(start.clone()).expect("same size");
+    let full = sim.accelerations().to_vec();
+    let springs_and_gravity = flat.accelerations().to_vec();
+    let topo = sim.topology().clone();
+    let n = topo.n_nodes;
+    let g = sim.params().gravity;
+    let masses = sim.masses().to_vec();
+    let (dt, t0) = (sim.params().dt, start.time);
+    while sim.state().time < t0 + 0.2 - 0.5 * dt {
+        assert!(sim.step().finite, "diverged");
+    }
+    let d: Vec<f64> = (0..3 * n).map(|i| sim.state().pos[i] - start.pos[i]).collect();
+    sim.set_state(start.clone()).expect("same size");
+    let rest_r = |k: usize| topo.rest_positions[k][0].hypot(topo.rest_positions[k][2]);
+    let band = |k: usize| BANDS.iter().position(|&(_, lo, hi)| (lo..hi).contains(&rest_r(k))).expect("a band");
+    // [band][gravity, springs, bending] work; [band][springs, bending] mean
+    // horizontal outward acceleration; moved distance.
+    let mut work = [[0.0; 3]; 4];
+    let mut outward = [[0.0; 2]; 4];
+    let mut count = [0usize; 4];
+    let mut moved = [0.0; 4];
+    let p = &start.pos;
+    for k in 0..n {
+        let b = band(k);
+        count[b] += 1;
+        let (x, z) = (p[k], p[2 * n + k]);
+        let r = x.hypot(z).max(1e-12);
+        let (ux, uz) = (x / r, z / r);
+        let mut dd = 0.0;
+        for c in 0..3 {
+            let i = c * n + k;
+            let parts = [g[c], springs_and_gravity[i] - g[c], full[i] - springs_and_gravity[i]];
+            for (w, a) in work[b].iter_mut().zip(parts) {
+                *w += masses[k] * a * d[i];
+            }
+            dd += d[i] * d[i];
+        }
+        moved[b] += dd.sqrt();
+        let parts = [
+            [springs_and_gravity[k] - g[0], springs_and_gravity[2 * n + k] - g[2]],
+            [full[k] - springs_and_gravity[k], full[2 * n + k] - springs_and_gravity[2 * n + k]],
+        ];
+        for (o, [ax, az]) in outward[b].iter_mut().zip(parts) {
+            *o += ax * ux + az * uz;
+        }
+    }
+    // Strain of the stretch springs on the shape, by band of their middle.
+    let mut strains: [[Vec<f64>; 2]; 4] = Default::default();
+    for grp in topo.groups.iter().filter(|g| g.class.kind() == SpringKind::Structural) {
+        for s in 0..grp.len() {
+            let (a, b) = (grp.a[s] as usize, grp.b[s] as usize);
+            let (ra, rb) = (topo.rest_positions[a], topo.rest_positions[b]);
+            let mid = [0.5 * (ra[0] + rb[0]), 0.5 * (ra[2] + rb[2])];
+            let along = [rb[0] - ra[0], rb[2] - ra[2]];
+            let cos = (along[0] * mid[0] + along[1] * mid[1]).abs()
+                / (along[0].hypot(along[1]) * mid[0].hypot(mid[1])).max(1e-12);
+            let l = (0..3).map(|c| (p[c * n + b] - p[c * n + a]).powi(2)).sum::<f64>().sqrt();
+            let r = mid[0].hypot(mid[1]);
+            let bi = BANDS.iter().position(|&(_, lo, hi)| (lo..hi).contains(&r)).expect("a band");
+            strains[bi][usize::from(cos < 0.866)].push(l / grp.rest[s] - 1.0);
+        }
+    }
+    let median = |v: &mut Vec<f64>| {
+        if v.is_empty() {
+            return f64::NAN;
+        }
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    let mut lines = Vec::new();
+    for (b, &(name, ..)) in BANDS.iter().enumerate() {
+        let c = count[b].max(1) as f64;
+        let [radial, hoop] = &mut strains[b];
+        lines.push(format!(
+            "  {name:>8} ({} v): moved {:.2} mm; work gravity {:+.3e} springs {:+.3e} bending {:+.3e} J; outward springs {:+.3} bending {:+.3} m/s²; strain radial {:+.4} hoop {:+.4}",
+            count[b],
+            1e3 * moved[b] / c,
+            work[b][0],
+            work[b][1],
+            work[b][2],
+            outward[b][0] / c,
+            outward[b][1] / c,
+            median(radial),
+            median(hoop),
+        ));
+    }
+    lines.join("\n")
+}
+
+fn spectrum(args: &Levels, modes: usize, stencils: &str) {
+    let mut setup = Setup::new(args);
+    restencil(&mut setup, stencils);
+    // The first level's modes (its k, and its mode shapes z as values per
+    // reference vertex), to read on the others.
+    let mut first: Option<(Vec<f64>, Vec<Vec<f64>>)> = None;
+    for cloth in &setup.levels {
+        let topo = &cloth.topology;
+        let n = topo.n_nodes;
+        let mut form = nalgebra::DMatrix::<f64>::zeros(n, n);
+        for s in 0..topo.bending.len() {
+            let (nodes, weights) = topo.bending.row(s);
+            for (&i, &wi) in nodes.iter().zip(weights) {
+                for (&j, &wj) in nodes.iter().zip(weights) {
+                    form[(i as usize, j as usize)] += wi * wj;
+                }
+            }
+        }
+        let areas = &topo.node_areas;
+        let mut b = form.clone();
+        for i in 0..n {
+            for j in 0..n {
+                b[(i, j)] /= (areas[i] * areas[j]).sqrt();
+            }
+        }
+        let eigen = b.symmetric_eigen();
+        let mut order: Vec<usize> = (0..n).collect();
+        order.sort_by(|&i, &j| eigen.eigenvalues[i].total_cmp(&eigen.eigenvalues[j]));
+        let values: Vec<f64> = order.iter().map(|&i| eigen.eigenvalues[i]).collect();
+        let top = values[n - 1];
+        let zero = values.iter().take_while(|&&v| v < 1e-9 * top).count();
+        let k: Vec<f64> = values.iter().map(|v| v.max(0.0).powf(0.25)).collect();
+        let shown: Vec<usize> = (zero..(zero + modes).min(n)).collect();
+        let source = &cloth.mesh.as_ref().expect("a mesh level").source;
+        let mut line = format!(
+            "{} ({n} v): {zero} zero modes; wavenumbers of the next {} (1/m): {}; largest {:.0}",
+            cloth.level,
+            shown.len(),
+            shown.iter().map(|&j| format!("{:.1}", k[j])).collect::<Vec<_>>().join(" "),
+            k[n - 1],
+        );
+        if let Some((k0, shapes)) = &first {
+            let ratio = |a: f64, b: f64| format!("{:.3}", (a / b).powi(4));
+            let own: Vec<String> = shown.iter().zip(k0).map(|(&j, &b)| ratio(k[j], b)).collect();
+            // The first level's mode shapes at this level's vertices: their
+            // Rayleigh quotient zᵀWz / zᵀMz here.
+            let read: Vec<String> = shapes
+                .iter()
+                .zip(k0)
+                .map(|(shape, &b)| {
+                    let z = nalgebra::DVector::from_iterator(n, source.iter().map(|&r| shape[r as usize]));
+                    let mass: f64 = (0..n).map(|i| areas[i] * z[i] * z[i]).sum();
+                    ratio((z.dot(&(&form * &z)) / mass).powf(0.25), b)
+                })
+                .collect();
+            line += &format!(
+                "\n  λ against the first level's: {}\n  the first level's modes read here: {}",
+                own.join(" "),
+                read.join(" ")
+            );
+            // Where this level's lowest modes leave the first level's: each
+            // mode less its M-projection on the affine fields and the first
+            // level's modes at these vertices, as a share of its mass, and
+            // that remainder's mass by band (border vertices apart).
+            let rest = &topo.rest_positions;
+            let mut basis: Vec<nalgebra::DVector<f64>> = vec![
+                nalgebra::DVector::from_element(n, 1.0),
+                nalgebra::DVector::from_iterator(n, rest.iter().map(|p| p[0])),
+                nalgebra::DVector::from_iterator(n, rest.iter().map(|p| p[2])),
+            ];
+            basis.extend(
+                shapes
+                    .iter()
+                    .map(|shape| nalgebra::DVector::from_iterator(n, source.iter().map(|&r| shape[r as usize]))),
+            );
+            let m = nalgebra::DVector::from_column_slice(areas);
+            let inner = |a: &nalgebra::DVector<f64>, b: &nalgebra::DVector<f64>| a.component_mul(&m).dot(b);
+            // M-orthonormalise (modified Gram–Schmidt).
+            let mut ortho: Vec<nalgebra::DVector<f64>> = Vec::new();
+            for mut v in basis {
+                for q in &ortho {
+                    v -= q * inner(q, &v);
+                }
+                let len = inner(&v, &v).sqrt();
+                if len > 1e-9 {
+                    ortho.push(v / len);
+                }
+            }
+            let border = cloth.mesh.as_ref().expect("a mesh level").mesh.border();
+            let r = |i: usize| rest[i][0].hypot(rest[i][2]);
+            let mut cells = Vec::new();
+            for &j in shown.iter().take(6) {
+                let v = eigen.eigenvectors.column(order[j]);
+                let mut z = nalgebra::DVector::from_iterator(n, (0..n).map(|i| v[i] / areas[i].sqrt()));
+                let total = inner(&z, &z);
+                for q in &ortho {
+                    z -= q * inner(q, &z);
+                }
+                let left = inner(&z, &z);
+                let share = |keep: &dyn Fn(usize) -> bool| {
+                    (0..n).filter(|&i| keep(i)).map(|i| areas[i] * z[i] * z[i]).sum::<f64>() / left
+                };
+                cells.push(format!(
+                    "{:.1} % (border {:.2}, rest of r > 0.14 {:.2}, 0.10–0.14 {:.2}, < 0.10 {:.2})",
+                    100.0 * left / total,
+                    share(&|i| border[i]),
+                    share(&|i| !border[i] && r(i) >= 0.14),
+                    share(&|i| (0.10..0.14).contains(&r(i))),
+                    share(&|i| r(i) < 0.10),
+                ));
+            }
+            line += &format!("\n  off the first level's modes: {}", cells.join("; "));
+        } else {
+            let shapes = shown
+                .iter()
+                .map(|&j| {
+                    let v = eigen.eigenvectors.column(order[j]);
+                    (0..n).map(|i| v[i] / areas[i].sqrt()).collect()
+                })
+                .collect();
+            first = Some((shown.iter().map(|&j| k[j]).collect(), shapes));
+        }
+        println!("{line}");
+    }
 }
 
 /// `write`'s remeshing.
@@ -1004,6 +1293,11 @@ fn main() {
             stencils,
         } => run(&runs, dt, twins, jitter, stencils_from.as_deref(), &stencils),
         Command::Restart { runs } => restart(&runs),
+        Command::Spectrum {
+            levels,
+            modes,
+            stencils,
+        } => spectrum(&levels, modes, &stencils),
         Command::Write {
             levels,
             out,
