@@ -87,6 +87,12 @@ enum Command {
     Restart {
         #[command(flatten)]
         runs: Runs,
+        /// Give each level's stretch springs their lengths on the
+        /// reference's shape as rest lengths: a level whose membrane holds
+        /// no stress there, to tell the springs' part in its departure
+        /// from the bending's.
+        #[arg(long)]
+        unstressed: bool,
     },
     /// The spectrum of each level's bending operator on its flat rest
     /// shape: the lowest eigenvalues λ of W z = λ M z (W the stencils'
@@ -104,6 +110,15 @@ enum Command {
         /// The levels' stencil rule, as `run --stencils`.
         #[arg(long, value_parser = ["vertex", "triangle", "quartic"], default_value = "vertex")]
         stencils: String,
+        /// Also step the first level (the reference: `100%`) for the
+        /// scene's duration and weigh the other levels' eigenvalue ratios
+        /// by where its drape's bending energy lies: `Σ e_j·λ_j/λ'_j / Σ e_j`
+        /// over the modes a level has (e_j the drape's energy in the first
+        /// level's mode j, λ' the level's j-th eigenvalue), the factor on
+        /// D that gives the level the reference's stiffness at the drape's
+        /// wavenumbers.
+        #[arg(long)]
+        drape: bool,
     },
     /// Save the (first) level as OBJ, optionally remeshed in its rest
     /// plane (to tell a level's uneven triangles from its size).
@@ -564,8 +579,8 @@ fn spread(runs: &[Run<'_>]) {
     }
 }
 
-fn restart(args: &Runs) {
-    let setup = Setup::new(&args.levels);
+fn restart(args: &Runs, unstressed: bool) {
+    let mut setup = Setup::new(&args.levels);
     let (bends, stretch) = (&args.bend, args.stretch);
     let mut reference = setup.scene.build().expect("builds");
     let n = reference.topology().n_nodes;
@@ -596,8 +611,33 @@ fn restart(args: &Runs) {
         );
     }
     let pos = reference.state().pos.clone();
+    if unstressed {
+        for cloth in &mut setup.levels {
+            let source = &cloth.mesh.as_ref().expect("a mesh level").source;
+            let at = |k: u32| {
+                let j = source[k as usize] as usize;
+                [pos[j], pos[n + j], pos[2 * n + j]]
+            };
+            let mut topology = (*cloth.topology).clone();
+            for g in topology
+                .groups
+                .iter_mut()
+                .filter(|g| g.class.kind() == SpringKind::Structural)
+            {
+                for s in 0..g.len() {
+                    g.rest[s] = dist(at(g.a[s]), at(g.b[s]));
+                    g.inv_rest[s] = 1.0 / g.rest[s];
+                }
+            }
+            cloth.topology = std::sync::Arc::new(topology);
+        }
+    }
     let jobs = setup.jobs(bends);
-    let start = format!("reference at {seconds} s");
+    let start = if unstressed {
+        format!("reference at {seconds} s, springs unstressed")
+    } else {
+        format!("reference at {seconds} s")
+    };
     let runs: Vec<Run<'_>> = jobs
         .par_iter()
         .map(|&(cloth, bend)| {
@@ -678,7 +718,12 @@ fn departure(setup: &Setup, cloth: &ClothLevel, bend: f64, stretch: f64, sim: &m
     let d: Vec<f64> = (0..3 * n).map(|i| sim.state().pos[i] - start.pos[i]).collect();
     sim.set_state(start.clone()).expect("same size");
     let rest_r = |k: usize| topo.rest_positions[k][0].hypot(topo.rest_positions[k][2]);
-    let band = |k: usize| BANDS.iter().position(|&(_, lo, hi)| (lo..hi).contains(&rest_r(k))).expect("a band");
+    let band = |k: usize| {
+        BANDS
+            .iter()
+            .position(|&(_, lo, hi)| (lo..hi).contains(&rest_r(k)))
+            .expect("a band")
+    };
     // [band][gravity, springs, bending] work; [band][springs, bending] mean
     // horizontal outward acceleration; moved distance.
     let mut work = [[0.0; 3]; 4];
@@ -704,7 +749,10 @@ fn departure(setup: &Setup, cloth: &ClothLevel, bend: f64, stretch: f64, sim: &m
         moved[b] += dd.sqrt();
         let parts = [
             [springs_and_gravity[k] - g[0], springs_and_gravity[2 * n + k] - g[2]],
-            [full[k] - springs_and_gravity[k], full[2 * n + k] - springs_and_gravity[2 * n + k]],
+            [
+                full[k] - springs_and_gravity[k],
+                full[2 * n + k] - springs_and_gravity[2 * n + k],
+            ],
         ];
         for (o, [ax, az]) in outward[b].iter_mut().zip(parts) {
             *o += ax * ux + az * uz;
@@ -720,9 +768,15 @@ fn departure(setup: &Setup, cloth: &ClothLevel, bend: f64, stretch: f64, sim: &m
             let along = [rb[0] - ra[0], rb[2] - ra[2]];
             let cos = (along[0] * mid[0] + along[1] * mid[1]).abs()
                 / (along[0].hypot(along[1]) * mid[0].hypot(mid[1])).max(1e-12);
-            let l = (0..3).map(|c| (p[c * n + b] - p[c * n + a]).powi(2)).sum::<f64>().sqrt();
+            let l = (0..3)
+                .map(|c| (p[c * n + b] - p[c * n + a]).powi(2))
+                .sum::<f64>()
+                .sqrt();
             let r = mid[0].hypot(mid[1]);
-            let bi = BANDS.iter().position(|&(_, lo, hi)| (lo..hi).contains(&r)).expect("a band");
+            let bi = BANDS
+                .iter()
+                .position(|&(_, lo, hi)| (lo..hi).contains(&r))
+                .expect("a band");
             strains[bi][usize::from(cos < 0.866)].push(l / grp.rest[s] - 1.0);
         }
     }
@@ -753,9 +807,25 @@ fn departure(setup: &Setup, cloth: &ClothLevel, bend: f64, stretch: f64, sim: &m
     lines.join("\n")
 }
 
-fn spectrum(args: &Levels, modes: usize, stencils: &str) {
+fn spectrum(args: &Levels, modes: usize, stencils: &str, drape: bool) {
     let mut setup = Setup::new(args);
     restencil(&mut setup, stencils);
+    let drape = drape.then(|| {
+        let mut reference = setup
+            .scene
+            .build_on(&setup.levels[0], setup.material(&setup.levels[0], 1.0, 1.0))
+            .expect("builds");
+        let dc = setup.stepped(&mut reference, setup.scene.duration.round() as usize);
+        println!(
+            "{}: drape stepped, DC {:.4}",
+            setup.levels[0].level,
+            dc.last().expect("a second")
+        );
+        reference.state().pos.clone()
+    });
+    // The first level's eigenvalues (all, ascending) and the drape's
+    // bending energy in each of its modes.
+    let mut weights: Option<(Vec<f64>, Vec<f64>)> = None;
     // The first level's modes (its k, and its mode shapes z as values per
     // reference vertex), to read on the others.
     let mut first: Option<(Vec<f64>, Vec<Vec<f64>>)> = None;
@@ -791,9 +861,27 @@ fn spectrum(args: &Levels, modes: usize, stencils: &str) {
             "{} ({n} v): {zero} zero modes; wavenumbers of the next {} (1/m): {}; largest {:.0}",
             cloth.level,
             shown.len(),
-            shown.iter().map(|&j| format!("{:.1}", k[j])).collect::<Vec<_>>().join(" "),
+            shown
+                .iter()
+                .map(|&j| format!("{:.1}", k[j]))
+                .collect::<Vec<_>>()
+                .join(" "),
             k[n - 1],
         );
+        if let (Some((v0, energy)), true) = (&weights, first.is_some()) {
+            let upto = n.min(v0.len());
+            let (mut num, mut den) = (0.0, 0.0);
+            for j in zero..upto {
+                num += energy[j] * v0[j] / values[j];
+                den += energy[j];
+            }
+            let total: f64 = energy.iter().sum();
+            line += &format!(
+                "\n  the drape's energy-weighted λ ratio (first level's over this one's): {:.3}, over the {:.1} % of its energy in this level's {upto} modes",
+                num / den,
+                100.0 * den / total
+            );
+        }
         if let Some((k0, shapes)) = &first {
             let ratio = |a: f64, b: f64| format!("{:.3}", (a / b).powi(4));
             let own: Vec<String> = shown.iter().zip(k0).map(|(&j, &b)| ratio(k[j], b)).collect();
@@ -874,6 +962,37 @@ fn spectrum(args: &Levels, modes: usize, stencils: &str) {
                 })
                 .collect();
             first = Some((shown.iter().map(|&j| k[j]).collect(), shapes));
+            if let Some(pos) = &drape {
+                // E = Σ_j λ_j Σ_c (v_jᵀ M^½ x_c)², x_c one coordinate of the
+                // drape (the stencils vanish on the affine rest positions).
+                let energy: Vec<f64> = order
+                    .iter()
+                    .zip(&values)
+                    .map(|(&col, &value)| {
+                        let v = eigen.eigenvectors.column(col);
+                        (0..3)
+                            .map(|c| {
+                                (0..n)
+                                    .map(|i| v[i] * areas[i].sqrt() * pos[c * n + i])
+                                    .sum::<f64>()
+                                    .powi(2)
+                            })
+                            .sum::<f64>()
+                            * value.max(0.0)
+                    })
+                    .collect();
+                let total: f64 = energy.iter().sum();
+                let bands = [(0, 12), (12, 24), (24, 50), (50, 100), (100, 200), (200, n - zero)];
+                line += &format!(
+                    "\n  the drape's bending energy by mode (past the affine ones): {}",
+                    bands
+                        .iter()
+                        .map(|&(a, b)| format!("{a}–{b} {:.3}", energy[zero + a..zero + b].iter().sum::<f64>() / total))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                );
+                weights = Some((values.clone(), energy));
+            }
         }
         println!("{line}");
     }
@@ -1292,12 +1411,13 @@ fn main() {
             stencils_from,
             stencils,
         } => run(&runs, dt, twins, jitter, stencils_from.as_deref(), &stencils),
-        Command::Restart { runs } => restart(&runs),
+        Command::Restart { runs, unstressed } => restart(&runs, unstressed),
         Command::Spectrum {
             levels,
             modes,
             stencils,
-        } => spectrum(&levels, modes, &stencils),
+            drape,
+        } => spectrum(&levels, modes, &stencils, drape),
         Command::Write {
             levels,
             out,
