@@ -8,7 +8,8 @@
 //!
 //! ```text
 //! cargo run --release --example drape_scan -- run SCENE --levels 721v,100% [--bend 1,1.35] [--stretch 2] [--dt 1e-4] [--twins 8 [--jitter 1e-6]] [--stencils-from MESH.obj | --stencils triangle|quartic] [--csv FILE]
-//! cargo run --release --example drape_scan -- restart SCENE --levels 1081v,721v [--bend 1,1.35] [--stretch 2] [--csv FILE]
+//! cargo run --release --example drape_scan -- restart SCENE --levels 1081v,721v [--bend 1,1.35] [--stretch 2] [--unstressed] [--csv FILE]
+//! cargo run --release --example drape_scan -- spectrum SCENE --levels 100%,60%,40% [--modes 24] [--stencils triangle|quartic] [--drape]
 //! cargo run --release --example drape_scan -- write SCENE --levels 1800v [--relax 20 --flip] [--shuffle 0.05 [--seed 1]] [--top-radius 0.08 [--top-vertices 40]] --out LEVEL.obj
 //! cargo run --release --example drape_scan -- chart --csv FILE[,FILE …] [--names A,B …] [--unscaled] --out CHART.svg
 //! ```
@@ -17,7 +18,12 @@
 //! every second, the bending energy each level's stencils read on the
 //! reference's own vertices (a level's vertices are reference vertices)
 //! against the reference's; then each level starts from the reference's
-//! last shape, at rest, and runs 3 s. `write` saves a level as OBJ, to be
+//! last shape, at rest, and runs 3 s, printing how far each band of it
+//! moves in the first 0.2 s, the forces there and its springs' strain on
+//! that shape (`--unstressed`: with those lengths as rest lengths).
+//! `spectrum` prints the softest modes of each level's bending operator
+//! against the first level's (and, with `--drape`, weighted by where the
+//! first level's drape holds its bending energy). `write` saves a level as OBJ, to be
 //! used as another scene's mesh (a reference of that resolution), and can
 //! remesh it in its rest plane first (Delaunay flips, tangential
 //! relaxation; border fixed; flat meshes only) or flip a share of its
@@ -655,7 +661,7 @@ fn restart(args: &Runs, unstressed: bool) {
             }
             sim.set_state(state).expect("same size");
             let first = setup.dc(&sim);
-            let departure = departure(&setup, cloth, bend, stretch, &mut sim);
+            let departure = departure(&setup, cloth, stretch, &mut sim);
             let run = Run {
                 scene: setup.name(),
                 vertices: m,
@@ -693,17 +699,16 @@ const BANDS: [(&str, f64, f64); 4] = [
 /// bending stencils (a twin built with bending off tells the last two
 /// apart; contact is a velocity projection, in none of them), and the
 /// work each does on the displacement of the next 0.2 s, Σ m·a·d, per
-/// rest-radius band: the force with the largest positive work is what
-/// moves the level off the shape. Also the strain of the level's stretch
+/// rest-radius band (a linearisation: a fast transient of the springs
+/// swamps it, so it says most with `--unstressed`). Also the strain of the level's stretch
 /// springs on the shape, radial (within 30° of the rest radius) and hoop.
 /// Leaves `sim` where it was.
-fn departure(setup: &Setup, cloth: &ClothLevel, bend: f64, stretch: f64, sim: &mut Simulation) -> String {
+fn departure(setup: &Setup, cloth: &ClothLevel, stretch: f64, sim: &mut Simulation) -> String {
     let start = sim.state().clone();
     let mut flat = setup
         .scene
         .build_on(cloth, setup.material(cloth, 0.0, stretch))
         .expect("builds");
-    let _ = bend;
     flat.set_state(start.clone()).expect("same size");
     let full = sim.accelerations().to_vec();
     let springs_and_gravity = flat.accelerations().to_vec();
@@ -825,7 +830,7 @@ fn spectrum(args: &Levels, modes: usize, stencils: &str, drape: bool) {
     });
     // The first level's eigenvalues (all, ascending) and the drape's
     // bending energy in each of its modes.
-    let mut weights: Option<(Vec<f64>, Vec<f64>)> = None;
+    let mut drape_energy: Option<(Vec<f64>, Vec<f64>)> = None;
     // The first level's modes (its k, and its mode shapes z as values per
     // reference vertex), to read on the others.
     let mut first: Option<(Vec<f64>, Vec<Vec<f64>>)> = None;
@@ -868,7 +873,7 @@ fn spectrum(args: &Levels, modes: usize, stencils: &str, drape: bool) {
                 .join(" "),
             k[n - 1],
         );
-        if let (Some((v0, energy)), true) = (&weights, first.is_some()) {
+        if let (Some((v0, energy)), true) = (&drape_energy, first.is_some()) {
             let upto = n.min(v0.len());
             let (mut num, mut den) = (0.0, 0.0);
             for j in zero..upto {
@@ -991,7 +996,7 @@ fn spectrum(args: &Levels, modes: usize, stencils: &str, drape: bool) {
                         .collect::<Vec<_>>()
                         .join(", ")
                 );
-                weights = Some((values.clone(), energy));
+                drape_energy = Some((values.clone(), energy));
             }
         }
         println!("{line}");
