@@ -141,10 +141,12 @@ async fn a_restarted_daemon_resumes_each_instance_where_it_was() {
             "[snapshots]\ndir = \"{}\"\ninterval = 0.5\n",
             dir.path().join("snapshots").display()
         );
+    let restarted = std::time::Instant::now();
     let d = Daemon::run(port, &longer, scratch());
     let c = client(&[d.endpoint()]).await;
     let prediction = predictions(&c, "a");
     let first = within(30, "a state after the restart", first_state(&c, "a")).await;
+    let waited = restarted.elapsed().as_secs_f64();
     let resumed = collect_states(&c, "a", 1.0).await;
     for s in std::iter::once(&first).chain(&resumed) {
         assert_eq!(
@@ -171,13 +173,19 @@ async fn a_restarted_daemon_resumes_each_instance_where_it_was() {
         assert!(s.coefficient_version >= saved.coefficient_version);
     }
     // Continuity: a fresh start would be at rest at t ≈ 0; the first state
-    // is within a fraction of a second of the saved one and close to it.
+    // is no further past the saved one than the daemon can have stepped in
+    // real time since it was started (how long the client took to see a
+    // state is the machine's load: 0.92 s once on a busy CI machine, where
+    // a fixed 0.5 s bound failed), and close to it.
     let gap = if first.episode == saved.episode {
         first.time - saved.state.time
     } else {
         first.time + LOOP_S - saved.state.time
     };
-    assert!(gap < 0.5, "first state {gap} s after the snapshot");
+    assert!(
+        gap <= waited + 0.1,
+        "first state {gap} s after the snapshot, {waited} s after the restart"
+    );
     if first.episode == saved.episode {
         let pos = unpack_positions(&first.positions).expect("positions");
         let moved = max_abs_diff(&pos, &saved.state.pos);
