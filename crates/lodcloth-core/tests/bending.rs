@@ -712,9 +712,8 @@ fn spectrum(m: &TriMesh, count: usize) -> (Vec<f64>, Vec<Vec<f64>>) {
     (picked.iter().map(|&j| eigen.eigenvalues[j]).collect(), shapes)
 }
 
-/// `zᵀWz / zᵀMz` of a vertical field `z` on `m`.
-fn rayleigh(m: &TriMesh, z: &[f64]) -> f64 {
-    let stencils = mesh::bending_stencils(m, &[]).expect("a flat mesh");
+/// `zᵀWz / zᵀMz` of a vertical field `z` on `m`, bent by `stencils`.
+fn rayleigh(m: &TriMesh, stencils: &lodcloth::sim::Bending, z: &[f64]) -> f64 {
     let points: Vec<[f64; 3]> = m.positions.iter().zip(z).map(|(p, &h)| [p[0], h, p[2]]).collect();
     let mass: f64 = m.vertex_areas().iter().zip(z).map(|(a, h)| a * h * h).sum();
     stencils.energy_of(&points) / mass
@@ -755,9 +754,10 @@ fn the_softest_bending_modes_converge_and_read_the_same_on_a_simplified_level() 
     let locked = vec![false; fine.vertices()];
     let level = mesh::simplify(&fine, 504, &locked, "disc").expect("simplifies");
     let (own, _) = spectrum(&level.mesh, count);
+    let stencils = mesh::bending_stencils(&level.mesh, &[]).expect("a flat mesh");
     for (j, (mode, f)) in fine_modes.iter().zip(&fine_values).enumerate() {
         let z: Vec<f64> = level.source.iter().map(|&r| mode[r as usize]).collect();
-        let read = rayleigh(&level.mesh, &z) / f;
+        let read = rayleigh(&level.mesh, &stencils, &z) / f;
         println!(
             "mode {j}: the disc's mode reads {read:.3} of its λ on the {} v level; the level's own mode {:.3}",
             level.mesh.vertices(),
