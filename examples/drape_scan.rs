@@ -7,9 +7,9 @@
 //! of the stretch springs over the overhang.
 //!
 //! ```text
-//! cargo run --release --example drape_scan -- run SCENE --levels 721v,100% [--bend 1,1.35] [--stretch 2] [--dt 1e-4] [--twins 8 [--jitter 1e-6]] [--stencils-from MESH.obj | --stencils triangle|quartic] [--csv FILE]
+//! cargo run --release --example drape_scan -- run SCENE --levels 721v,100% [--bend 1,1.35] [--stretch 2] [--dt 1e-4] [--twins 8 [--jitter 1e-6]] [--stencils-from MESH.obj | --stencils triangle|quartic|mixed|mixed-exact] [--csv FILE]
 //! cargo run --release --example drape_scan -- restart SCENE --levels 1081v,721v [--bend 1,1.35] [--stretch 2] [--unstressed] [--csv FILE]
-//! cargo run --release --example drape_scan -- spectrum SCENE --levels 100%,60%,40% [--modes 24] [--stencils triangle|quartic] [--drape]
+//! cargo run --release --example drape_scan -- spectrum SCENE --levels 100%,60%,40% [--modes 24] [--stencils triangle|quartic|mixed|mixed-exact] [--drape]
 //! cargo run --release --example drape_scan -- write SCENE --levels 1800v [--relax 20 --flip] [--shuffle 0.05 [--seed 1]] [--top-radius 0.08 [--top-vertices 40]] --out LEVEL.obj
 //! cargo run --release --example drape_scan -- chart --csv FILE[,FILE …] [--names A,B …] [--unscaled] --out CHART.svg
 //! ```
@@ -86,7 +86,7 @@ enum Command {
         /// `triangle`, six-point patches; `quartic`, a quartic over the
         /// nearest 19 or more points at every interior vertex;
         /// `lodcloth_core::mesh::Stencils`).
-        #[arg(long, value_parser = ["vertex", "triangle", "quartic"], default_value = "vertex")]
+        #[arg(long, value_parser = ["vertex", "triangle", "quartic", "mixed", "mixed-exact"], default_value = "vertex")]
         stencils: String,
     },
     /// Step the reference, then each level from its last shape, at rest.
@@ -114,7 +114,7 @@ enum Command {
         #[arg(long, default_value_t = 24)]
         modes: usize,
         /// The levels' stencil rule, as `run --stencils`.
-        #[arg(long, value_parser = ["vertex", "triangle", "quartic"], default_value = "vertex")]
+        #[arg(long, value_parser = ["vertex", "triangle", "quartic", "mixed", "mixed-exact"], default_value = "vertex")]
         stencils: String,
         /// Also step the first level (the reference: `100%`) for the
         /// scene's duration and weigh the other levels' eigenvalue ratios
@@ -424,6 +424,8 @@ fn restencil(setup: &mut Setup, stencils: &str) {
     let how = match stencils {
         "triangle" => lodcloth_core::mesh::Stencils::Triangle,
         "quartic" => lodcloth_core::mesh::Stencils::Quartic,
+        "mixed" => lodcloth_core::mesh::Stencils::Mixed,
+        "mixed-exact" => lodcloth_core::mesh::Stencils::MixedExact,
         _ => return,
     };
     for cloth in &mut setup.levels {

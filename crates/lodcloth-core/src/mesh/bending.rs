@@ -71,7 +71,17 @@
 //! fits a quartic over the nearest 19 or more points: 0.48–0.96, the same
 //! on any connectivity of the same points. Neither brings the Cusick
 //! levels' drape to the reference's (docs/results.md, "Mesh cloths");
-//! `tests/bending.rs` measures both.
+//! `tests/bending.rs` measures both. `Mixed` is the mixed finite element
+//! Hessian energy (Stein, Grinspun & Wardetzky 2018) on the Delaunay
+//! triangulation of the rest positions: a simplified level's soft modes
+//! as stiff as a regular mesh's of its size (0.79 of the reference's at
+//! the drape's wavenumbers on the 504 v Cusick level, against 0.54 for
+//! the vertex rule), but not consistent on an irregular mesh (a uniform
+//! bend reads 11 % high there); `MixedExact` recombines each vertex's
+//! rows to read quadratics exactly (0.72 there; the cylinder within
+//! 2.3 %). Their levels drape 13–19 % below the reference instead of
+//! 19–26 %, so the scenes keep the vertex rule until a rule closes the
+//! gap (docs/results.md, "Why a level leaves the reference's shape").
 
 use super::TriMesh;
 use crate::sim::vec3::{cross, dot, norm, normalize, sub, tangent_basis};
@@ -108,6 +118,20 @@ pub enum Stencils {
     /// edges; at the border, whose one-sided quartics are wild, a
     /// quadratic.
     Quartic,
+    /// The mixed finite element Hessian energy of Stein et al. (2018,
+    /// "Natural boundary conditions for smoothing in geometry
+    /// processing"): the weak Hessian of the piecewise-linear shape,
+    /// tested with each vertex's hat function, with its boundary term on
+    /// the border (so affine maps store nothing there too), over the
+    /// vertex's lumped area. One ring per vertex, as the cotangent
+    /// Laplacian, which is its trace. Clamps as [`Stencils::Vertex`].
+    Mixed,
+    /// [`Stencils::Mixed`] with each vertex's three rows recombined so
+    /// that they read every quadratic's Hessian exactly (the mixed rows
+    /// are not consistent on an irregular mesh: a uniform bend reads 11 %
+    /// high on a simplified disc), where that takes a recombination within
+    /// a factor 2 of the identity.
+    MixedExact,
 }
 
 /// [`bending_stencils`] read as `how` says.
@@ -143,6 +167,8 @@ pub fn bending_stencils_by(mesh: &TriMesh, pinned: &[bool], how: Stencils) -> Re
         Stencils::Vertex => hessian_stencils(mesh, pinned),
         Stencils::Triangle => triangle_stencils(mesh, pinned),
         Stencils::Quartic => quartic_stencils(mesh, pinned),
+        Stencils::Mixed => mixed_stencils(mesh, pinned, false),
+        Stencils::MixedExact => mixed_stencils(mesh, pinned, true),
     })
 }
 
@@ -219,6 +245,177 @@ fn quartic_stencils(mesh: &TriMesh, pinned: &[bool]) -> Bending {
         push_rows(&mut rows, &ring, &r, clamp[i] * areas[i]);
     }
     Bending::from_rows(rows.iter().map(Vec::as_slice))
+}
+
+/// Three stencils per vertex i from the weak Hessian of the
+/// piecewise-linear shape (Stein et al. 2018): with φ_i the hat function
+/// and g_T the gradient on triangle T,
+/// `A_i·V_ab = −Σ_T A_T·½(g_a·∂_bφ_i + g_b·∂_aφ_i) + Σ_e |e|/2·½(g_a·n_b + g_b·n_a)`,
+/// the second sum over the border edges at i (n their outward normal, g
+/// on their one triangle). `V` is read over `A_i` (rows scaled as the
+/// quadratic's); clamps as [`hessian_stencils`]. `exact`: each vertex's
+/// rows made exact on quadratics ([`consistent`]).
+fn mixed_stencils(mesh: &TriMesh, pinned: &[bool], exact: bool) -> Bending {
+    let p = &mesh.positions;
+    let n = mesh.vertices();
+    let (areas, clamp) = areas_and_clamps(mesh, pinned);
+    let (t1, t2) = rest_axes(mesh);
+    let local = |i: u32| {
+        let q = p[i as usize];
+        [dot(q, t1), dot(q, t2)]
+    };
+    // Each triangle's vertices' hat-function gradients in the rest plane.
+    let gradients = |t: [u32; 3]| {
+        let q = t.map(local);
+        let twice = (q[1][0] - q[0][0]) * (q[2][1] - q[0][1]) - (q[1][1] - q[0][1]) * (q[2][0] - q[0][0]);
+        let g = |k: usize| {
+            let e = [
+                q[(k + 2) % 3][0] - q[(k + 1) % 3][0],
+                q[(k + 2) % 3][1] - q[(k + 1) % 3][1],
+            ];
+            [-e[1] / twice, e[0] / twice]
+        };
+        ([g(0), g(1), g(2)], 0.5 * twice.abs())
+    };
+    // (uu, uv, vv) of ½(x_a·y_b + x_b·y_a).
+    let sym = |x: [f64; 2], y: [f64; 2]| [x[0] * y[0], 0.5 * (x[0] * y[1] + x[1] * y[0]), x[1] * y[1]];
+    let mut delaunay = mesh.clone();
+    delaunay.triangles = delaunay_flipped(&mesh.triangles, local);
+    let mesh = &delaunay;
+    let mut acc: Vec<Vec<(u32, [f64; 3])>> = vec![Vec::new(); n];
+    let mut add = |i: u32, k: u32, w: [f64; 3]| acc[i as usize].push((k, w));
+    for &t in &mesh.triangles {
+        let (g, area) = gradients(t);
+        for a in 0..3 {
+            for k in 0..3 {
+                add(t[a], t[k], sym(g[k], g[a]).map(|w| -area * w));
+            }
+        }
+    }
+    for ((a, b), ts) in mesh.edges() {
+        let [t] = ts.as_slice() else { continue };
+        let tri = mesh.triangles[*t];
+        let (g, _) = gradients(tri);
+        let c = tri
+            .into_iter()
+            .find(|&v| v != a && v != b)
+            .expect("a triangle has three vertices");
+        let (qa, qb, qc) = (local(a), local(b), local(c));
+        let e = [qb[0] - qa[0], qb[1] - qa[1]];
+        let length = e[0].hypot(e[1]);
+        let mut normal = [e[1] / length, -e[0] / length];
+        if normal[0] * (qc[0] - qa[0]) + normal[1] * (qc[1] - qa[1]) > 0.0 {
+            normal = [-normal[0], -normal[1]];
+        }
+        for i in [a, b] {
+            for k in 0..3 {
+                add(i, tri[k], sym(g[k], normal).map(|w| 0.5 * length * w));
+            }
+        }
+    }
+    let mut rows: Vec<Vec<(u32, f64)>> = Vec::with_capacity(3 * n);
+    for (i, mut entries) in acc.into_iter().enumerate() {
+        if clamp[i] == 0.0 || !(areas[i] > 0.0) {
+            continue;
+        }
+        entries.sort_by_key(|&(k, _)| k);
+        let mut points: Vec<u32> = Vec::new();
+        let mut fit: [Vec<f64>; 3] = Default::default();
+        for (k, w) in entries {
+            if points.last() != Some(&k) {
+                points.push(k);
+                fit.iter_mut().for_each(|r| r.push(0.0));
+            }
+            for (r, w) in fit.iter_mut().zip(w) {
+                *r.last_mut().expect("pushed above") += w / areas[i];
+            }
+        }
+        let fit = if exact { consistent(&fit, &points, local) } else { fit };
+        push_rows(&mut rows, &points, &fit, clamp[i] * areas[i]);
+    }
+    Bending::from_rows(rows.iter().map(Vec::as_slice))
+}
+
+/// The rows `fit` (the Hessian's uu, uv, vv read from `points`) made exact
+/// on quadratics: C⁻¹·rows, C the 3×3 matrix they read on u²/2, u·v and
+/// v²/2 (the identity for a consistent rule). Left as they are where C is
+/// far from it.
+fn consistent(fit: &[Vec<f64>; 3], points: &[u32], at: impl Fn(u32) -> [f64; 2]) -> [Vec<f64>; 3] {
+    let q: Vec<[f64; 2]> = points.iter().map(|&j| at(j)).collect();
+    let monomials = |x: [f64; 2]| [0.5 * x[0] * x[0], x[0] * x[1], 0.5 * x[1] * x[1]];
+    let c = nalgebra::Matrix3::from_fn(|r, m| fit[r].iter().zip(&q).map(|(w, &x)| w * monomials(x)[m]).sum::<f64>());
+    let singular = c.singular_values();
+    let (lo, hi) = (singular.min(), singular.max());
+    let Some(inverse) = c.try_inverse().filter(|_| lo > 0.5 && hi < 2.0) else {
+        return fit.clone();
+    };
+    std::array::from_fn(|r| {
+        (0..q.len())
+            .map(|j| (0..3).map(|k| inverse[(r, k)] * fit[k][j]).sum())
+            .collect()
+    })
+}
+
+/// `triangles` with every interior edge flipped until each is locally
+/// Delaunay (Lawson's flips: the two angles facing an edge sum to at most
+/// π), in the plane `at` maps the vertices to; the border is kept. Among
+/// the triangulations of the same points and border this one has the
+/// largest smallest angle, so no sliver a flip can remove is left.
+fn delaunay_flipped(triangles: &[[u32; 3]], at: impl Fn(u32) -> [f64; 2]) -> Vec<[u32; 3]> {
+    use std::collections::HashMap;
+    let mut tris = triangles.to_vec();
+    let key = |a: u32, b: u32| (a.min(b), a.max(b));
+    let mut sides: HashMap<(u32, u32), Vec<usize>> = HashMap::new();
+    for (t, tri) in tris.iter().enumerate() {
+        for e in 0..3 {
+            sides.entry(key(tri[e], tri[(e + 1) % 3])).or_default().push(t);
+        }
+    }
+    let mut stack: Vec<(u32, u32)> = sides.keys().copied().collect();
+    stack.sort_unstable();
+    let third = |tri: [u32; 3], a: u32, b: u32| tri.into_iter().find(|&v| v != a && v != b);
+    // The angle at c facing edge ab.
+    let angle = |a: u32, b: u32, c: u32| {
+        let (pa, pb, pc) = (at(a), at(b), at(c));
+        let (u, v) = ([pa[0] - pc[0], pa[1] - pc[1]], [pb[0] - pc[0], pb[1] - pc[1]]);
+        (u[0] * v[1] - u[1] * v[0]).abs().atan2(u[0] * v[0] + u[1] * v[1])
+    };
+    let mut flips = 0usize;
+    while let Some((a, b)) = stack.pop() {
+        let Some(&[t0, t1]) = sides.get(&(a, b)).map(Vec::as_slice) else {
+            continue;
+        };
+        let (Some(c), Some(d)) = (third(tris[t0], a, b), third(tris[t1], a, b)) else {
+            continue;
+        };
+        if c == d || sides.contains_key(&key(c, d)) || angle(a, b, c) + angle(a, b, d) <= std::f64::consts::PI + 1e-12 {
+            continue;
+        }
+        // Keep each triangle's orientation: t0 = (a, b, c) as wound, so
+        // the new pair is (c, d, b)-(d, c, a) or its mirror.
+        let tri = tris[t0];
+        let forward = (0..3).any(|e| tri[e] == a && tri[(e + 1) % 3] == b);
+        let (n0, n1) = if forward {
+            ([a, d, c], [b, c, d])
+        } else {
+            ([a, c, d], [b, d, c])
+        };
+        tris[t0] = n0;
+        tris[t1] = n1;
+        sides.remove(&(a, b));
+        sides.insert(key(c, d), vec![t0, t1]);
+        for (edge, from, to) in [(key(b, c), t0, t1), (key(a, d), t1, t0)] {
+            for t in sides.get_mut(&edge).expect("a triangle's edge").iter_mut() {
+                if *t == from {
+                    *t = to;
+                }
+            }
+        }
+        stack.extend([key(a, c), key(b, c), key(a, d), key(b, d)]);
+        flips += 1;
+        assert!(flips <= 100 * triangles.len().max(1), "Delaunay flips do not end");
+    }
+    tris
 }
 
 /// Three stencils per triangle: the second derivatives of the quadratic
