@@ -391,8 +391,9 @@ fn delaunay_flipped(triangles: &[[u32; 3]], at: impl Fn(u32) -> [f64; 2]) -> Vec
         if c == d || sides.contains_key(&key(c, d)) || angle(a, b, c) + angle(a, b, d) <= std::f64::consts::PI + 1e-12 {
             continue;
         }
-        // Keep each triangle's orientation: t0 = (a, b, c) as wound, so
-        // the new pair is (c, d, b)-(d, c, a) or its mirror.
+        // Keep the winding: with t0 wound a → b → c (and t1 b → a → d),
+        // the pair across c–d is (a, d, c) and (b, c, d); mirrored when t0
+        // runs b → a.
         let tri = tris[t0];
         let forward = (0..3).any(|e| tri[e] == a && tri[(e + 1) % 3] == b);
         let (n0, n1) = if forward {
