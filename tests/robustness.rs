@@ -15,7 +15,7 @@ use futures_util::stream::{FuturesUnordered, StreamExt};
 use prost::Message;
 
 use common::Rng;
-use daemon::{client, collect_states, config_text, level_of, wait_info, within, Daemon, PREFIX};
+use daemon::{client, collect_states, config_text, wait_info, within, Daemon, PREFIX};
 use fuzz::Leaf;
 use lodcloth::estimate::Method;
 use lodcloth::plan::{InstancePlan, Level};
@@ -388,10 +388,7 @@ async fn a_flood_of_switches_is_answered_and_the_instance_ends_consistent() {
     let info = c.info("a").await.expect("info");
     assert_eq!(info.coefficient_version, last.coefficient_version);
     assert_eq!(Level::from_wire(info.level.as_ref().expect("level")), Ok(last_level));
-    let states = collect_states(&c, "a", 0.5).await;
-    assert!(states
-        .iter()
-        .all(|s| level_of(s) == last_level && s.coefficient_version == last.coefficient_version));
+    daemon::assert_after_switch(&collect_states(&c, "a", 0.5).await, last);
     counter.abort();
     d.shutdown().await.expect("clean shutdown");
 }
@@ -445,9 +442,11 @@ async fn a_client_vanishing_mid_request_disturbs_nothing() {
         info.coefficient_version, reply.coefficient_version,
         "the last switch is the one applied"
     );
-    let states = collect_states(&c, "a", 0.5).await;
-    assert!(!states.is_empty());
-    assert!(states.iter().all(|s| level_of(s) == Level::new(16, 16)));
+    assert_eq!(
+        Level::from_wire(reply.level.as_ref().expect("level")),
+        Ok(Level::new(16, 16))
+    );
+    daemon::assert_after_switch(&collect_states(&c, "a", 0.5).await, &reply);
     d.shutdown().await.expect("clean shutdown");
 }
 

@@ -207,6 +207,48 @@ pub fn level_of(s: &v1::State) -> Level {
     Level::from_wire(s.level.as_ref().expect("level")).expect("a valid level")
 }
 
+/// `states`, collected by a subscriber declared after `reply` came back,
+/// against that switch: each is at its level and coefficient version,
+/// except the switch's own last frame of the level before it. A switch
+/// publishes two transition snapshots in order, the old level's last and
+/// the new level's first (proto: `State.transition`); they are queued
+/// before the reply is sent and put on the bus by the instance's publishing
+/// task, so on a busy machine a subscriber declared after the reply can
+/// still receive the old one. Anything else at another level (a switch
+/// landing after this one, a state stepped after it at the old level)
+/// fails. At least one state is at the new level.
+pub fn assert_after_switch(states: &[v1::State], reply: &v1::SwitchReply) {
+    let level = Level::from_wire(reply.level.as_ref().expect("level")).expect("a valid level");
+    let previous = Level::from_wire(reply.previous.as_ref().expect("previous")).expect("a valid level");
+    let version = reply.coefficient_version;
+    let switched = |s: &v1::State| level_of(s) == level && s.coefficient_version == version;
+    let its_last_old = |s: &v1::State| {
+        s.transition && s.frame == reply.frame && level_of(s) == previous && s.coefficient_version + 1 == version
+    };
+    assert!(
+        states.iter().any(switched),
+        "none of {} states after the switch is at {level}, version {version}",
+        states.len()
+    );
+    if let Some(s) = states.iter().find(|s| its_last_old(s)) {
+        println!(
+            "the switch's last frame at {previous} (frame {}) reached a subscriber declared after its reply",
+            s.frame
+        );
+    }
+    for s in states {
+        assert!(
+            switched(s) || its_last_old(s),
+            "after the switch to {level} (version {version}, frame {}) a state at {} (version {}, frame {}, transition {})",
+            reply.frame,
+            level_of(s),
+            s.coefficient_version,
+            s.frame,
+            s.transition
+        );
+    }
+}
+
 static SERIAL: tokio::sync::Mutex<()> = tokio::sync::Mutex::const_new(());
 
 /// Held for the whole of a bus test, so they run one at a time (tests/bus.rs):
