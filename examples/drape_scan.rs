@@ -1135,7 +1135,11 @@ fn remesh(mesh: &mut TriMesh, sweeps: usize, flip: bool) -> usize {
             "--relax/--flip need a flat rest shape: triangle {t:?} is tilted"
         );
     }
-    let mut flips = if flip { delaunay_flips(mesh) } else { 0 };
+    let mut flips = if flip {
+        lodcloth_core::mesh::delaunay_flips(mesh)
+    } else {
+        0
+    };
     let border = mesh.border();
     let n = mesh.vertices();
     for _ in 0..sweeps {
@@ -1154,7 +1158,7 @@ fn remesh(mesh: &mut TriMesh, sweeps: usize, flip: bool) -> usize {
         }
     }
     if flip {
-        flips += delaunay_flips(mesh);
+        flips += lodcloth_core::mesh::delaunay_flips(mesh);
     }
     for &t in &mesh.triangles {
         let m = normal(&mesh.positions, t);
@@ -1178,46 +1182,6 @@ fn adjacency(mesh: &TriMesh) -> (Facing, HashSet<(u32, u32)>) {
         }
     }
     (facing, edges)
-}
-
-/// Lawson's flips until every interior edge is locally Delaunay (the two
-/// angles facing it sum to at most π). Returns the flips made.
-fn delaunay_flips(mesh: &mut TriMesh) -> usize {
-    let angle = |p: &[[f64; 3]], at: u32, a: u32, b: u32| {
-        let (u, v) = (sub(p[a as usize], p[at as usize]), sub(p[b as usize], p[at as usize]));
-        (dot(u, v) / (norm(u) * norm(v))).clamp(-1.0, 1.0).acos()
-    };
-    let mut total = 0;
-    loop {
-        let (facing, mut edges) = adjacency(mesh);
-        let mut touched = vec![false; mesh.triangles.len()];
-        let mut flips = 0;
-        let mut directed: Vec<(u32, u32)> = facing.keys().copied().filter(|&(a, b)| a < b).collect();
-        directed.sort_unstable();
-        for (a, b) in directed {
-            let (Some(&(t1, c)), Some(&(t2, d))) = (facing.get(&(a, b)), facing.get(&(b, a))) else {
-                continue;
-            };
-            if touched[t1] || touched[t2] || edges.contains(&(c.min(d), c.max(d))) {
-                continue;
-            }
-            let p = &mesh.positions;
-            if angle(p, c, a, b) + angle(p, d, b, a) <= std::f64::consts::PI + 1e-9 {
-                continue;
-            }
-            // a→b→c and b→a→d counter-clockwise: the quad is a, d, b, c.
-            mesh.triangles[t1] = [a, d, c];
-            mesh.triangles[t2] = [d, b, c];
-            edges.insert((c.min(d), c.max(d)));
-            touched[t1] = true;
-            touched[t2] = true;
-            flips += 1;
-        }
-        if flips == 0 {
-            return total;
-        }
-        total += flips;
-    }
 }
 
 /// Flip `share` of `mesh`'s interior edges, drawn at random (seeded), its

@@ -280,7 +280,7 @@ fn mixed_stencils(mesh: &TriMesh, pinned: &[bool], exact: bool) -> Bending {
     // (uu, uv, vv) of ½(x_a·y_b + x_b·y_a).
     let sym = |x: [f64; 2], y: [f64; 2]| [x[0] * y[0], 0.5 * (x[0] * y[1] + x[1] * y[0]), x[1] * y[1]];
     let mut delaunay = mesh.clone();
-    delaunay.triangles = delaunay_flipped(&mesh.triangles, local);
+    delaunay_flips(&mut delaunay);
     let mesh = &delaunay;
     let mut acc: Vec<Vec<(u32, [f64; 3])>> = vec![Vec::new(); n];
     let mut add = |i: u32, k: u32, w: [f64; 3]| acc[i as usize].push((k, w));
@@ -356,14 +356,16 @@ fn consistent(fit: &[Vec<f64>; 3], points: &[u32], at: impl Fn(u32) -> [f64; 2])
     })
 }
 
-/// `triangles` with every interior edge flipped until each is locally
-/// Delaunay (Lawson's flips: the two angles facing an edge sum to at most
-/// π), in the plane `at` maps the vertices to; the border is kept. Among
-/// the triangulations of the same points and border this one has the
-/// largest smallest angle, so no sliver a flip can remove is left.
-fn delaunay_flipped(triangles: &[[u32; 3]], at: impl Fn(u32) -> [f64; 2]) -> Vec<[u32; 3]> {
+/// Flips `mesh`'s interior edges until each is locally Delaunay (Lawson's
+/// flips: the two angles facing an edge sum to at most π), its vertices
+/// and border kept; returns the flips made. For a flat mesh (angles are
+/// read in space). Among the triangulations of the same points and border
+/// the result has the largest smallest angle, so no sliver a flip can
+/// remove is left.
+pub fn delaunay_flips(mesh: &mut TriMesh) -> usize {
     use std::collections::HashMap;
-    let mut tris = triangles.to_vec();
+    let p = &mesh.positions;
+    let tris = &mut mesh.triangles;
     let key = |a: u32, b: u32| (a.min(b), a.max(b));
     let mut sides: HashMap<(u32, u32), Vec<usize>> = HashMap::new();
     for (t, tri) in tris.iter().enumerate() {
@@ -376,9 +378,8 @@ fn delaunay_flipped(triangles: &[[u32; 3]], at: impl Fn(u32) -> [f64; 2]) -> Vec
     let third = |tri: [u32; 3], a: u32, b: u32| tri.into_iter().find(|&v| v != a && v != b);
     // The angle at c facing edge ab.
     let angle = |a: u32, b: u32, c: u32| {
-        let (pa, pb, pc) = (at(a), at(b), at(c));
-        let (u, v) = ([pa[0] - pc[0], pa[1] - pc[1]], [pb[0] - pc[0], pb[1] - pc[1]]);
-        (u[0] * v[1] - u[1] * v[0]).abs().atan2(u[0] * v[0] + u[1] * v[1])
+        let (u, v) = (sub(p[a as usize], p[c as usize]), sub(p[b as usize], p[c as usize]));
+        norm(cross(u, v)).atan2(dot(u, v))
     };
     let mut flips = 0usize;
     while let Some((a, b)) = stack.pop() {
@@ -414,9 +415,9 @@ fn delaunay_flipped(triangles: &[[u32; 3]], at: impl Fn(u32) -> [f64; 2]) -> Vec
         }
         stack.extend([key(a, c), key(b, c), key(a, d), key(b, d)]);
         flips += 1;
-        assert!(flips <= 100 * triangles.len().max(1), "Delaunay flips do not end");
+        assert!(flips <= 100 * tris.len().max(1), "Delaunay flips do not end");
     }
-    tris
+    flips
 }
 
 /// Three stencils per triangle: the second derivatives of the quadratic

@@ -27,7 +27,7 @@ mod patch;
 mod simplify;
 mod springs;
 
-pub use bending::{bending_stencils, bending_stencils_by, Stencils};
+pub use bending::{bending_stencils, bending_stencils_by, delaunay_flips, Stencils};
 pub use io::load;
 pub use locate::{locate, SurfaceIndex};
 pub use patch::{material_point, patch_weights};
