@@ -10,6 +10,7 @@
 //! cargo run --release --example drape_scan -- run SCENE --levels 721v,100% [--bend 1,1.35] [--stretch 2] [--dt 1e-4] [--twins 8 [--jitter 1e-6]] [--stencils-from MESH.obj | --stencils triangle|quartic|mixed|mixed-exact] [--csv FILE]
 //! cargo run --release --example drape_scan -- restart SCENE --levels 1081v,721v [--bend 1,1.35] [--stretch 2] [--unstressed] [--csv FILE]
 //! cargo run --release --example drape_scan -- spectrum SCENE --levels 100%,60%,40% [--modes 24] [--stencils triangle|quartic|mixed|mixed-exact] [--drape]
+//! cargo run --release --example drape_scan -- membrane SCENE --levels 100%,60%,40% [--rings 2,3,4]
 //! cargo run --release --example drape_scan -- write SCENE --levels 1800v [--relax 20 --flip] [--shuffle 0.05 [--seed 1]] [--top-radius 0.08 [--top-vertices 40]] --out LEVEL.obj
 //! cargo run --release --example drape_scan -- chart --csv FILE[,FILE …] [--names A,B …] [--unscaled] --out CHART.svg
 //! ```
@@ -125,6 +126,22 @@ enum Command {
         /// wavenumbers.
         #[arg(long)]
         drape: bool,
+    },
+    /// The spring membrane of each level under a homogeneous in-plane
+    /// strain: its energy with every vertex moved affinely, and with the
+    /// border moved affinely and the inside left to relax (the network's
+    /// own response), each against the isotropic membrane the springs
+    /// stand for (λ = μ, the biaxial stiffness the scene's material gives
+    /// them). A regular triangular network holds the affine field in
+    /// equilibrium; an irregular one relaxes off it and is softer than its
+    /// coefficients say.
+    Membrane {
+        #[command(flatten)]
+        levels: Levels,
+        /// Also the same measure on every interior vertex's patch of this
+        /// many rings (its outermost ring held), summed over the patches.
+        #[arg(long, value_delimiter = ',')]
+        rings: Vec<usize>,
     },
     /// Save the (first) level as OBJ, optionally remeshed in its rest
     /// plane (to tell a level's uneven triangles from its size).
@@ -814,6 +831,220 @@ fn departure(setup: &Setup, cloth: &ClothLevel, stretch: f64, sim: &mut Simulati
     lines.join("\n")
 }
 
+fn membrane(args: &Levels, rings: &[usize]) {
+    let setup = Setup::new(args);
+    // Strains (ε_uu, ε_vv, ε_uv): biaxial, pure shear, simple shear.
+    let strains = [
+        ("biaxial", [1.0, 1.0, 0.0]),
+        ("pure shear", [1.0, -1.0, 0.0]),
+        ("simple shear", [0.0, 0.0, 1.0]),
+    ];
+    for cloth in &setup.levels {
+        let topo = &cloth.topology;
+        let material = setup.material(cloth, 1.0, 1.0);
+        let mesh = &cloth.mesh.as_ref().expect("a mesh level").mesh;
+        let (e1, e2) = tangent_plane(mesh);
+        let n = topo.n_nodes;
+        let uv: Vec<[f64; 2]> = topo
+            .rest_positions
+            .iter()
+            .map(|p| {
+                let d = sub(*p, topo.rest_positions[0]);
+                [dot(d, e1), dot(d, e2)]
+            })
+            .collect();
+        // The in-plane stiffness Σ K·d·dᵀ of every stretch spring at rest,
+        // and the biaxial modulus its coefficients were made for.
+        let mut h = nalgebra::DMatrix::<f64>::zeros(2 * n, 2 * n);
+        let mut biaxial = 0.0;
+        for g in topo.groups.iter().filter(|g| g.kind() == SpringKind::Structural) {
+            let k = material.springs[g.class.index()].k;
+            for ((&a, &b), &l) in g.a.iter().zip(&g.b).zip(&g.rest) {
+                let (a, b) = (a as usize, b as usize);
+                let d = [(uv[b][0] - uv[a][0]) / l, (uv[b][1] - uv[a][1]) / l];
+                biaxial += k * l * l;
+                for r in 0..2 {
+                    for c in 0..2 {
+                        let v = k * d[r] * d[c];
+                        h[(2 * a + r, 2 * a + c)] += v;
+                        h[(2 * b + r, 2 * b + c)] += v;
+                        h[(2 * a + r, 2 * b + c)] -= v;
+                        h[(2 * b + r, 2 * a + c)] -= v;
+                    }
+                }
+            }
+        }
+        let area: f64 = topo.node_areas.iter().sum();
+        // Σ K·L² ε² = A·T·ε² under a biaxial ε (module docs of
+        // mesh::springs); the springs' isotropic membrane has λ = μ, T = 8μ.
+        let mu = biaxial / area / 8.0;
+        let border = mesh.border();
+        let inside: Vec<usize> = (0..n).filter(|&i| !border[i]).collect();
+        let dofs: Vec<usize> = inside.iter().flat_map(|&i| [2 * i, 2 * i + 1]).collect();
+        let h_ii = h.select_rows(&dofs).select_columns(&dofs);
+        let chol = h_ii
+            .cholesky()
+            .expect("the inside's stiffness with its border held is definite");
+        let mut line = format!("{} ({n} v, {} inside):", cloth.level, inside.len());
+        let mut sums = (0.0, 0.0);
+        for (name, [euu, evv, euv]) in strains {
+            let affine = nalgebra::DVector::<f64>::from_iterator(
+                2 * n,
+                uv.iter()
+                    .flat_map(|p| [euu * p[0] + euv * p[1], euv * p[0] + evv * p[1]]),
+            );
+            let energy = |u: &nalgebra::DVector<f64>| 0.5 * u.dot(&(&h * u));
+            let e_affine = energy(&affine);
+            // The inside relaxed: H_II·u_I = −H_IB·u_B with u_B affine.
+            let mut held = affine.clone();
+            for &d in &dofs {
+                held[d] = 0.0;
+            }
+            let rhs = -(&h * &held).select_rows(&dofs);
+            let u_inside = chol.solve(&rhs);
+            let mut relaxed = held;
+            for (k, &d) in dofs.iter().enumerate() {
+                relaxed[d] = u_inside[k];
+            }
+            let e_relaxed = energy(&relaxed);
+            sums.0 += e_affine;
+            sums.1 += e_relaxed;
+            let tr = euu + evv;
+            let contraction = euu * euu + evv * evv + 2.0 * euv * euv;
+            let e_continuum = area * 0.5 * mu * (tr * tr + 2.0 * contraction);
+            line += &format!(
+                "\n  {name:>12}: affine {:.4}, relaxed {:.4} of the membrane's",
+                e_affine / e_continuum,
+                e_relaxed / e_continuum
+            );
+        }
+        line += &format!("\n  all three: relaxed {:.4} of affine", sums.1 / sums.0);
+        for &k in rings {
+            line += &format!(
+                "\n  {k}-ring patches: relaxed {:.4} of affine",
+                patch_relaxation(topo, &material, &uv, &border, k, &strains)
+            );
+        }
+        println!("{line}");
+    }
+}
+
+/// `membrane`'s relaxed-over-affine energy, summed over three strains and
+/// over every interior vertex's patch of `k` rings of stretch springs (its
+/// ring `k` held affine, the rest relaxed), counting the springs with an
+/// end inside.
+fn patch_relaxation(
+    topo: &lodcloth_core::sim::Topology,
+    material: &Material,
+    uv: &[[f64; 2]],
+    border: &[bool],
+    k: usize,
+    strains: &[(&str, [f64; 3]); 3],
+) -> f64 {
+    let n = topo.n_nodes;
+    let mut springs = Vec::new();
+    let mut next: Vec<Vec<usize>> = vec![Vec::new(); n];
+    for g in topo.groups.iter().filter(|g| g.kind() == SpringKind::Structural) {
+        let kk = material.springs[g.class.index()].k;
+        for ((&a, &b), &l) in g.a.iter().zip(&g.b).zip(&g.rest) {
+            let (a, b) = (a as usize, b as usize);
+            next[a].push(springs.len());
+            next[b].push(springs.len());
+            springs.push((a, b, kk, [(uv[b][0] - uv[a][0]) / l, (uv[b][1] - uv[a][1]) / l]));
+        }
+    }
+    let (mut affine_sum, mut relaxed_sum) = (0.0, 0.0);
+    let mut depth = vec![usize::MAX; n];
+    for centre in (0..n).filter(|&i| !border[i]) {
+        // Breadth first to ring k.
+        let mut patch = vec![centre];
+        depth[centre] = 0;
+        let mut head = 0;
+        while head < patch.len() {
+            let i = patch[head];
+            head += 1;
+            if depth[i] == k {
+                continue;
+            }
+            for &s in &next[i] {
+                let (a, b, ..) = springs[s];
+                let j = if a == i { b } else { a };
+                if depth[j] == usize::MAX {
+                    depth[j] = depth[i] + 1;
+                    patch.push(j);
+                }
+            }
+        }
+        let inner: Vec<usize> = patch.iter().copied().filter(|&i| depth[i] < k && !border[i]).collect();
+        let index: HashMap<usize, usize> = inner.iter().enumerate().map(|(m, &i)| (i, m)).collect();
+        let mut local: Vec<usize> = patch
+            .iter()
+            .flat_map(|&i| next[i].iter().copied())
+            .filter(|&s| {
+                let (a, b, ..) = springs[s];
+                depth[a] != usize::MAX && depth[b] != usize::MAX && (index.contains_key(&a) || index.contains_key(&b))
+            })
+            .collect();
+        local.sort_unstable();
+        local.dedup();
+        let m = 2 * inner.len();
+        let mut h = nalgebra::DMatrix::<f64>::zeros(m, m);
+        for &s in &local {
+            let (a, b, kk, d) = springs[s];
+            for (p, q, sign) in [(a, a, 1.0), (b, b, 1.0), (a, b, -1.0), (b, a, -1.0)] {
+                if let (Some(&mp), Some(&mq)) = (index.get(&p), index.get(&q)) {
+                    for r in 0..2 {
+                        for c in 0..2 {
+                            h[(2 * mp + r, 2 * mq + c)] += sign * kk * d[r] * d[c];
+                        }
+                    }
+                }
+            }
+        }
+        let chol = h.cholesky().expect("a held patch is definite");
+        for &(_, [euu, evv, euv]) in strains {
+            let field = |i: usize| [euu * uv[i][0] + euv * uv[i][1], euv * uv[i][0] + evv * uv[i][1]];
+            // The held ring's pull on the inside: −H_IB·u_B.
+            let mut rhs = nalgebra::DVector::<f64>::zeros(m);
+            for &s in &local {
+                let (a, b, kk, d) = springs[s];
+                for (p, q) in [(a, b), (b, a)] {
+                    if let (Some(&mp), None) = (index.get(&p), index.get(&q)) {
+                        let u = field(q);
+                        let pull = kk * (d[0] * u[0] + d[1] * u[1]);
+                        rhs[2 * mp] += pull * d[0];
+                        rhs[2 * mp + 1] += pull * d[1];
+                    }
+                }
+            }
+            let x = chol.solve(&rhs);
+            let at = |i: usize| match index.get(&i) {
+                Some(&mi) => [x[2 * mi], x[2 * mi + 1]],
+                None => field(i),
+            };
+            for &s in &local {
+                let (a, b, kk, d) = springs[s];
+                let stretch = |u: [f64; 2], w: [f64; 2]| d[0] * (w[0] - u[0]) + d[1] * (w[1] - u[1]);
+                affine_sum += 0.5 * kk * stretch(field(a), field(b)).powi(2);
+                relaxed_sum += 0.5 * kk * stretch(at(a), at(b)).powi(2);
+            }
+        }
+        for &i in &patch {
+            depth[i] = usize::MAX;
+        }
+    }
+    relaxed_sum / affine_sum
+}
+
+/// An orthonormal basis of a flat mesh's plane.
+fn tangent_plane(mesh: &TriMesh) -> ([f64; 3], [f64; 3]) {
+    let [a, b, c] = mesh.triangles[0].map(|i| mesh.positions[i as usize]);
+    let normal = cross(sub(b, a), sub(c, a));
+    let e1 = scale(sub(b, a), 1.0 / norm(sub(b, a)));
+    let e2 = cross(scale(normal, 1.0 / norm(normal)), e1);
+    (e1, e2)
+}
+
 fn spectrum(args: &Levels, modes: usize, stencils: &str, drape: bool) {
     let mut setup = Setup::new(args);
     restencil(&mut setup, stencils);
@@ -1389,6 +1620,7 @@ fn main() {
             stencils,
             drape,
         } => spectrum(&levels, modes, &stencils, drape),
+        Command::Membrane { levels, rings } => membrane(&levels, &rings),
         Command::Write {
             levels,
             out,
