@@ -853,11 +853,23 @@ fn membrane(args: &Levels, rings: &[usize]) {
                 [dot(d, e1), dot(d, e2)]
             })
             .collect();
-        // The in-plane stiffness Σ K·d·dᵀ of every stretch spring at rest,
-        // and the biaxial modulus its coefficients were made for.
+        let off_plane = topo
+            .rest_positions
+            .iter()
+            .map(|p| dot(sub(*p, topo.rest_positions[0]), cross(e1, e2)).abs())
+            .fold(0.0, f64::max);
+        assert!(
+            off_plane < 1e-9,
+            "{}: membrane reads flat meshes only ({off_plane:.2e} m off the plane)",
+            cloth.level
+        );
+        // The in-plane stiffness Σ K·d·dᵀ of every spring at rest (a plate's
+        // stretch springs; the stretch and bend springs of a cloth that has
+        // them, which share its membrane), and the biaxial modulus its
+        // coefficients were made for.
         let mut h = nalgebra::DMatrix::<f64>::zeros(2 * n, 2 * n);
         let mut biaxial = 0.0;
-        for g in topo.groups.iter().filter(|g| g.kind() == SpringKind::Structural) {
+        for g in &topo.groups {
             let k = material.springs[g.class.index()].k;
             for ((&a, &b), &l) in g.a.iter().zip(&g.b).zip(&g.rest) {
                 let (a, b) = (a as usize, b as usize);
@@ -930,9 +942,8 @@ fn membrane(args: &Levels, rings: &[usize]) {
 }
 
 /// `membrane`'s relaxed-over-affine energy, summed over three strains and
-/// over every interior vertex's patch of `k` rings of stretch springs (its
-/// ring `k` held affine, the rest relaxed), counting the springs with an
-/// end inside.
+/// over every interior vertex's patch of `k` rings of springs (its ring `k`
+/// held affine, the rest relaxed), counting the springs with an end inside.
 fn patch_relaxation(
     topo: &lodcloth_core::sim::Topology,
     material: &Material,
@@ -944,7 +955,7 @@ fn patch_relaxation(
     let n = topo.n_nodes;
     let mut springs = Vec::new();
     let mut next: Vec<Vec<usize>> = vec![Vec::new(); n];
-    for g in topo.groups.iter().filter(|g| g.kind() == SpringKind::Structural) {
+    for g in &topo.groups {
         let kk = material.springs[g.class.index()].k;
         for ((&a, &b), &l) in g.a.iter().zip(&g.b).zip(&g.rest) {
             let (a, b) = (a as usize, b as usize);
