@@ -50,7 +50,7 @@ use lodcloth_core::drape::{drape_coefficient, fold_count, jitter_heights, shadow
 use lodcloth_core::level::GridLevel;
 use lodcloth_core::mesh::{triangle_area, TriMesh};
 use lodcloth_core::scene::{ClothLevel, Scene};
-use lodcloth_core::sim::vec3::{add, cross, dist, dot, norm, scale, sub};
+use lodcloth_core::sim::vec3::{add, cross, dist, dot, norm, normalize, scale, sub};
 use lodcloth_core::sim::{Material, Shape, Simulation, SpringClass, SpringKind};
 use rayon::prelude::*;
 
@@ -863,26 +863,37 @@ fn membrane(args: &Levels, rings: &[usize]) {
             "{}: membrane reads flat meshes only ({off_plane:.2e} m off the plane)",
             cloth.level
         );
-        // The in-plane stiffness Σ K·d·dᵀ of every spring at rest (a plate's
-        // stretch springs; the stretch and bend springs of a cloth that has
-        // them, which share its membrane), and the biaxial modulus its
-        // coefficients were made for.
-        let mut h = nalgebra::DMatrix::<f64>::zeros(2 * n, 2 * n);
-        let mut biaxial = 0.0;
-        for g in &topo.groups {
-            let k = material.springs[g.class.index()].k;
-            for ((&a, &b), &l) in g.a.iter().zip(&g.b).zip(&g.rest) {
+        // Every spring at rest (a plate's stretch springs; the stretch and
+        // bend springs of a cloth that has them, which share its
+        // membrane), its in-plane stiffness Σ K·d·dᵀ, and the biaxial
+        // modulus the coefficients were made for.
+        let springs: Vec<PlaneSpring> = topo
+            .groups
+            .iter()
+            .flat_map(|g| {
+                let k = material.springs[g.class.index()].k;
+                g.a.iter()
+                    .zip(&g.b)
+                    .zip(&g.rest)
+                    .map(move |((&a, &b), &l)| (a, b, k, l))
+            })
+            .map(|(a, b, k, l)| {
                 let (a, b) = (a as usize, b as usize);
                 let d = [(uv[b][0] - uv[a][0]) / l, (uv[b][1] - uv[a][1]) / l];
-                biaxial += k * l * l;
-                for r in 0..2 {
-                    for c in 0..2 {
-                        let v = k * d[r] * d[c];
-                        h[(2 * a + r, 2 * a + c)] += v;
-                        h[(2 * b + r, 2 * b + c)] += v;
-                        h[(2 * a + r, 2 * b + c)] -= v;
-                        h[(2 * b + r, 2 * a + c)] -= v;
-                    }
+                PlaneSpring { a, b, k, l, d }
+            })
+            .collect();
+        let mut h = nalgebra::DMatrix::<f64>::zeros(2 * n, 2 * n);
+        let mut biaxial = 0.0;
+        for &PlaneSpring { a, b, k, l, d } in &springs {
+            biaxial += k * l * l;
+            for r in 0..2 {
+                for c in 0..2 {
+                    let v = k * d[r] * d[c];
+                    h[(2 * a + r, 2 * a + c)] += v;
+                    h[(2 * b + r, 2 * b + c)] += v;
+                    h[(2 * a + r, 2 * b + c)] -= v;
+                    h[(2 * b + r, 2 * a + c)] -= v;
                 }
             }
         }
@@ -934,7 +945,7 @@ fn membrane(args: &Levels, rings: &[usize]) {
         for &k in rings {
             line += &format!(
                 "\n  {k}-ring patches: relaxed {:.4} of affine",
-                patch_relaxation(topo, &material, &uv, &border, k, &strains)
+                patch_relaxation(&springs, &uv, &border, k, &strains)
             );
         }
         println!("{line}");
@@ -945,24 +956,17 @@ fn membrane(args: &Levels, rings: &[usize]) {
 /// over every interior vertex's patch of `k` rings of springs (its ring `k`
 /// held affine, the rest relaxed), counting the springs with an end inside.
 fn patch_relaxation(
-    topo: &lodcloth_core::sim::Topology,
-    material: &Material,
+    springs: &[PlaneSpring],
     uv: &[[f64; 2]],
     border: &[bool],
     k: usize,
     strains: &[(&str, [f64; 3]); 3],
 ) -> f64 {
-    let n = topo.n_nodes;
-    let mut springs = Vec::new();
+    let n = uv.len();
     let mut next: Vec<Vec<usize>> = vec![Vec::new(); n];
-    for g in &topo.groups {
-        let kk = material.springs[g.class.index()].k;
-        for ((&a, &b), &l) in g.a.iter().zip(&g.b).zip(&g.rest) {
-            let (a, b) = (a as usize, b as usize);
-            next[a].push(springs.len());
-            next[b].push(springs.len());
-            springs.push((a, b, kk, [(uv[b][0] - uv[a][0]) / l, (uv[b][1] - uv[a][1]) / l]));
-        }
+    for (s, spring) in springs.iter().enumerate() {
+        next[spring.a].push(s);
+        next[spring.b].push(s);
     }
     let (mut affine_sum, mut relaxed_sum) = (0.0, 0.0);
     let mut depth = vec![usize::MAX; n];
@@ -978,7 +982,7 @@ fn patch_relaxation(
                 continue;
             }
             for &s in &next[i] {
-                let (a, b, ..) = springs[s];
+                let PlaneSpring { a, b, .. } = springs[s];
                 let j = if a == i { b } else { a };
                 if depth[j] == usize::MAX {
                     depth[j] = depth[i] + 1;
@@ -992,7 +996,7 @@ fn patch_relaxation(
             .iter()
             .flat_map(|&i| next[i].iter().copied())
             .filter(|&s| {
-                let (a, b, ..) = springs[s];
+                let PlaneSpring { a, b, .. } = springs[s];
                 depth[a] != usize::MAX && depth[b] != usize::MAX && (index.contains_key(&a) || index.contains_key(&b))
             })
             .collect();
@@ -1001,7 +1005,7 @@ fn patch_relaxation(
         let m = 2 * inner.len();
         let mut h = nalgebra::DMatrix::<f64>::zeros(m, m);
         for &s in &local {
-            let (a, b, kk, d) = springs[s];
+            let PlaneSpring { a, b, k: kk, d, .. } = springs[s];
             for (p, q, sign) in [(a, a, 1.0), (b, b, 1.0), (a, b, -1.0), (b, a, -1.0)] {
                 if let (Some(&mp), Some(&mq)) = (index.get(&p), index.get(&q)) {
                     for r in 0..2 {
@@ -1018,7 +1022,7 @@ fn patch_relaxation(
             // The held ring's pull on the inside: −H_IB·u_B.
             let mut rhs = nalgebra::DVector::<f64>::zeros(m);
             for &s in &local {
-                let (a, b, kk, d) = springs[s];
+                let PlaneSpring { a, b, k: kk, d, .. } = springs[s];
                 for (p, q) in [(a, b), (b, a)] {
                     if let (Some(&mp), None) = (index.get(&p), index.get(&q)) {
                         let u = field(q);
@@ -1034,7 +1038,7 @@ fn patch_relaxation(
                 None => field(i),
             };
             for &s in &local {
-                let (a, b, kk, d) = springs[s];
+                let PlaneSpring { a, b, k: kk, d, .. } = springs[s];
                 let stretch = |u: [f64; 2], w: [f64; 2]| d[0] * (w[0] - u[0]) + d[1] * (w[1] - u[1]);
                 affine_sum += 0.5 * kk * stretch(field(a), field(b)).powi(2);
                 relaxed_sum += 0.5 * kk * stretch(at(a), at(b)).powi(2);
@@ -1047,13 +1051,21 @@ fn patch_relaxation(
     relaxed_sum / affine_sum
 }
 
-/// An orthonormal basis of a flat mesh's plane.
+/// A spring in a flat mesh's plane: its ends, K, rest length and unit
+/// direction in plane coordinates.
+#[derive(Clone, Copy)]
+struct PlaneSpring {
+    a: usize,
+    b: usize,
+    k: f64,
+    l: f64,
+    d: [f64; 2],
+}
+
+/// An orthonormal basis of a flat mesh's plane (its first triangle's).
 fn tangent_plane(mesh: &TriMesh) -> ([f64; 3], [f64; 3]) {
     let [a, b, c] = mesh.triangles[0].map(|i| mesh.positions[i as usize]);
-    let normal = cross(sub(b, a), sub(c, a));
-    let e1 = scale(sub(b, a), 1.0 / norm(sub(b, a)));
-    let e2 = cross(scale(normal, 1.0 / norm(normal)), e1);
-    (e1, e2)
+    lodcloth_core::sim::vec3::tangent_basis(normalize(cross(sub(b, a), sub(c, a))).expect("a triangle with an area"))
 }
 
 fn spectrum(args: &Levels, modes: usize, stencils: &str, drape: bool) {
