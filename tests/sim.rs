@@ -12,3 +12,4 @@ mod generalise;
 mod lod;
 mod parse_fuzz;
 mod points;
+mod prepare;

@@ -98,6 +98,11 @@ async fn on_thread(
         .name("lodcloth-prepare".into())
         .spawn(move || {
             let run = || {
+                // A client does not wait for a reference the background
+                // is recording (`Preparer::reference_now`).
+                if waiting == Waiting::Client {
+                    preparer.reference_now()?;
+                }
                 work(&preparer).and_then(|prepared| {
                     let sim = preparer.live_simulation(&prepared)?;
                     let cloud = prepared.cloud_map();

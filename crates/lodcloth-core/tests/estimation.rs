@@ -644,3 +644,31 @@ fn a_replayed_reference_is_the_recording_without_inputs_and_the_touched_scene_wi
         Err(ReplayError::OtherReference)
     );
 }
+
+/// A recording whose caller says stop ends at the first 1 % of the run
+/// where it is asked, naming that step; asked nothing, it records whole
+/// (the daemon stops a background copy of a reference a client recorded
+/// first).
+#[test]
+fn a_reference_recording_stops_where_its_caller_says() {
+    let sim = || scene(8, "symplectic_euler", 1e-3).build().expect("builds");
+    let spec = RecordSpec {
+        frames: 1000,
+        metric_stride: 10,
+        estimate_stride: 10,
+        difference_span: 1,
+    };
+    let asked = std::cell::Cell::new(0u32);
+    let mut ticks = Vec::new();
+    let stopped = Reference::record_while(sim(), spec, &mut |done, _| ticks.push(done), &|| {
+        asked.set(asked.get() + 1);
+        asked.get() < 3
+    });
+    assert_eq!(
+        stopped.err(),
+        Some(lodcloth::estimate::ReferenceError::Stopped { step: 30 })
+    );
+    assert_eq!(ticks, [10, 20, 30]);
+    let whole = Reference::record_while(sim(), spec, &mut |_, _| {}, &|| true).expect("records");
+    assert_eq!(whole.frames.len(), 100);
+}

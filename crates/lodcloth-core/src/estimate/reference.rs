@@ -115,6 +115,12 @@ pub enum ReferenceError {
         /// Its time (s).
         time: f64,
     },
+    /// Stopped by its caller before the end.
+    #[error("the reference was stopped at step {step}")]
+    Stopped {
+        /// The last step taken.
+        step: u64,
+    },
     /// No node moved from rest.
     #[error("the reference never moved from its rest shape (O_max = {o_max}); the relative error is undefined")]
     NoMotion {
@@ -130,9 +136,21 @@ impl Reference {
     /// Run `sim` (at rest, t = 0) for `spec.frames` steps and record it.
     /// `progress(done, total)` is called every 1 % of the run.
     pub fn record(
+        sim: Simulation,
+        spec: RecordSpec,
+        progress: &mut dyn FnMut(u64, u64),
+    ) -> Result<Reference, ReferenceError> {
+        Self::record_while(sim, spec, progress, &|| true)
+    }
+
+    /// [`Reference::record`], asking `keep_going` every 1 % of the run and
+    /// stopping ([`ReferenceError::Stopped`]) when it says no: a recording
+    /// that someone else's copy has made useless.
+    pub fn record_while(
         mut sim: Simulation,
         spec: RecordSpec,
         progress: &mut dyn FnMut(u64, u64),
+        keep_going: &dyn Fn() -> bool,
     ) -> Result<Reference, ReferenceError> {
         if spec.frames < 3 {
             return Err(ReferenceError::Spec("frames must be at least 3"));
@@ -199,6 +217,9 @@ impl Reference {
             }
             if step % tick == 0 {
                 progress(step, spec.frames);
+                if !keep_going() {
+                    return Err(ReferenceError::Stopped { step });
+                }
             }
         }
         let o_max = o_max2.sqrt();

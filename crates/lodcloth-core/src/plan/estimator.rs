@@ -158,22 +158,34 @@ pub fn record_reference(
     spec: RecordSpec,
     log: &mut dyn FnMut(String),
 ) -> Result<(Arc<Reference>, f64), PlanError> {
+    record_reference_while(scene, spec, log, &|| true)
+}
+
+/// [`record_reference`], stopped when `keep_going` says no
+/// ([`Reference::record_while`]).
+pub fn record_reference_while(
+    scene: &Scene,
+    spec: RecordSpec,
+    log: &mut dyn FnMut(String),
+    keep_going: &dyn Fn() -> bool,
+) -> Result<(Arc<Reference>, f64), PlanError> {
     let mut s = scene.clone();
     s.stability = StabilityCheck::Enforce;
     let sim = s.build()?;
     let start = Instant::now();
     let mut last = Instant::now();
     let name = scene.name.clone();
-    let reference = Reference::record(sim, spec, &mut |done, total| {
+    let mut progress = |done, total| {
         if last.elapsed().as_secs_f64() > 5.0 {
             last = Instant::now();
             log(format!("{name}: reference {done}/{total} steps"));
         }
-    })
-    .map_err(|source| PlanError::Reference {
-        scene: scene.name.clone(),
-        source,
-    })?;
+    };
+    let reference =
+        Reference::record_while(sim, spec, &mut progress, keep_going).map_err(|source| PlanError::Reference {
+            scene: scene.name.clone(),
+            source,
+        })?;
     let wall = start.elapsed().as_secs_f64();
     let simulated = spec.frames as f64 * reference.dt;
     Ok((Arc::new(reference), wall / simulated))

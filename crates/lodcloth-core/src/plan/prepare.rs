@@ -5,12 +5,12 @@
 //! threads, never on a stepping thread.
 
 use std::collections::HashMap;
-use std::sync::{Arc, Mutex};
+use std::sync::{Arc, Condvar, Mutex, TryLockError};
 use std::time::Instant;
 
 use rayon::prelude::*;
 
-use super::estimator::{default_problem, record_reference, stable_problem, Estimator, PlanError};
+use super::estimator::{default_problem, record_reference_while, stable_problem, Estimator, PlanError};
 use super::{EstimationPlan, InstanceKind, InstancePlan, Level};
 use crate::cache::{CacheEntry, CacheError, CacheKey, CoefficientCache, Provenance};
 use crate::estimate::inverse::{self, Distribution};
@@ -149,8 +149,14 @@ pub struct Preparer {
     plan: Arc<InstancePlan>,
     estimation: EstimationPlan,
     estimator: Estimator,
-    reference: Mutex<Option<Arc<Reference>>>,
+    /// The cloth reference, recorded once by whoever needs it first
+    /// ([`Preparer::reference_now`] for who may not wait).
+    reference: Mutex<ReferenceSlot>,
+    /// Notified when a recording of the reference ends.
+    reference_ended: Condvar,
     surface_reference: Mutex<Option<Arc<SurfaceReference>>>,
+    /// A surface's all-points run recorded as a cloth reference.
+    surface_samples: Mutex<Option<Arc<Reference>>>,
     prepared: Mutex<HashMap<(Level, Method), Arc<Prepared>>>,
     /// One preparation at a time per level and method: a second request for
     /// the same waits for the first and then finds it prepared, while other
@@ -165,6 +171,26 @@ pub struct Preparer {
 /// Held while one level and method is prepared.
 type WorkLock = Arc<Mutex<()>>;
 
+/// Takes a finished (or abandoned) recording out of the reference's
+/// count and wakes whoever waits for it.
+struct CountedOut<'a>(&'a Preparer);
+
+impl Drop for CountedOut<'_> {
+    fn drop(&mut self) {
+        lock(&self.0.reference).recording -= 1;
+        self.0.reference_ended.notify_all();
+    }
+}
+
+/// The cloth reference and who is recording it.
+#[derive(Debug, Default)]
+struct ReferenceSlot {
+    recorded: Option<Arc<Reference>>,
+    /// Threads recording it now: one, or a client's copy beside a
+    /// background recording ([`Preparer::reference_now`]).
+    recording: usize,
+}
+
 impl Preparer {
     /// A preparer for `plan`'s levels, estimating as `estimation` says and
     /// through `cache` when there is one. Records nothing until asked.
@@ -177,8 +203,10 @@ impl Preparer {
             plan,
             estimation,
             estimator: Estimator { cache, tag },
-            reference: Mutex::new(None),
+            reference: Mutex::new(ReferenceSlot::default()),
+            reference_ended: Condvar::new(),
             surface_reference: Mutex::new(None),
+            surface_samples: Mutex::new(None),
             prepared: Mutex::new(HashMap::new()),
             work: Mutex::new(HashMap::new()),
             touched: Default::default(),
@@ -207,28 +235,83 @@ impl Preparer {
         out
     }
 
-    /// The cloth reference run, recorded on first use.
+    /// The cloth reference run, recorded on first use. A thread that finds
+    /// it being recorded waits for that recording.
     fn reference(&self, scene: &Scene) -> Result<Arc<Reference>, PrepareError> {
         let mut slot = lock(&self.reference);
-        if let Some(r) = slot.as_ref() {
-            return Ok(r.clone());
+        loop {
+            if let Some(r) = &slot.recorded {
+                return Ok(r.clone());
+            }
+            if slot.recording == 0 {
+                break;
+            }
+            slot = self.reference_ended.wait(slot).unwrap_or_else(|e| e.into_inner());
         }
+        slot.recording += 1;
+        drop(slot);
+        self.record(scene)
+    }
+
+    /// The cloth reference for work a client waits for: recorded on this
+    /// thread unless it is recorded already, and if another thread is
+    /// recording it, recorded again here rather than waited for. That
+    /// thread may be background work, which the daemon runs only on cycles
+    /// nothing else wants (`SCHED_IDLE`, a class an unprivileged thread
+    /// cannot be raised from), so waiting for it would put the client
+    /// behind everything (19.9 s for a first switch on a cold start of the
+    /// default config, 2 cores, where the reference alone takes 5 s). The
+    /// first copy to finish is kept; the other stops at its next 1 % of
+    /// the run. Nothing to do for a surface.
+    pub fn reference_now(&self) -> Result<(), PrepareError> {
+        let InstanceKind::Cloth(scene) = &self.plan.kind else {
+            return Ok(());
+        };
+        {
+            let mut slot = lock(&self.reference);
+            if slot.recorded.is_some() {
+                return Ok(());
+            }
+            slot.recording += 1;
+        }
+        self.record(&Self::cloth_scene(scene, &self.plan)).map(|_| ())
+    }
+
+    /// Record the reference (the caller has counted itself in
+    /// `recording`), stopping when another copy is kept first.
+    fn record(&self, scene: &Scene) -> Result<Arc<Reference>, PrepareError> {
+        // Counted out, and the waiters woken, however this ends (a panic
+        // too: they would otherwise wait for it forever). Dropped last,
+        // after the slot's guard.
+        let _counted = CountedOut(self);
         let name = self.plan.name.clone();
-        let (reference, _) = record_reference(scene, self.estimation.spec, &mut |line| {
-            tracing::info!(instance = %name, "{line}");
-        })
-        .map_err(|e| PrepareError::Reference {
-            scene: scene.name.clone(),
-            message: e.to_string(),
-        })?;
-        tracing::info!(
-            instance = %self.plan.name,
-            frames = reference.frames.len(),
-            o_max = reference.o_max,
-            "reference recorded"
+        let recorded = record_reference_while(
+            scene,
+            self.estimation.spec,
+            &mut |line| tracing::info!(instance = %name, "{line}"),
+            &|| lock(&self.reference).recorded.is_none(),
         );
-        *slot = Some(reference.clone());
-        Ok(reference)
+        let mut slot = lock(&self.reference);
+        match (recorded, slot.recorded.clone()) {
+            (_, Some(first)) => {
+                tracing::info!(instance = %self.plan.name, "reference recorded by another thread first; this copy stopped or dropped");
+                Ok(first)
+            }
+            (Ok((reference, _)), None) => {
+                tracing::info!(
+                    instance = %self.plan.name,
+                    frames = reference.frames.len(),
+                    o_max = reference.o_max,
+                    "reference recorded"
+                );
+                slot.recorded = Some(reference.clone());
+                Ok(reference)
+            }
+            (Err(e), None) => Err(PrepareError::Reference {
+                scene: scene.name.clone(),
+                message: e.to_string(),
+            }),
+        }
     }
 
     /// The cloth scene with the instance's integrator.
@@ -259,7 +342,7 @@ impl Preparer {
     /// `level` with `method` prepared only if no estimate has to be made: it
     /// is prepared already, or a cloth whose coefficients the on-disk cache
     /// holds (then the reference is recorded if need be, and the level
-    /// scored). `None` otherwise.
+    /// scored). `None` otherwise, and while another thread prepares it.
     pub fn prepare_if_cached(&self, level: Level, method: Method) -> Result<Option<Arc<Prepared>>, PrepareError> {
         self.prepare_with(level, method, true)
     }
@@ -275,7 +358,15 @@ impl Preparer {
             return Ok(Some(p));
         }
         let work = lock(&self.work).entry((level, method)).or_default().clone();
-        let _guard = lock(&work);
+        // Asked only for what is ready: an estimate another thread is
+        // making now is not (it may be the background's, run on cycles
+        // nothing else wants; a daemon's switch waited 67 s for one).
+        let _guard = match (cached_only, work.try_lock()) {
+            (_, Ok(guard)) => guard,
+            (_, Err(TryLockError::Poisoned(e))) => e.into_inner(),
+            (true, Err(TryLockError::WouldBlock)) => return Ok(None),
+            (false, Err(TryLockError::WouldBlock)) => lock(&work),
+        };
         if let Some(p) = self.get(level, method) {
             return Ok(Some(p));
         }
@@ -660,10 +751,9 @@ impl Preparer {
     }
 
     /// The all-points surface run recorded as a cloth reference: one
-    /// estimation sample (three consecutive steps) per frame interval. It
-    /// takes the cloth reference's slot: an instance is one or the other.
+    /// estimation sample (three consecutive steps) per frame interval.
     fn surface_samples(&self, scene: &SurfaceScene) -> Result<Arc<Reference>, PrepareError> {
-        once(&self.reference, || {
+        once(&self.surface_samples, || {
             let started = Instant::now();
             let model = self.all_points(scene)?;
             let per_frame = (scene.interval() / model.sim.params().dt).round() as u64;
