@@ -259,10 +259,11 @@ impl Preparer {
     /// thread may be background work, which the daemon runs only on cycles
     /// nothing else wants (`SCHED_IDLE`, a class an unprivileged thread
     /// cannot be raised from), so waiting for it would put the client
-    /// behind everything (19.9 s for a first switch on a cold start of the
-    /// default config, 2 cores, where the reference alone takes 5 s). The
-    /// first copy to finish is kept; the other stops at its next 1 % of
-    /// the run. Nothing to do for a surface.
+    /// behind everything: at a cold start the background records every
+    /// instance's reference in turn, and a first switch of the instance
+    /// whose turn it is waited for it. The first copy to finish is kept;
+    /// the other stops at its next 1 % of the run. Nothing to do for a
+    /// surface.
     pub fn reference_now(&self) -> Result<(), PrepareError> {
         let InstanceKind::Cloth(scene) = &self.plan.kind else {
             return Ok(());
