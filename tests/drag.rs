@@ -19,8 +19,9 @@ use lodcloth::service::config::ServiceConfig;
 use lodcloth::touch::{Input, Patch, Script};
 
 /// Paper scene 1 (top edge pinned, pulled down 1.0–2.5 s) with a 24×24
-/// reference over its first 3 s, as the daemon tests run it.
-fn preparer() -> Preparer {
+/// reference over its first 3 s, as the daemon tests run it (tests/prepare.rs
+/// too).
+pub(crate) fn preparer() -> Preparer {
     let scene = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/scenes/paper-1-top-edge.toml");
     let text = format!(
         r#"

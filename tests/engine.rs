@@ -37,13 +37,7 @@ fn a_split_cloth_in_the_engine_steps_exactly_as_on_one_thread() {
                 touch: None,
                 input_idle: 10.0,
             }],
-            EngineSettings {
-                threads,
-                max_substeps: 64,
-                max_lag: 0.25,
-                metrics_hz: 10.0,
-                replay_class: || {},
-            },
+            settings(threads),
         )
         .expect("engine");
         std::thread::sleep(Duration::from_millis(600));
@@ -91,13 +85,7 @@ fn an_engine_dropped_without_stop_stops_its_threads() {
             touch: None,
             input_idle: 10.0,
         }],
-        EngineSettings {
-            threads: 2,
-            max_substeps: 64,
-            max_lag: 0.25,
-            metrics_hz: 10.0,
-            replay_class: || {},
-        },
+        settings(2),
     )
     .expect("engine");
     let handle = engine.handles()[0].clone();
@@ -180,17 +168,22 @@ fn instances_are_spread_by_their_measured_step_cost() {
             setup("skirt", skirt, Level::Vertices(nodes as usize)),
             setup("small", small, Level::new(16, 16)),
         ],
-        EngineSettings {
-            threads: 2,
-            max_substeps: 64,
-            max_lag: 0.25,
-            metrics_hz: 10.0,
-            replay_class: || {},
-        },
+        settings(2),
     )
     .expect("engine");
     let thread: Vec<_> = engine.handles().iter().map(|h| h.stepping_thread()).collect();
     engine.stop();
     assert_ne!(thread[1], thread[0], "the mesh shares a thread with the 64x64 grid");
     assert_ne!(thread[1], thread[2], "the mesh shares a thread with the small grid");
+}
+
+/// The daemon's default pacing on `threads` stepping threads.
+fn settings(threads: usize) -> EngineSettings {
+    EngineSettings {
+        threads,
+        max_substeps: 64,
+        max_lag: 0.25,
+        metrics_hz: 10.0,
+        replay_class: || {},
+    }
 }

@@ -3,39 +3,16 @@
 //! nothing else wants, and an unprivileged thread cannot be raised out of
 //! that class; so whatever a client needs that a background thread is
 //! making must not be waited for. Here the cloth reference
-//! ([`Preparer::reference_now`]).
+//! (`Preparer::reference_now`).
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{mpsc, Arc};
 use std::time::{Duration, Instant};
 
 use lodcloth::estimate::Method;
-use lodcloth::plan::{Level, Preparer};
-use lodcloth::service::config::ServiceConfig;
+use lodcloth::plan::Level;
 
-/// Paper scene 1 with a 24×24 reference over 3 s (as tests/drag.rs).
-fn preparer() -> Preparer {
-    let scene = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/scenes/paper-1-top-edge.toml");
-    let text = format!(
-        r#"
-[estimation]
-reference_steps = 15000
-metric_stride = 25
-estimate_stride = 25
-precompute = false
-[[instances]]
-name = "prepare"
-scene = "{}"
-reference = "24x24"
-levels = ["8x8", "12x12"]
-start = "8x8"
-method = "same"
-"#,
-        scene.display()
-    );
-    let config = ServiceConfig::from_toml(&text, "prepare test").expect("valid config");
-    Preparer::new(Arc::new(config.instances[0].clone()), config.estimation, None)
-}
+use crate::drag::preparer;
 
 /// A background thread (`SCHED_IDLE`) starts recording the reference while
 /// every core is busy at normal priority (as the daemon's cores are with
