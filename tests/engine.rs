@@ -129,14 +129,20 @@ fn instances_are_spread_by_their_measured_step_cost() {
         scene.build_at(n, n).expect("builds")
     };
     let (big, small) = (grid(64, 7.5e-5), grid(16, 1e-3));
-    // Seconds of a core per simulated second, timed here.
+    // Seconds of a core per simulated second, timed here: the fastest of
+    // five runs of 10 steps (other tests run beside this one).
     let per_second = |sim: &lodcloth::sim::Simulation| {
         let mut sim = sim.clone();
-        let t = std::time::Instant::now();
-        for _ in 0..50 {
-            sim.step();
-        }
-        t.elapsed().as_secs_f64() / 50.0 / sim.params().dt
+        let fastest = (0..5)
+            .map(|_| {
+                let t = std::time::Instant::now();
+                for _ in 0..10 {
+                    sim.step();
+                }
+                t.elapsed().as_secs_f64() / 10.0
+            })
+            .fold(f64::INFINITY, f64::min);
+        fastest / sim.params().dt
     };
     let (c_skirt, c_big) = (per_second(&skirt), per_second(&big));
     eprintln!("cores per simulated second: mesh {c_skirt:.2}, 64x64 grid {c_big:.2}");
