@@ -238,19 +238,7 @@ impl Preparer {
     /// The cloth reference run, recorded on first use. A thread that finds
     /// it being recorded waits for that recording.
     fn reference(&self, scene: &Scene) -> Result<Arc<Reference>, PrepareError> {
-        let mut slot = lock(&self.reference);
-        loop {
-            if let Some(r) = &slot.recorded {
-                return Ok(r.clone());
-            }
-            if slot.recording == 0 {
-                break;
-            }
-            slot = self.reference_ended.wait(slot).unwrap_or_else(|e| e.into_inner());
-        }
-        slot.recording += 1;
-        drop(slot);
-        self.record(scene)
+        self.reference_or_record(scene, true)
     }
 
     /// The cloth reference for work a client waits for: recorded on this
@@ -265,17 +253,30 @@ impl Preparer {
     /// the other stops at its next 1 % of the run. Nothing to do for a
     /// surface.
     pub fn reference_now(&self) -> Result<(), PrepareError> {
-        let InstanceKind::Cloth(scene) = &self.plan.kind else {
-            return Ok(());
-        };
-        {
-            let mut slot = lock(&self.reference);
-            if slot.recorded.is_some() {
-                return Ok(());
-            }
-            slot.recording += 1;
+        match &self.plan.kind {
+            InstanceKind::Cloth(scene) => self
+                .reference_or_record(&Self::cloth_scene(scene, &self.plan), false)
+                .map(|_| ()),
+            InstanceKind::Surface(_) => Ok(()),
         }
-        self.record(&Self::cloth_scene(scene, &self.plan)).map(|_| ())
+    }
+
+    /// The recorded reference, else recorded here; a recording in progress
+    /// is waited for when `wait`, else recorded again beside it.
+    fn reference_or_record(&self, scene: &Scene, wait: bool) -> Result<Arc<Reference>, PrepareError> {
+        let mut slot = lock(&self.reference);
+        loop {
+            if let Some(r) = &slot.recorded {
+                return Ok(r.clone());
+            }
+            if !wait || slot.recording == 0 {
+                break;
+            }
+            slot = self.reference_ended.wait(slot).unwrap_or_else(|e| e.into_inner());
+        }
+        slot.recording += 1;
+        drop(slot);
+        self.record(scene)
     }
 
     /// Record the reference (the caller has counted itself in
