@@ -17,12 +17,15 @@
 //! `coldstart_rtf.svg` (each instance's real-time factor).
 //!
 //! `cargo bench --bench coldstart -- [--minutes 15] [--switch-after 5]
-//! [--switch paper-3=40x40] [--at-once] [--background idle|nice] [--log FILE]`
+//! [--switch paper-3=40x40] [--at-once] [--background idle|nice] [--log FILE]
+//! [--binary PATH] [--switch-budget SECONDS]`
 //! (`--log`: keep the daemon's log there, else it goes with its temporary
 //! directory)
 //! (`--at-once`: the switch goes live with the scene's coefficients and its
 //! estimate follows in place; `--background` replaces the config's
-//! `[engine] background`, to compare the classes).
+//! `[engine] background`, to compare the classes; `--binary`: serve with
+//! another build of `lodcloth`, the config's keys it knows the same;
+//! `--switch-budget`: set the config's `[estimation] switch_budget`).
 
 #[path = "../tests/daemon/mod.rs"]
 mod daemon;
@@ -130,19 +133,31 @@ async fn main() {
         "{CONFIG} no longer sets background = \"idle\""
     );
     let config_path = dir.path().join("default.toml");
-    std::fs::write(
-        &config_path,
-        text.replace("background = \"idle\"", &format!("background = \"{background}\"")),
-    )
-    .expect("config");
+    let mut text = text.replace("background = \"idle\"", &format!("background = \"{background}\""));
+    if let Some(budget) = arg("--switch-budget") {
+        assert!(
+            text.contains("switch_budget = 5.0"),
+            "{CONFIG} no longer sets switch_budget = 5.0"
+        );
+        text = text.replace("switch_budget = 5.0", &format!("switch_budget = {budget}"));
+    }
+    // An older binary knows no switch budget: without the key it serves as it did.
+    if arg("--switch-budget").as_deref() == Some("none") {
+        text = text.replace("switch_budget = none", "");
+    }
+    std::fs::write(&config_path, text).expect("config");
     let port = daemon::free_port();
     let http: SocketAddr = format!("127.0.0.1:{}", daemon::free_port()).parse().expect("addr");
-    // The binary cargo built beside this benchmark.
-    let lodcloth = std::path::Path::new(env!("CARGO_BIN_EXE_lodcloth"));
+    // The binary cargo built beside this benchmark, or another one
+    // (`--binary`: an A/B of two commits on the same config and machine).
+    let lodcloth = arg("--binary").map_or_else(
+        || std::path::PathBuf::from(env!("CARGO_BIN_EXE_lodcloth")),
+        std::path::PathBuf::from,
+    );
     let log_path = arg("--log").map_or_else(|| dir.path().join("serve.log"), std::path::PathBuf::from);
     let log = std::fs::File::create(&log_path).expect("log");
     let _daemon = Daemon(
-        std::process::Command::new(lodcloth)
+        std::process::Command::new(&lodcloth)
             .arg("serve")
             .arg("--config")
             .arg(&config_path)
@@ -161,11 +176,12 @@ async fn main() {
     );
     let started = Instant::now();
     println!(
-        "cold start of {CONFIG} ({} instances, {total_levels} levels, background {background}) on {} ({} cores), lodcloth {}",
+        "cold start of {CONFIG} ({} instances, {total_levels} levels, background {background}) on {} ({} cores), bench of lodcloth {}, serving {}",
         names.len(),
         cpu_model(),
         std::thread::available_parallelism().map_or(0, |n| n.get()),
-        lodcloth::VERSION
+        lodcloth::VERSION,
+        lodcloth.display()
     );
 
     // Every instance's states, counted per instance.
@@ -195,6 +211,10 @@ async fn main() {
     let mut samples: Vec<Sample> = Vec::new();
     let mut switch_task = None;
     let mut switch_answer: Option<(f64, String)> = None;
+    // After a `refining` answer: the coefficient version live (read once a
+    // second, so what follows is timed to the second).
+    let mut refining: Option<u32> = None;
+    let mut followed: Vec<(f64, String)> = Vec::new();
     let mut all_prepared_at = None;
     let mut last_counts: BTreeMap<String, u64> = BTreeMap::new();
     let mut next = Instant::now() + Duration::from_secs(1);
@@ -269,10 +289,7 @@ async fn main() {
             switch_task = Some(tokio::spawn(async move {
                 let sent = Instant::now();
                 let reply = c.switch(&instance, &request, Duration::from_secs(600)).await;
-                (
-                    sent.elapsed().as_secs_f64(),
-                    reply.map_or_else(|e| format!("refused: {e}"), |r| format!("{r:?}")),
-                )
+                (sent.elapsed().as_secs_f64(), reply)
             }));
         }
         if let Some(task) = switch_task
@@ -280,8 +297,27 @@ async fn main() {
             .filter(|t| t.is_finished() && switch_answer.is_none())
         {
             let (secs, reply) = task.await.expect("switch task");
-            println!("switch of {switch_instance} to {switch_level} answered in {secs:.2} s: {reply}");
-            switch_answer = Some((secs, reply));
+            let text = reply
+                .as_ref()
+                .map_or_else(|e| format!("refused: {e}"), |r| format!("{r:?}"));
+            println!("switch of {switch_instance} to {switch_level} answered in {secs:.2} s: {text}");
+            // A provisional answer: watch for what follows it in place.
+            refining = reply.ok().filter(|r| r.refining).map(|r| r.coefficient_version);
+            switch_answer = Some((secs, text));
+        }
+        // Each same-level switch that follows (until the run ends).
+        if let Some(version) = refining {
+            if let Ok(info) = client.info(switch_instance).await {
+                if info.coefficient_version > version {
+                    let since = t - switch_after;
+                    println!(
+                        "{switch_instance}: {} live in place {since:.1} s after the switch was sent (version {})",
+                        info.method, info.coefficient_version
+                    );
+                    followed.push((since, info.method));
+                    refining = Some(info.coefficient_version);
+                }
+            }
         }
         if (all_prepared_at.is_some() && switch_answer.is_some()) || t > minutes * 60.0 {
             break;
@@ -319,6 +355,9 @@ async fn main() {
     if let Some((secs, _)) = &switch_answer {
         let how = if at_once { ", at once" } else { "" };
         println!("first switch to an unprepared level ({switch_instance} → {switch_level}, sent at {switch_after} s{how}) answered in {secs:.2} s");
+        for (since, method) in &followed {
+            println!("  then {method} live in place within {since:.0} s of the request");
+        }
     }
 
     let out_dir = format!("out/coldstart-{background}");

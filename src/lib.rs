@@ -34,7 +34,7 @@
 //! flow through these layers.
 
 pub use lodcloth_core::{
-    atomic, cache, estimate, hash, level, lod, mesh, names, plan, points, problems, scene, sim, touch,
+    atomic, cache, estimate, hash, level, lod, mesh, names, plan, points, problems, scene, sim, touch, turns,
 };
 
 /// `<package version> (<git revision>)`, e.g. `0.1.0 (d7aae52e1f3a)`: what

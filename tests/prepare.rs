@@ -5,12 +5,13 @@
 //! making must not be waited for. Here the cloth reference
 //! (`Preparer::reference_now`).
 
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::{mpsc, Arc};
 use std::time::{Duration, Instant};
 
 use lodcloth::estimate::Method;
 use lodcloth::plan::Level;
+use lodcloth::turns::{Courtesy, Turns};
 
 use crate::drag::preparer;
 
@@ -94,4 +95,78 @@ fn a_client_records_the_reference_instead_of_waiting_for_a_starved_background_re
 /// The reference of a fresh preparer, recorded on this thread.
 fn preparer_alone_reference() {
     preparer().reference_now().expect("records");
+}
+
+/// Held at its checkpoints while `hold` is set; a wait inside `waiting`
+/// clears it (what the daemon does for a client that waits for held work).
+#[derive(Default)]
+struct Gate {
+    hold: AtomicBool,
+    checkpoints: AtomicUsize,
+    held: AtomicUsize,
+    waits: AtomicUsize,
+}
+
+impl Courtesy for Gate {
+    fn checkpoint(&self) {
+        self.checkpoints.fetch_add(1, Ordering::Relaxed);
+        if self.hold.load(Ordering::Acquire) {
+            self.held.fetch_add(1, Ordering::Relaxed);
+        }
+        while self.hold.load(Ordering::Acquire) {
+            std::thread::sleep(Duration::from_millis(1));
+        }
+    }
+
+    fn waiting(&self, wait: &mut dyn FnMut()) {
+        self.waits.fetch_add(1, Ordering::Relaxed);
+        self.hold.store(false, Ordering::Release);
+        wait();
+    }
+}
+
+/// Issue 21: a preparer gives way where the daemon may hold background work
+/// for a client's: every 1 % of its reference recording and every metric
+/// frame of a level's runs. A second preparation of the same level waits
+/// for the first inside `waiting`, so work held at a checkpoint while it
+/// holds the level's lock is let go on, and neither waits for the other.
+/// With the wait for the level's lock outside `waiting` both wait forever
+/// (the first held, the second for its lock): the timeout below fails.
+#[test]
+fn a_preparer_gives_way_at_its_checkpoints_and_lets_held_work_go_on_when_it_waits_for_it() {
+    let gate = Arc::new(Gate::default());
+    gate.hold.store(true, Ordering::Release);
+    let preparer = Arc::new(preparer().with_turns(Turns::new(gate.clone())));
+    let level = Level::new(8, 8);
+    let first = {
+        let preparer = preparer.clone();
+        std::thread::spawn(move || preparer.prepare(level, Method::Same))
+    };
+    // The first is held at its first checkpoint, the level's lock held.
+    let deadline = Instant::now() + Duration::from_secs(30);
+    while gate.held.load(Ordering::Relaxed) == 0 {
+        assert!(Instant::now() < deadline, "the first preparation reached no checkpoint");
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    assert!(preparer.get(level, Method::Same).is_none());
+    let (tx, rx) = mpsc::channel();
+    let second = {
+        let preparer = preparer.clone();
+        std::thread::spawn(move || {
+            let r = preparer.prepare(level, Method::Same);
+            let _ = tx.send(());
+            r
+        })
+    };
+    let answered = rx.recv_timeout(Duration::from_secs(60));
+    gate.hold.store(false, Ordering::Release);
+    answered.expect("the second preparation waited for the held first one for 60 s");
+    let a = first.join().expect("first").expect("prepared");
+    let b = second.join().expect("second").expect("prepared");
+    assert!(Arc::ptr_eq(&a, &b), "the second found the first's level");
+    assert_eq!(gate.waits.load(Ordering::Relaxed), 1);
+    // 1 % ticks of the reference (100) and a frame of every scored run.
+    let frames = 15000 / 25;
+    let checkpoints = gate.checkpoints.load(Ordering::Relaxed);
+    assert!(checkpoints >= 100 + frames, "{checkpoints} checkpoints");
 }

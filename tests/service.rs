@@ -241,12 +241,10 @@ async fn a_fit_that_predicts_no_less_than_the_live_quick_best_is_not_applied() {
     assert!(!applied);
 }
 
-/// A daemon (with `estimation`'s extra lines) asked for 12×12 with `fit`:
-/// checks the provisional level against the truth and what follows it;
-/// returns whether the fit went live in place. The instance's own method
-/// is `fit` (so its levels' `ready` tells when a fit is prepared), and
-/// nothing is prepared beforehand but its start level.
-async fn first_switch_to_an_unfitted_level(estimation: &str, ask_again: bool) -> bool {
+/// The daemon config of [`first_switch_to_an_unfitted_level`]: instance
+/// "first" runs `fit`, nothing is prepared at start but its start level,
+/// and `estimation`'s lines are added to `[estimation]`.
+fn unfitted_daemon_config(estimation: &str) -> (u16, tempfile::TempDir, String) {
     let port = daemon::free_port();
     let dir = tempfile::tempdir().expect("temp dir");
     let text = daemon::config_text(port, &dir.path().join("cache"), ("first", "first-fixed"))
@@ -255,8 +253,22 @@ async fn first_switch_to_an_unfitted_level(estimation: &str, ask_again: bool) ->
             &format!("[estimation]\nprecompute = false\n{estimation}"),
         )
         .replacen("method = \"same\"", "method = \"fit\"", 1);
-    // The truth, in this process, without a cache.
-    let config = ServiceConfig::from_toml(&text, "test").expect("valid config");
+    (port, dir, text)
+}
+
+/// What instance "first" of `text` prepares at `level`, made in this
+/// process without a cache: the truth a daemon's switch is checked against.
+struct Truth {
+    /// The quick methods' best and its predicted error.
+    best_method: String,
+    best_error: f64,
+    fit: Arc<lodcloth::plan::Prepared>,
+    /// The fit alone, in seconds.
+    fit_seconds: f64,
+}
+
+fn truth_at(text: &str, level: Level) -> Truth {
+    let config = ServiceConfig::from_toml(text, "test").expect("valid config");
     let plan = config
         .instances
         .iter()
@@ -264,7 +276,6 @@ async fn first_switch_to_an_unfitted_level(estimation: &str, ask_again: bool) ->
         .expect("instance")
         .clone();
     let truth = Preparer::new(Arc::new(plan), config.estimation, None);
-    let level = Level::new(12, 12);
     let quick: Vec<(String, f64)> = truth
         .quick_methods()
         .iter()
@@ -283,6 +294,87 @@ async fn first_switch_to_an_unfitted_level(estimation: &str, ask_again: bool) ->
         "quick methods {quick:?}: best {best_method}; fit {:.5}",
         fit.predicted_error
     );
+    Truth {
+        best_method,
+        best_error,
+        fit,
+        fit_seconds,
+    }
+}
+
+/// Issue 21: an ordinary switch waits for its estimate no longer than the
+/// daemon's `switch_budget`. Past it (here 0: nothing is prepared, so the
+/// level's reference alone is past it) the level goes live with the
+/// scene's own coefficients, as at once; what the switch waited for (the
+/// quick methods' best, checked against the truth) follows in place, and
+/// then the fit, which predicts less on this scene.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_switch_past_its_budget_goes_live_at_once_and_what_it_waited_for_follows_in_place() {
+    let _serial = daemon::serial().await;
+    let (port, dir, text) = unfitted_daemon_config("switch_budget = 0.0\n");
+    let level = Level::new(12, 12);
+    let truth = truth_at(&text, level);
+    assert!(
+        truth.fit.predicted_error < truth.best_error,
+        "on this scene the fit predicts less"
+    );
+    let d = Daemon::run(port, &text, dir);
+    let c = client(&[d.endpoint()]).await;
+    wait_info(&c, "first").await;
+    let request = v1::SwitchRequest {
+        target: Some(v1::switch_request::Target::Level(level.to_wire())),
+        method: "fit".into(),
+        at_once: false,
+    };
+    let reply = within(60, "switch", c.switch("first", &request, Duration::from_secs(60)))
+        .await
+        .expect("switch accepted");
+    assert_eq!(Level::from_wire(reply.level.as_ref().unwrap()), Ok(level));
+    assert!(reply.refining && !reply.cached);
+    assert_eq!(reply.method, "same", "live with the scene's own coefficients first");
+    assert_eq!(reply.predicted_error, None, "no prediction before the estimate");
+    // Then the quick best, then the fit, each one coefficient version on.
+    let mut seen = Vec::new();
+    within(120, "the quick best and the fit in place", async {
+        loop {
+            let info = c.info("first").await.expect("info");
+            let entry = (info.coefficient_version, info.method.clone(), info.o_max > 0.0);
+            if seen.last() != Some(&entry) {
+                seen.push(entry);
+            }
+            if info.coefficient_version >= reply.coefficient_version + 2 {
+                return;
+            }
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+    })
+    .await;
+    eprintln!("versions seen after the switch: {seen:?}");
+    let version = |v: u32| seen.iter().find(|e| e.0 == v).cloned();
+    let quick = version(reply.coefficient_version + 1).expect("the quick best went live (or was skipped)");
+    assert_eq!(quick.1, truth.best_method, "the quick methods' best follows first");
+    assert!(quick.2, "with its prepared normaliser");
+    let fit = version(reply.coefficient_version + 2).expect("the fit went live");
+    assert_eq!(fit.1, "fit");
+    let info = c.info("first").await.expect("info");
+    assert_eq!(Level::from_wire(info.level.as_ref().unwrap()), Ok(level));
+    d.shutdown().await.expect("clean exit");
+}
+
+/// A daemon (with `estimation`'s extra lines) asked for 12×12 with `fit`:
+/// checks the provisional level against the truth and what follows it;
+/// returns whether the fit went live in place. The instance's own method
+/// is `fit` (so its levels' `ready` tells when a fit is prepared), and
+/// nothing is prepared beforehand but its start level.
+async fn first_switch_to_an_unfitted_level(estimation: &str, ask_again: bool) -> bool {
+    let (port, dir, text) = unfitted_daemon_config(estimation);
+    let level = Level::new(12, 12);
+    let Truth {
+        best_method,
+        best_error,
+        fit,
+        fit_seconds,
+    } = truth_at(&text, level);
 
     let d = Daemon::run(port, &text, dir);
     let c = client(&[d.endpoint()]).await;
@@ -596,6 +688,7 @@ max_substeps = 0
 [estimation]
 reference_steps = 1000
 estimate_stride = 2000
+switch_budget = -1.0
 [[instances]]
 name = "instances"
 scene = "no/such/scene.toml"
@@ -615,6 +708,7 @@ spring_precision = "f16"
         "zenoh.listen[0]: 'carrier-pigeon'",
         "engine.max_substeps",
         "estimation.estimate_stride: 2000 is longer than estimation.reference_steps (1000)",
+        "estimation.switch_budget: must be in [0, 3600] seconds, got -1",
         "instances[0].name: must be 1–64 letters, digits, '-' or '_' and not one of [\"instances\", \"alive\"], got 'instances'",
         "instances[0].scene:",
         "instances[0].levels[0]: 1x1",

@@ -263,6 +263,13 @@ pub struct RawEstimation {
     /// true).
     #[serde(default = "yes")]
     pub predict_under_input: bool,
+    /// Longest a client's switch waits for its level's estimate, in seconds
+    /// (default 5): past it, the switch goes live with the scene's own
+    /// coefficients and says `refining`, and the estimate it waited for
+    /// follows in place when ready. 0 answers every unprepared switch at
+    /// once, as `at_once` does.
+    #[serde(default = "default_switch_budget")]
+    pub switch_budget: f64,
 }
 
 impl Default for RawEstimation {
@@ -275,6 +282,7 @@ impl Default for RawEstimation {
             fit_iterations: default_fit_iterations(),
             precompute: true,
             predict_under_input: true,
+            switch_budget: default_switch_budget(),
         }
     }
 }
@@ -293,6 +301,12 @@ fn default_fit_frames() -> usize {
 }
 fn default_fit_iterations() -> u32 {
     6
+}
+/// Under issue 21's 10 s for a first switch with the at-once fallback's
+/// build on top; on a Zen 4 the quick best alone took 6.5–9.5 s at a cold
+/// start, on a Zen 3 18–54 s (docs/results.md, cold start).
+fn default_switch_budget() -> f64 {
+    5.0
 }
 fn yes() -> bool {
     true
@@ -365,6 +379,8 @@ pub struct ServiceConfig {
     pub http: Option<std::net::SocketAddr>,
     /// The scheduling class asked for background work.
     pub background: super::Background,
+    /// `[estimation] switch_budget`: longest a switch waits for an estimate.
+    pub switch_budget: std::time::Duration,
 }
 
 /// `[zenoh]`, validated: made only by [`ServiceConfig::validate`] and
@@ -541,6 +557,7 @@ impl ServiceConfig {
             }),
             http,
             background: parse_background(&e.background).unwrap_or(super::Background::Idle),
+            switch_budget: std::time::Duration::from_secs_f64(s.switch_budget),
             zenoh: ZenohSettings(raw.zenoh),
             engine: EngineSettings {
                 threads,
@@ -667,6 +684,7 @@ fn check_estimation(p: &mut Problems, s: &RawEstimation) {
         ));
     }
     p.at_least("estimation.fit_frames", s.fit_frames, 2);
+    p.in_closed("estimation.switch_budget", s.switch_budget, 0.0, 3_600.0, "seconds");
 }
 
 /// `[engine] background`.

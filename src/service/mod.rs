@@ -27,6 +27,7 @@ mod publish;
 mod startup;
 mod telemetry;
 mod touched;
+mod turns;
 
 pub mod client;
 pub mod config;
@@ -171,6 +172,8 @@ struct Context {
     metrics_hz: f64,
     /// Inputs' rate limit and idle time.
     input: config::InputSettings,
+    /// Longest a switch waits for its level's estimate.
+    switch_budget: std::time::Duration,
 }
 
 /// Open the zenoh session from `config` and serve until `shutdown` completes.
@@ -208,6 +211,7 @@ pub async fn serve(
         closing: closing.clone(),
         metrics_hz: config.engine.metrics_hz,
         input: config.input,
+        switch_budget: config.switch_budget,
     });
     let mut tasks = tokio::task::JoinSet::new();
     if let Some(listener) = listener {
@@ -329,6 +333,7 @@ static BACKGROUND: AtomicU8 = AtomicU8::new(Background::Idle as u8);
 /// the start-up's preparation. Where
 /// background work is `nice` (10), the client's is too.
 pub fn client_priority() {
+    turns::mark_client();
     let nice = if BACKGROUND.load(Ordering::Relaxed) == Background::Idle as u8 {
         19
     } else {
@@ -353,6 +358,7 @@ pub(crate) static CLIENT_POOL: std::sync::OnceLock<rayon::ThreadPool> = std::syn
 /// "Real time during a cold start"): nice 10 alone let preparation take
 /// real time from the instances.
 pub fn lower_priority() -> Background {
+    turns::mark_background();
     #[cfg(target_os = "linux")]
     if BACKGROUND.load(Ordering::Relaxed) == Background::Idle as u8 {
         let param = libc::sched_param { sched_priority: 0 };

@@ -8,7 +8,7 @@ use std::time::Duration;
 use tokio::sync::oneshot;
 
 use super::persist::resume;
-use super::{client_priority, lower_priority, Context, Instance, CLIENT_POOL};
+use super::{client_priority, lower_priority, turns, Context, Instance, CLIENT_POOL};
 use crate::engine::{Command, InstanceHandle, Snapshot, SwitchOutcome};
 use crate::estimate::Method;
 use crate::plan::{InstanceKind, Level, PrepareError, Prepared, Preparer};
@@ -98,6 +98,9 @@ async fn on_thread(
         .name("lodcloth-prepare".into())
         .spawn(move || {
             let run = || {
+                // Background work holds while this runs (`turns`); counted
+                // on the thread that runs it, after its turn in the pool.
+                let _claim = (waiting == Waiting::Client).then(turns::client_work);
                 // A client does not wait for a reference the background
                 // is recording (`Preparer::reference_now`).
                 if waiting == Waiting::Client {
@@ -173,13 +176,29 @@ pub(super) async fn estimate_in_place(
     version: u32,
     live_error: Option<f64>,
 ) {
-    let name = &inst.handle.name;
     let prepared = prepare(Waiting::Background, inst.preparer.clone(), level, method).await;
+    apply_in_place(inst, level, method, version, live_error, prepared).await;
+}
+
+/// Put `prepared` (`level` with `method`, or what a client's preparation
+/// of it went live with) live in place, on the terms of
+/// [`estimate_in_place`]: only if the instance still runs `level` at
+/// coefficient `version` and, given `live_error`, only if it predicts less.
+/// Returns the coefficient version it went live at.
+pub(super) async fn apply_in_place(
+    inst: &Instance,
+    level: Level,
+    method: Method,
+    version: u32,
+    live_error: Option<f64>,
+    prepared: Result<Ready, PrepareError>,
+) -> Option<u32> {
+    let name = &inst.handle.name;
     let _guard = inst.switching.lock().await;
     let status = inst.handle.status();
     if status.level != level || status.coefficient_version != version {
         tracing::info!(instance = %name, %level, %method, "estimate prepared; the instance has switched since, not applied");
-        return;
+        return None;
     }
     if let (Ok(ready), Some(live)) = (&prepared, live_error) {
         if !(ready.prepared.predicted_error < live) {
@@ -191,7 +210,7 @@ pub(super) async fn estimate_in_place(
                 live_error = live,
                 "estimate prepared; it predicts no less than the live coefficients, not applied"
             );
-            return;
+            return None;
         }
     }
     match prepared {
@@ -200,18 +219,25 @@ pub(super) async fn estimate_in_place(
                 tracing::info!(
                     instance = %name,
                     %level,
-                    %method,
+                    method = %o.method,
                     predicted_error = o.predicted_error,
                     coefficient_version = o.coefficient_version,
                     "estimated coefficients live"
                 );
-                if let Some(p) = inst.preparer.get(level, method) {
+                if let Some(p) = inst.preparer.get(level, o.method) {
                     inst.predict_under_input(&p);
                 }
+                Some(o.coefficient_version)
             }
-            Err(e) => tracing::error!(instance = %name, %level, "applying the estimate: {e}"),
+            Err(e) => {
+                tracing::error!(instance = %name, %level, "applying the estimate: {e}");
+                None
+            }
         },
-        Err(e) => tracing::error!(instance = %name, %level, %method, "preparing the estimate: {e}"),
+        Err(e) => {
+            tracing::error!(instance = %name, %level, %method, "preparing the estimate: {e}");
+            None
+        }
     }
 }
 

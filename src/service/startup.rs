@@ -77,7 +77,9 @@ pub(super) fn start_engine(config: &ServiceConfig) -> Result<Started, ServiceErr
         if let Some(saved) = config.snapshots.as_ref().and_then(|s| resumable(s, ic)) {
             resumes.insert(ic.name.clone(), saved);
         }
-        let preparer = Arc::new(Preparer::new(Arc::new(ic.clone()), config.estimation, cache.clone()));
+        let preparer = Arc::new(
+            Preparer::new(Arc::new(ic.clone()), config.estimation, cache.clone()).with_turns(super::turns::turns()),
+        );
         let start = preparer.quick_start().map_err(|source| ServiceError::Prepare {
             instance: ic.name.clone(),
             source,

@@ -261,6 +261,13 @@ impl Collector for DaemonCollector {
             prometheus_client::metrics::MetricType::Gauge,
         )?;
         ConstGauge::new(start).encode(m)?;
+        let m = enc.encode_descriptor(
+            "lodcloth_client_preparations_running",
+            "Preparations a client waits for, running now: background preparation holds while any runs",
+            None,
+            prometheus_client::metrics::MetricType::Gauge,
+        )?;
+        ConstGauge::new(i64::try_from(super::turns::client_work_running()).unwrap_or(i64::MAX)).encode(m)?;
 
         // Refusals by code (every code, zero included, so rates start at 0).
         let mut m = enc.encode_descriptor(

@@ -40,6 +40,8 @@
 //!   engine and the experiments both plan levels through it.
 //! - [`drape`] — the shadow area and drape coefficient of a cloth over a
 //!   support, a physical measure to compare levels by.
+//! - [`turns`] — where long work (recordings, estimates) may give way to
+//!   other work; the caller decides whether it does.
 //! - [`hash`] — FNV-1a, the one hash of file names, checksums and digests.
 //! - [`atomic`] — the one atomic file replacement (cache entries, snapshots).
 //! - [`names`] — the one parser of integrator, method and mass names.
@@ -63,3 +65,4 @@ pub mod problems;
 pub mod scene;
 pub mod sim;
 pub mod touch;
+pub mod turns;

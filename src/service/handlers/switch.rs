@@ -15,7 +15,9 @@ use crate::estimate::Method;
 use crate::plan::{Level, PrepareError, Prepared};
 use crate::proto::v1::error::Code;
 use crate::proto::{self, schema, v1, WireLevel};
-use crate::service::prepare::{estimate_in_place, prepare, prepare_first, switch_at_once, switch_to, Ready, Waiting};
+use crate::service::prepare::{
+    apply_in_place, estimate_in_place, prepare, prepare_first, switch_at_once, switch_to, Ready, Waiting,
+};
 use crate::service::request::{self, SwitchTarget};
 use crate::service::{client_priority, keys, Context, Instance, MAX_PENDING_SWITCHES};
 
@@ -95,8 +97,43 @@ pub(in crate::service) async fn answer_switch(ctx: Arc<Context>, q: Query) {
         }
     }
     // A level whose estimate is slow to make (`fit`) goes live with the
-    // quick methods' best, the estimate following in place if better.
-    let (ready, provisional) = match prepare_first(inst.preparer.clone(), level, method).await {
+    // quick methods' best, the estimate following in place if better. That
+    // is waited for `switch_budget` at most: past it (a reference still to
+    // record on a busy machine) the level goes live with the scene's own
+    // coefficients, and what the switch waited for follows in place.
+    // A level prepared already is only built, and always waited for.
+    let mut first = tokio::spawn(prepare_first(inst.preparer.clone(), level, method));
+    let waited = match was_ready {
+        true => Ok((&mut first).await),
+        false => tokio::time::timeout(ctx.switch_budget, &mut first).await,
+    };
+    let first = match waited {
+        Ok(joined) => joined,
+        Err(_) => {
+            tracing::info!(
+                instance = %config.name,
+                %level,
+                %method,
+                budget_s = ctx.switch_budget.as_secs_f64(),
+                "the estimate is not ready within the switch budget; live with the scene's coefficients first"
+            );
+            return match switch_at_once(&inst.handle, inst.preparer.clone(), level).await {
+                Ok(o) => {
+                    tokio::spawn(follow(
+                        ctx.clone(),
+                        config.name.clone(),
+                        level,
+                        method,
+                        o.coefficient_version,
+                        first,
+                    ));
+                    reply_switched(&ctx, &q, inst, &o, arrived, false, true).await
+                }
+                Err(e) => reply_error(&ctx, &q, prepare_code(&e), e.to_string()).await,
+            };
+        }
+    };
+    let (ready, provisional) = match first.map_err(|e| joined_error(level, method, &e)).and_then(|r| r) {
         Ok(p) => p,
         Err(e) => return reply_error(&ctx, &q, prepare_code(&e), e.to_string()).await,
     };
@@ -183,6 +220,47 @@ async fn refine(ctx: Arc<Context>, name: String, level: Level, method: Method, v
     }
 }
 
+/// After a switch that went live past its budget with the scene's own
+/// coefficients (at `version`): what it waited for (`first`, the
+/// preparation [`prepare_first`] started) goes live in place, then, if
+/// that was provisional, the requested method's estimate as [`refine`]
+/// does. Nothing goes live once the instance is switched again.
+async fn follow(
+    ctx: Arc<Context>,
+    name: String,
+    level: Level,
+    method: Method,
+    version: u32,
+    first: tokio::task::JoinHandle<Result<(Ready, bool), PrepareError>>,
+) {
+    let Some(inst) = ctx.instances.get(&name) else {
+        return;
+    };
+    let (ready, provisional) = match first.await.map_err(|e| joined_error(level, method, &e)).and_then(|r| r) {
+        Ok(p) => p,
+        Err(e) => {
+            tracing::error!(instance = %name, %level, %method, "preparing the level a switch went live at: {e}");
+            return;
+        }
+    };
+    let live_error = ready.prepared.predicted_error;
+    // The live coefficients have no prediction: whatever was prepared is
+    // better known than they are.
+    let applied = apply_in_place(inst, level, method, version, None, Ok(ready)).await;
+    if let (Some(version), true) = (applied, provisional) {
+        estimate_in_place(inst, level, method, version, Some(live_error)).await;
+    }
+}
+
+/// A preparation's task that panicked or was cancelled, as its error.
+fn joined_error(level: Level, method: Method, e: &tokio::task::JoinError) -> PrepareError {
+    PrepareError::Failed {
+        level,
+        method,
+        message: format!("the preparation stopped: {e}"),
+    }
+}
+
 /// A client's input acts on the instance now (its latest metrics say so).
 fn touched(inst: &Instance) -> bool {
     inst.handle.metrics.borrow().as_ref().is_some_and(|m| m.touched)
@@ -241,6 +319,7 @@ async fn predict_under_input(inst: &Instance, prepared: Arc<Prepared>) -> Result
         .name("lodcloth-prepare".into())
         .spawn(move || {
             client_priority();
+            let _claim = crate::service::turns::client_work();
             let _ = tx.send(preparer.predict_touched(&prepared, &|| false));
         })
         .map_err(|e| format!("cannot start a thread: {e}"))?;

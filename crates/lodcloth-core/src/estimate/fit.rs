@@ -288,6 +288,7 @@ impl Objective<'_> {
         let mut next = 0;
         let last = *self.frames.last()?;
         for f in 0..=last {
+            self.problem.turns().checkpoint();
             for _ in 0..self.problem.steps_per_frame {
                 sim.step();
             }

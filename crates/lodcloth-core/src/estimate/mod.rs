@@ -45,6 +45,7 @@ use crate::scene::{MassConvention, Scene, SceneError};
 use crate::sim::{
     Integrator, Loads, Material, SimError, SimParams, Simulation, SpringPrecision, StabilityCheck, State, Topology,
 };
+use crate::turns::Turns;
 
 /// Progress of a long estimation stage.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -210,6 +211,8 @@ pub struct LodProblem {
     same: Material,
     /// Coarse steps per reference metric frame.
     steps_per_frame: u64,
+    /// Given way at every metric frame of every run ([`LodProblem::with_turns`]).
+    turns: Turns,
 }
 
 /// Coarse steps of `dt` per metric frame of `reference`, when `dt` divides it.
@@ -283,6 +286,7 @@ impl LodProblem {
             loads,
             same,
             steps_per_frame,
+            turns: Turns::none(),
         })
     }
 
@@ -295,6 +299,17 @@ impl LodProblem {
             steps_per_frame,
             ..self.clone()
         })
+    }
+
+    /// The same level whose runs (scores, a fit's residuals, runs under
+    /// input) give way at every metric frame as `turns` says.
+    pub fn with_turns(self, turns: Turns) -> LodProblem {
+        LodProblem { turns, ..self }
+    }
+
+    /// Where this level's runs give way ([`LodProblem::with_turns`]).
+    pub fn turns(&self) -> &Turns {
+        &self.turns
     }
 
     /// The coarse cloth.
@@ -380,6 +395,7 @@ impl LodProblem {
         let mut mapped = vec![0.0; 3 * n];
         let total = frames.end as u64;
         for f in 0..frames.end {
+            self.turns.checkpoint();
             for _ in 0..self.steps_per_frame {
                 sim.step();
             }
@@ -485,6 +501,7 @@ impl LodProblem {
                 start
             };
             for f in first..end {
+                self.turns.checkpoint();
                 for _ in 0..self.steps_per_frame {
                     sim.step();
                 }

@@ -21,6 +21,7 @@ use crate::points::model::PointModel;
 use crate::points::scene::SurfaceScene;
 use crate::scene::{MassConvention, Scene};
 use crate::sim::{Material, SimError, Simulation, StabilityCheck, State};
+use crate::turns::Turns;
 
 use crate::points::cloud::CloudMap;
 
@@ -166,6 +167,9 @@ pub struct Preparer {
     /// The standard drags' references and each level's prediction under
     /// them ([`Preparer::predict_touched`]).
     pub(super) touched: super::touched::TouchedCache,
+    /// Where its recordings and every prepared level's runs give way
+    /// ([`Preparer::with_turns`]).
+    turns: Turns,
 }
 
 /// Held while one level and method is prepared.
@@ -210,7 +214,16 @@ impl Preparer {
             prepared: Mutex::new(HashMap::new()),
             work: Mutex::new(HashMap::new()),
             touched: Default::default(),
+            turns: Turns::none(),
         }
+    }
+
+    /// The same preparer, its reference recording and every level's runs
+    /// giving way as `turns` says, and its waits for other threads' work
+    /// (a level another thread prepares, a reference it records) made
+    /// inside [`Turns::waiting`].
+    pub fn with_turns(self, turns: Turns) -> Preparer {
+        Preparer { turns, ..self }
     }
 
     /// The instance this preparer prepares levels of.
@@ -272,7 +285,9 @@ impl Preparer {
             if !wait || slot.recording == 0 {
                 break;
             }
-            slot = self.reference_ended.wait(slot).unwrap_or_else(|e| e.into_inner());
+            slot = self
+                .turns
+                .waiting(|| self.reference_ended.wait(slot).unwrap_or_else(|e| e.into_inner()));
         }
         slot.recording += 1;
         drop(slot);
@@ -291,7 +306,10 @@ impl Preparer {
             scene,
             self.estimation.spec,
             &mut |line| tracing::info!(instance = %name, "{line}"),
-            &|| lock(&self.reference).recorded.is_none(),
+            &|| {
+                self.turns.checkpoint();
+                lock(&self.reference).recorded.is_none()
+            },
         );
         let mut slot = lock(&self.reference);
         match (recorded, slot.recorded.clone()) {
@@ -367,7 +385,7 @@ impl Preparer {
             (_, Ok(guard)) => guard,
             (_, Err(TryLockError::Poisoned(e))) => e.into_inner(),
             (true, Err(TryLockError::WouldBlock)) => return Ok(None),
-            (false, Err(TryLockError::WouldBlock)) => lock(&work),
+            (false, Err(TryLockError::WouldBlock)) => self.turns.waiting(|| lock(&work)),
         };
         if let Some(p) = self.get(level, method) {
             return Ok(Some(p));
@@ -468,7 +486,8 @@ impl Preparer {
                 LodProblem::at(scene, reference.clone(), level, mass, integrator, dt).map_err(|e| failed(e.into()))?
             }
             None => default_problem(scene, &reference, level).map_err(failed)?,
-        };
+        }
+        .with_turns(self.turns.clone());
         let dt = problem.dt;
         let frames = problem.frames();
         let fit = FitOptions {
