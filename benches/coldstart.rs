@@ -18,14 +18,15 @@
 //!
 //! `cargo bench --bench coldstart -- [--minutes 15] [--switch-after 5]
 //! [--switch paper-3=40x40] [--at-once] [--background idle|nice] [--log FILE]
-//! [--binary PATH] [--switch-budget SECONDS]`
+//! [--binary PATH] [--switch-budget SECONDS] [--load BUSY/PERIOD,…]`
 //! (`--log`: keep the daemon's log there, else it goes with its temporary
 //! directory)
 //! (`--at-once`: the switch goes live with the scene's coefficients and its
 //! estimate follows in place; `--background` replaces the config's
 //! `[engine] background`, to compare the classes; `--binary`: serve with
 //! another build of `lodcloth`, the config's keys it knows the same;
-//! `--switch-budget`: set the config's `[estimation] switch_budget`).
+//! `--switch-budget`: set the config's `[estimation] switch_budget`;
+//! `--load`: one busy thread per BUSY/PERIOD (ms), for the whole run).
 
 #[path = "../tests/daemon/mod.rs"]
 mod daemon;
@@ -110,6 +111,34 @@ fn cpu_model() -> String {
         .unwrap_or_else(|| "unknown CPU".into())
 }
 
+/// Threads busy-waiting `busy` ms of every `period` ms (`"1.0/2,0.8/2"`)
+/// until the returned flag is set.
+fn emulated_load(spec: &str) -> Arc<std::sync::atomic::AtomicBool> {
+    let stop = Arc::new(std::sync::atomic::AtomicBool::new(false));
+    for part in spec.split(',') {
+        let (busy, period) = part.split_once('/').expect("--load BUSY/PERIOD in ms");
+        let busy = Duration::from_secs_f64(busy.parse::<f64>().expect("busy ms") / 1e3);
+        let period = Duration::from_secs_f64(period.parse::<f64>().expect("period ms") / 1e3);
+        assert!(busy <= period, "--load: busy longer than its period");
+        let stop = stop.clone();
+        std::thread::spawn(move || {
+            let mut next = Instant::now();
+            while !stop.load(std::sync::atomic::Ordering::Relaxed) {
+                let start = next;
+                while start.elapsed() < busy {
+                    std::hint::spin_loop();
+                }
+                next += period;
+                match next.checked_duration_since(Instant::now()) {
+                    Some(rest) => std::thread::sleep(rest),
+                    None => next = Instant::now(),
+                }
+            }
+        });
+    }
+    stop
+}
+
 #[tokio::main(flavor = "multi_thread", worker_threads = 1)]
 async fn main() {
     let minutes: f64 = arg("--minutes").and_then(|v| v.parse().ok()).unwrap_or(15.0);
@@ -174,6 +203,11 @@ async fn main() {
             .spawn()
             .unwrap_or_else(|e| panic!("{}: {e} (cargo build --release first)", lodcloth.display())),
     );
+    // `--load 1.0/2,0.8/2`: busy threads beside the daemon, each busy so
+    // many ms of every period (ms), unpinned at nice 0: a machine whose
+    // stepping leaves less free (a Zen 3's cores were 0.85 and 0.55 busy
+    // with this config, a Zen 5's 0.36 and 0.14).
+    let load = arg("--load").map(|spec| emulated_load(&spec));
     let started = Instant::now();
     println!(
         "cold start of {CONFIG} ({} instances, {total_levels} levels, background {background}) on {} ({} cores), bench of lodcloth {}, serving {}",
@@ -184,6 +218,9 @@ async fn main() {
         lodcloth.display()
     );
 
+    if let Some(spec) = arg("--load") {
+        println!("beside it, busy threads (ms busy/period): {spec}");
+    }
     // Every instance's states, counted per instance.
     let options = ClientOptions::new(&[format!("tcp/127.0.0.1:{port}")]);
     let session = loop {
@@ -324,6 +361,9 @@ async fn main() {
         }
     }
 
+    if let Some(stop) = &load {
+        stop.store(true, std::sync::atomic::Ordering::Relaxed);
+    }
     // Summary.
     let first = &samples[0];
     let last = samples.last().expect("a sample");

@@ -16,10 +16,11 @@ use crate::plan::{Level, PrepareError, Prepared};
 use crate::proto::v1::error::Code;
 use crate::proto::{self, schema, v1, WireLevel};
 use crate::service::prepare::{
-    apply_in_place, estimate_in_place, prepare, prepare_first, switch_at_once, switch_to, Ready, Waiting,
+    apply_in_place, estimate_in_place, on_client_thread, prepare, prepare_first, switch_at_once, switch_to, Ready,
+    Waiting,
 };
 use crate::service::request::{self, SwitchTarget};
-use crate::service::{client_priority, keys, Context, Instance, MAX_PENDING_SWITCHES};
+use crate::service::{keys, Context, Instance, MAX_PENDING_SWITCHES};
 
 /// Holds one of an instance's bounded switch slots (see
 /// [`MAX_PENDING_SWITCHES`]); frees it when dropped.
@@ -314,19 +315,10 @@ async fn cheapest_meeting(inst: &Instance, method: Method, bound: f64, under_inp
 /// the class of work a client waits for.
 async fn predict_under_input(inst: &Instance, prepared: Arc<Prepared>) -> Result<f64, String> {
     let preparer = inst.preparer.clone();
-    let (tx, rx) = tokio::sync::oneshot::channel();
-    std::thread::Builder::new()
-        .name("lodcloth-prepare".into())
-        .spawn(move || {
-            client_priority();
-            let _claim = crate::service::turns::client_work();
-            let _ = tx.send(preparer.predict_touched(&prepared, &|| false));
-        })
-        .map_err(|e| format!("cannot start a thread: {e}"))?;
-    match rx.await {
+    match on_client_thread(move || preparer.predict_touched(&prepared, &|| false)).await {
         Ok(Ok(Some(t))) => Ok(t.error),
         Ok(Ok(None)) => Err("a surface takes no input".into()),
         Ok(Err(e)) => Err(e.to_string()),
-        Err(_) => Err("the prediction's thread stopped".into()),
+        Err(e) => Err(format!("the prediction: {e}")),
     }
 }
