@@ -18,7 +18,7 @@ use lodcloth::lod::Correlation;
 use lodcloth::plan::{Level, Preparer};
 use lodcloth::proto::{unpack_positions, v1, WireLevel};
 use lodcloth::scene::Scene;
-use lodcloth::service::client::ClientError;
+use lodcloth::service::client::{Client, ClientError};
 use lodcloth::service::config::ServiceConfig;
 use lodcloth::service::keys;
 use lodcloth::sim::{SpringPrecision, Topology};
@@ -302,6 +302,30 @@ fn truth_at(text: &str, level: Level) -> Truth {
     }
 }
 
+/// Serve `text` and switch its instance "first" to `level` with `fit` (an
+/// ordinary switch): the daemon, its client, the request and the reply,
+/// which is at `level`.
+async fn switch_first_to_fit(
+    port: u16,
+    text: &str,
+    dir: tempfile::TempDir,
+    level: Level,
+) -> (Daemon, Client, v1::SwitchRequest, v1::SwitchReply) {
+    let d = Daemon::run(port, text, dir);
+    let c = client(&[d.endpoint()]).await;
+    wait_info(&c, "first").await;
+    let request = v1::SwitchRequest {
+        target: Some(v1::switch_request::Target::Level(level.to_wire())),
+        method: "fit".into(),
+        at_once: false,
+    };
+    let reply = within(60, "switch", c.switch("first", &request, Duration::from_secs(60)))
+        .await
+        .expect("switch accepted");
+    assert_eq!(Level::from_wire(reply.level.as_ref().unwrap()), Ok(level));
+    (d, c, request, reply)
+}
+
 /// Issue 21: an ordinary switch waits for its estimate no longer than the
 /// daemon's `switch_budget`. Past it (here 0: nothing is prepared, so the
 /// level's reference alone is past it) the level goes live with the
@@ -318,18 +342,7 @@ async fn a_switch_past_its_budget_goes_live_at_once_and_what_it_waited_for_follo
         truth.fit.predicted_error < truth.best_error,
         "on this scene the fit predicts less"
     );
-    let d = Daemon::run(port, &text, dir);
-    let c = client(&[d.endpoint()]).await;
-    wait_info(&c, "first").await;
-    let request = v1::SwitchRequest {
-        target: Some(v1::switch_request::Target::Level(level.to_wire())),
-        method: "fit".into(),
-        at_once: false,
-    };
-    let reply = within(60, "switch", c.switch("first", &request, Duration::from_secs(60)))
-        .await
-        .expect("switch accepted");
-    assert_eq!(Level::from_wire(reply.level.as_ref().unwrap()), Ok(level));
+    let (d, c, _, reply) = switch_first_to_fit(port, &text, dir, level).await;
     assert!(reply.refining && !reply.cached);
     assert_eq!(reply.method, "same", "live with the scene's own coefficients first");
     assert_eq!(reply.predicted_error, None, "no prediction before the estimate");
@@ -376,18 +389,7 @@ async fn first_switch_to_an_unfitted_level(estimation: &str, ask_again: bool) ->
         fit_seconds,
     } = truth_at(&text, level);
 
-    let d = Daemon::run(port, &text, dir);
-    let c = client(&[d.endpoint()]).await;
-    wait_info(&c, "first").await;
-    let request = v1::SwitchRequest {
-        target: Some(v1::switch_request::Target::Level(level.to_wire())),
-        method: "fit".into(),
-        at_once: false,
-    };
-    let reply = within(60, "switch", c.switch("first", &request, Duration::from_secs(60)))
-        .await
-        .expect("switch accepted");
-    assert_eq!(Level::from_wire(reply.level.as_ref().unwrap()), Ok(level));
+    let (d, c, request, reply) = switch_first_to_fit(port, &text, dir, level).await;
     assert!(reply.refining, "the fit is still to come");
     assert!(!reply.cached);
     assert_eq!(reply.method, best_method, "the quick methods' best goes live");
