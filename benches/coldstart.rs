@@ -25,7 +25,8 @@
 //! estimate follows in place; `--background` replaces the config's
 //! `[engine] background`, to compare the classes; `--binary`: serve with
 //! another build of `lodcloth`, the config's keys it knows the same;
-//! `--switch-budget`: set the config's `[estimation] switch_budget`;
+//! `--switch-budget`: set the config's `[estimation] switch_budget`, or
+//! `none` to leave it out;
 //! `--load`: one busy thread per BUSY/PERIOD (ms), for the whole run).
 
 #[path = "../tests/daemon/mod.rs"]
@@ -168,11 +169,12 @@ async fn main() {
             text.contains("switch_budget = 5.0"),
             "{CONFIG} no longer sets switch_budget = 5.0"
         );
-        text = text.replace("switch_budget = 5.0", &format!("switch_budget = {budget}"));
-    }
-    // An older binary knows no switch budget: without the key it serves as it did.
-    if arg("--switch-budget").as_deref() == Some("none") {
-        text = text.replace("switch_budget = none", "");
+        // `none`: the key left out, for an older binary that knows none.
+        let line = match budget.as_str() {
+            "none" => String::new(),
+            b => format!("switch_budget = {b}"),
+        };
+        text = text.replace("switch_budget = 5.0", &line);
     }
     std::fs::write(&config_path, text).expect("config");
     let port = daemon::free_port();

@@ -473,7 +473,7 @@ impl LodProblem {
         let mut mapped = vec![0.0; 3 * n];
         let mut hand = Hand::new(&touched.probe.script, &self.scene);
         for (f, frame) in touched.frames.iter().enumerate() {
-            self.turns().checkpoint();
+            self.turns.checkpoint();
             for _ in 0..self.steps_per_frame {
                 hand.apply_due(&touched.probe.name, &mut sim)?;
                 sim.step();
