@@ -237,10 +237,15 @@ pub enum Experiment {
         /// Euler: of 4× the symplectic limit).
         #[arg(long, value_delimiter = ',', default_values_t = vec![0.25, 0.5, 0.8])]
         dt_fractions: Vec<f64>,
-        /// Implicit Euler's own dt fractions (of 4× the symplectic limit; may
-        /// exceed 1, up to the metric frame interval); default: --dt-fractions.
+        /// Implicit Euler's and XPBD's own dt fractions (of 4× the
+        /// symplectic limit; may exceed 1, up to the metric frame interval);
+        /// default: --dt-fractions.
         #[arg(long, value_delimiter = ',')]
         implicit_fractions: Vec<f64>,
+        /// Integrators compared.
+        #[arg(long, value_delimiter = ',', value_parser = crate::integrator_arg,
+              default_values_t = vec![Integrator::SymplecticEuler, Integrator::Rk4, Integrator::ImplicitEuler, Integrator::Xpbd])]
+        integrators: Vec<Integrator>,
     },
     /// The coarsest level whose fitted model stays within --max-error on
     /// held-out frames.
@@ -349,6 +354,7 @@ pub fn run(experiment: Experiment) -> Result<()> {
             methods,
             dt_fractions,
             implicit_fractions,
+            integrators,
         } => {
             common.apply_quick();
             let levels = if !levels.is_empty() {
@@ -363,7 +369,14 @@ pub fn run(experiment: Experiment) -> Result<()> {
             } else {
                 &implicit_fractions
             };
-            pareto_cmd(&common, &levels, &parse_methods(&methods)?, &dt_fractions, implicit)
+            pareto_cmd(
+                &common,
+                &levels,
+                &parse_methods(&methods)?,
+                &integrators,
+                &dt_fractions,
+                implicit,
+            )
         }
         Experiment::LodPlan {
             mut common,
@@ -894,6 +907,7 @@ fn pareto_cmd(
     common: &Common,
     levels: &[GridLevel],
     methods: &[Method],
+    integrators: &[Integrator],
     fractions: &[f64],
     implicit_fractions: &[f64],
 ) -> Result<()> {
@@ -902,13 +916,12 @@ fn pareto_cmd(
     let scene = common.scenes()?.into_iter().next().context("no scene")?;
     let (reference, _) = reference_for(&scene, spec)?;
     let frames = reference.frames.len();
-    let integrators = [Integrator::SymplecticEuler, Integrator::Rk4, Integrator::ImplicitEuler];
     let points = pareto(
         &scene,
         &reference,
         levels,
         methods,
-        &integrators,
+        integrators,
         fractions,
         implicit_fractions,
         &common.fit(frames)?,

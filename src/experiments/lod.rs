@@ -394,9 +394,9 @@ pub fn pareto(
         for &method in methods {
             let material = estimator.estimate(&base, method, fit)?.material;
             for &integrator in integrators {
-                // Implicit Euler is stable at any dt: its fractions are of
-                // 4× the symplectic limit, and may exceed 1.
-                let (probe_integrator, scale, fractions) = if integrator == Integrator::ImplicitEuler {
+                // Implicit Euler and XPBD are stable at any dt: their
+                // fractions are of 4× the symplectic limit, and may exceed 1.
+                let (probe_integrator, scale, fractions) = if integrator.unconditionally_stable() {
                     (Integrator::SymplecticEuler, 4.0, implicit_fractions)
                 } else {
                     (integrator, 1.0, dt_fractions)

@@ -148,7 +148,7 @@ pub fn stability_sweep(cfg: &StabilitySweep, progress: &mut dyn FnMut(usize, usi
                 };
                 let unstable = |dt: f64| is_unstable(&mut build(dt), cfg.steps);
                 let (mut lo, mut hi) = (reference / 64.0, 4.0 * reference);
-                if integrator == Integrator::ImplicitEuler {
+                if integrator.unconditionally_stable() {
                     hi = 100.0 * reference;
                 }
                 // (largest dt seen stable, smallest seen unstable)

@@ -126,6 +126,17 @@ fn implicit_euler_error_falls_2x_when_dt_halves() {
     }
 }
 
+/// XPBD with one sweep per step solves backward Euler only in part, but
+/// what it leaves shrinks with the step: it must still converge at first
+/// order to the same trajectory.
+#[test]
+fn xpbd_error_falls_2x_when_dt_halves() {
+    let (_, ratios) = errors(Integrator::Xpbd, 2f64.powi(-12));
+    for r in ratios {
+        assert!((1.7..2.3).contains(&r), "XPBD ratio {r}, expected ~2");
+    }
+}
+
 /// A spring whose top end is driven sinusoidally (a moving pin) and whose
 /// free end also feels a sinusoidal load: RK4 must keep its order with
 /// time-dependent constraints and loads (its stages sit at t, t + dt/2, t + dt).

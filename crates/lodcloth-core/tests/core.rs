@@ -29,3 +29,4 @@ mod strain_control;
 mod symmetry_determinism;
 mod touch;
 mod two_threads;
+mod xpbd;

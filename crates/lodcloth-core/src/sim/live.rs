@@ -81,7 +81,7 @@ impl Simulation {
         }
         let dt = m.params.dt;
         let limit = match m.params.integrator {
-            Integrator::ImplicitEuler => dt_limit(Integrator::SymplecticEuler, dk.sqrt(), dc),
+            Integrator::ImplicitEuler | Integrator::Xpbd => dt_limit(Integrator::SymplecticEuler, dk.sqrt(), dc),
             integrator => {
                 let mut modal = self.modal;
                 modal.omega_max = (modal.omega_max.powi(2) + dk).sqrt();

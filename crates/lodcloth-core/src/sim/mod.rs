@@ -22,6 +22,7 @@ mod state;
 mod strain;
 mod topology;
 pub mod vec3;
+mod xpbd;
 
 use std::sync::Arc;
 
@@ -48,6 +49,7 @@ use implicit::{ImplicitInputs, ImplicitWorkspace};
 use paged::Paged;
 use simd::Isa;
 use strain::StrainWorkspace;
+use xpbd::{SweepInputs, XpbdWorkspace};
 
 /// Why a simulation could not be built or changed. Every variant names what
 /// was wrong.
@@ -182,6 +184,8 @@ struct Workspace {
     near: Vec<u8>,
     /// Springs in f32 ([`SpringPrecision::F32`]); None in f64.
     mixed: Option<Box<Mixed>>,
+    /// XPBD's sweep order and buffers (XPBD only).
+    xpbd: Option<Box<XpbdWorkspace>>,
 }
 
 /// The f32 side of a step with [`SpringPrecision::F32`]: positions and
@@ -256,6 +260,7 @@ impl Workspace {
                 vec![0; topology.n_nodes]
             },
             mixed: None,
+            xpbd: (params.integrator == Integrator::Xpbd).then(|| Box::new(XpbdWorkspace::new(topology))),
         }
     }
 }
@@ -283,6 +288,25 @@ impl Model {
         self.params
             .stiffness_adjustment
             .map_or(f64::INFINITY, |a| 1.0 + a.allowed)
+    }
+
+    /// Every force but the springs' and the bending stencils' at (t, pos,
+    /// vel) into `out`: loads, wind, grabs, gravity and drag; zero on pinned
+    /// nodes.
+    fn external_forces(&self, t: f64, pos: &[f64], vel: &[f64], out: &mut [f64], normals: &mut Vec<f64>) {
+        let n = self.topology.n_nodes;
+        out.fill(0.0);
+        self.loads.add_forces(&self.topology, t, pos, vel, out, normals);
+        for grab in &self.grabs {
+            grab.add_force(pos, vel, out);
+        }
+        let (g, drag) = (self.params.gravity, self.params.drag);
+        for c in 0..3 {
+            for k in 0..n {
+                let i = c * n + k;
+                out[i] = self.free[k] * (out[i] + self.masses[k] * (g[c] - drag * vel[i]));
+            }
+        }
     }
 
     /// Accelerations at (t, pos, vel) into `acc`; returns the spring by-products.
@@ -776,24 +800,12 @@ impl Simulation {
     /// # Panics
     /// When a slice is not 3n long.
     pub fn external_forces(&mut self, t: f64, pos: &[f64], vel: &[f64], out: &mut [f64]) {
-        let m = &self.model;
-        let n = m.topology.n_nodes;
+        let n = self.model.topology.n_nodes;
         assert!(
             pos.len() == 3 * n && vel.len() == 3 * n && out.len() == 3 * n,
             "field sizes"
         );
-        out.fill(0.0);
-        m.loads.add_forces(&m.topology, t, pos, vel, out, &mut self.ws.normals);
-        for grab in &m.grabs {
-            grab.add_force(pos, vel, out);
-        }
-        let (g, drag) = (m.params.gravity, m.params.drag);
-        for c in 0..3 {
-            for k in 0..n {
-                let i = c * n + k;
-                out[i] = m.free[k] * (out[i] + m.masses[k] * (g[c] - drag * vel[i]));
-            }
-        }
+        self.model.external_forces(t, pos, vel, out, &mut self.ws.normals);
     }
 
     /// Advance by one `dt`. Never fails and never allocates. After a
@@ -830,7 +842,11 @@ impl Simulation {
         if let Some(last) = self.last.filter(|r| !r.finite) {
             return last;
         }
-        self.ensure_cache(par);
+        let xpbd = self.model.params.integrator == Integrator::Xpbd;
+        // XPBD needs no acceleration: its constraints replace the springs' forces.
+        if !xpbd {
+            self.ensure_cache(par);
+        }
         let dt = self.model.params.dt;
         let t0 = self.state.time;
         let mut solver = (0, 0.0);
@@ -885,11 +901,31 @@ impl Simulation {
                 let out = implicit::step(&inputs, &mut self.state.pos, &mut self.state.vel, &self.acc, ws);
                 solver = (out.iterations, out.relative_residual);
             }
+            Integrator::Xpbd => {
+                let ws = self.ws.xpbd.as_deref_mut().expect("XPBD workspace exists for XPBD");
+                let s = &mut self.state;
+                self.model
+                    .external_forces(t0, &s.pos, &s.vel, &mut ws.ext, &mut self.ws.normals);
+                xpbd::predict(&self.model.inv_mass, dt, &mut s.pos, &mut s.vel, ws);
+            }
         }
         self.state.step += 1;
         // Time from the step count, not by accumulation: no drift over long runs.
         self.state.time = self.epoch.0 + (self.state.step - self.epoch.1) as f64 * dt;
         self.apply_pins();
+        if xpbd {
+            // The constraints see the pins where they are at the step's end.
+            let m = &self.model;
+            let inputs = SweepInputs {
+                topology: &m.topology,
+                material: &m.params.material,
+                adjust_ratio: m.adjust_ratio(),
+                inv_mass: &m.inv_mass,
+                dt,
+            };
+            let ws = self.ws.xpbd.as_deref_mut().expect("XPBD workspace exists for XPBD");
+            self.totals = xpbd::sweep(&inputs, &mut self.state.pos, &mut self.state.vel, ws);
+        }
 
         // Strain limiting runs before the force evaluation, not after it: its
         // first full pass finds the over-long springs itself (and returns at
@@ -913,7 +949,9 @@ impl Simulation {
         // Contact last, so no state a reader sees has a node inside a body.
         let contacts = self.resolve_contact(t0);
         self.cached = false;
-        self.ensure_cache(par);
+        if !xpbd {
+            self.ensure_cache(par);
+        }
 
         let mut report = self.measure(solver, strain_iterations, par);
         report.contacts = contacts;

@@ -308,7 +308,9 @@ pub fn amplification(integrator: Integrator, omega: f64, c: f64, h: f64) -> f64 
             p = add_id_scaled(mul(a, p), 1.0);
             p
         }
-        Integrator::ImplicitEuler => {
+        // XPBD is backward Euler in the positions: one spring alone is
+        // solved exactly by its one correction.
+        Integrator::ImplicitEuler | Integrator::Xpbd => {
             // (I − hA)^{-1} with A = [[0, 1], [−ω², −c]].
             let (a, b, cc, d) = (1.0, -h, h * w2, 1.0 + h * c);
             let det = a * d - b * cc;
@@ -341,7 +343,7 @@ fn spectral_radius(m: [[f64; 2]; 2]) -> f64 {
 pub fn dt_limit(integrator: Integrator, omega: f64, damping_rate: f64) -> f64 {
     // The mode's fastest rate sets the scale of h.
     let scale = omega.max(0.0).max(damping_rate.max(0.0));
-    if integrator == Integrator::ImplicitEuler || scale <= 0.0 {
+    if integrator.unconditionally_stable() || scale <= 0.0 {
         return f64::INFINITY;
     }
     let omega = omega.max(0.0);
