@@ -47,11 +47,17 @@ pub(crate) struct XpbdWorkspace {
     batches: Vec<Batch>,
     /// Springs without a stencil (meshes), greedy-coloured, in sweep order.
     loose: Loose,
-    /// Where each group's springs start in `stretch` and `strain`.
+    /// Per group: its slots when it is swept masked.
+    slots: Vec<Option<Slots>>,
+    /// Where each group starts in `stretch` and `strain`: a spring (or a
+    /// masked group's slot) per entry.
     group_base: Vec<usize>,
-    /// Per spring (groups concatenated): `L − L0` and `L/L0 − 1`, read before its correction.
+    /// `L − L0` and `L/L0 − 1` of each spring, read before its correction
+    /// (a masked group's slots that are no spring keep 0 and −∞).
     stretch: Vec<f64>,
     strain: Vec<f64>,
+    /// A masked batch's corrections of a (`[..3]`) and b (`[3..]`), per slot.
+    corr: [Vec<f64>; 6],
     /// Positions at the start of the step.
     pub prev: Vec<f64>,
     /// External forces at the start of the step.
@@ -67,7 +73,7 @@ struct Batch {
     shape: Shape,
     /// Node `a` of the first spring.
     a0: u32,
-    /// Springs (`Contiguous`) or chunks of `2o` nodes (`Chunks`).
+    /// Springs (`Contiguous`) or slots (`Masked`).
     count: u32,
     /// The first spring's index in its group's arrays.
     first: u32,
@@ -77,9 +83,11 @@ struct Batch {
 enum Shape {
     /// Springs `a0 + i → a0 + i + o`, `i < count ≤ o`.
     Contiguous,
-    /// Chunks of `2o` nodes from `a0`, each holding the `o` springs `r → r + o`
-    /// (`o` = 1 or 2).
-    Chunks,
+    /// Every slot `a0 + k → a0 + k + o`, `k < count`, of a group along the
+    /// rows (`o` ≤ 2), computed at once and kept where the slot is a spring
+    /// of the batch's colour (`first` is the colour): one vector loop that
+    /// reads, one that adds the corrections, at twice the arithmetic.
+    Masked,
 }
 
 /// Springs without a stencil, colour by colour.
@@ -99,24 +107,36 @@ struct Loose {
 impl XpbdWorkspace {
     pub(crate) fn new(topology: &Topology) -> XpbdWorkspace {
         let n = topology.n_nodes;
-        let mut group_base = Vec::with_capacity(topology.groups.len());
-        let mut total = 0;
-        for g in &topology.groups {
-            group_base.push(total);
-            total += g.len();
-        }
         let mut batches = Vec::new();
+        let mut slots = Vec::new();
+        let mut group_base = Vec::with_capacity(topology.groups.len());
+        let (mut total, mut widest) = (0, 0);
         for (gi, g) in topology.groups.iter().enumerate() {
+            let start = batches.len();
             if let Some(o) = g.stencil_offset {
                 plan_group(gi as u32, o as usize, &g.runs, &mut batches);
             }
+            let masked = batches[start..].iter().find(|b| b.shape == Shape::Masked).copied();
+            let o = g.stencil_offset.unwrap_or(0) as usize;
+            slots.push(masked.map(|b| Slots::new(o, g, b.a0 as usize, b.count as usize)));
+            group_base.push(total);
+            let entries = masked.map_or(g.len(), |b| b.count as usize);
+            total += entries;
+            if masked.is_some() {
+                widest = widest.max(entries);
+            }
         }
+        // Every spring's entries are written by every sweep; a masked
+        // group's other slots keep these (no energy, no strain).
+        let strain = vec![f64::NEG_INFINITY; total];
         XpbdWorkspace {
             batches,
             loose: colour_loose(topology, &group_base),
+            slots,
             group_base,
             stretch: vec![0.0; total],
-            strain: vec![0.0; total],
+            strain,
+            corr: std::array::from_fn(|_| vec![0.0; widest]),
             prev: vec![0.0; 3 * n],
             ext: vec![0.0; 3 * n],
             disp: vec![0.0; 3 * n],
@@ -125,49 +145,68 @@ impl XpbdWorkspace {
 }
 
 /// The batches of one grid group `a → a + o`: colour 0 (`⌊a/o⌋` even), then
-/// colour 1, each run's blocks of that colour in order.
+/// colour 1. A group along the rows (`o` ≤ 2) is one masked batch per
+/// colour over all its slots; any other, each run's blocks of that colour.
 fn plan_group(group: u32, o: usize, runs: &[super::topology::Run], out: &mut Vec<Batch>) {
+    let (Some(head), Some(tail)) = (runs.first(), runs.last()) else {
+        return;
+    };
     for colour in 0..2 {
+        if o <= 2 {
+            out.push(Batch {
+                group,
+                shape: Shape::Masked,
+                a0: head.start,
+                count: tail.start + tail.len - head.start,
+                first: colour,
+            });
+            continue;
+        }
         for run in runs {
             let (start, end) = (run.start as usize, (run.start + run.len) as usize);
             if start == end {
                 continue;
             }
-            let first_of = |a: usize| (run.first as usize + a - start) as u32;
             for m in start / o..=(end - 1) / o {
-                if m % 2 != colour {
+                if m % 2 != colour as usize {
                     continue;
                 }
                 let (s0, s1) = ((m * o).max(start), ((m + 1) * o).min(end));
-                // A whole block whose chunk (the block and the next, its b
-                // side) lies inside the run: a chunk, appended to the last
-                // batch when that ended where this one starts.
-                let chunked = o <= 2 && s0 == m * o && s1 == (m + 1) * o && m * o + 2 * o <= end;
-                if chunked {
-                    if let Some(last) = out.last_mut().filter(|b| {
-                        b.group == group && b.shape == Shape::Chunks && (b.a0 as usize) + 2 * o * b.count as usize == s0
-                    }) {
-                        last.count += 1;
-                        continue;
-                    }
-                    out.push(Batch {
-                        group,
-                        shape: Shape::Chunks,
-                        a0: s0 as u32,
-                        count: 1,
-                        first: first_of(s0),
-                    });
-                } else {
-                    out.push(Batch {
-                        group,
-                        shape: Shape::Contiguous,
-                        a0: s0 as u32,
-                        count: (s1 - s0) as u32,
-                        first: first_of(s0),
-                    });
-                }
+                out.push(Batch {
+                    group,
+                    shape: Shape::Contiguous,
+                    a0: s0 as u32,
+                    count: (s1 - s0) as u32,
+                    first: (run.first as usize + s0 - start) as u32,
+                });
             }
         }
+    }
+}
+
+/// A masked group's slots: rest length, 1/rest and, per colour, 1 where the
+/// slot is a spring of that colour (0 elsewhere, and rest 1 there).
+#[derive(Debug, Clone)]
+struct Slots {
+    rest: Vec<f64>,
+    inv_rest: Vec<f64>,
+    colour: [Vec<f64>; 2],
+}
+
+impl Slots {
+    fn new(o: usize, g: &super::topology::SpringGroup, a0: usize, count: usize) -> Slots {
+        let mut slots = Slots {
+            rest: vec![1.0; count],
+            inv_rest: vec![1.0; count],
+            colour: [vec![0.0; count], vec![0.0; count]],
+        };
+        for i in 0..g.len() {
+            let k = g.a[i] as usize - a0;
+            slots.rest[k] = g.rest[i];
+            slots.inv_rest[k] = g.inv_rest[i];
+            slots.colour[(g.a[i] as usize / o) % 2][k] = 1.0;
+        }
+        slots
     }
 }
 
@@ -268,7 +307,8 @@ fn correction(
     let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
     let ratio = len * inv_rest;
     let c = len - rest;
-    let inv = if len > 1e-12 { 1.0 / len } else { 0.0 };
+    // No branch: a spring of length 0 has d = 0, so u = 0 (and no correction).
+    let inv = 1.0 / len.max(f64::MIN_POSITIVE);
     let u = [d[0] * inv, d[1] * inv, d[2] * inv];
     // ∇c·(x − x₀): the spring's lengthening over the step so far.
     let moved = u[0] * (db[0] - da[0]) + u[1] * (db[1] - da[1]) + u[2] * (db[2] - da[2]);
@@ -293,7 +333,64 @@ fn ends(v: &mut [f64], a0: usize, o: usize, len: usize) -> (&mut [f64], &mut [f6
     (&mut lo[a0..a0 + len], &mut hi[..len])
 }
 
-/// Springs `a0 + i → a0 + i + o`, `i < len ≤ o`: independent, one vector loop.
+/// `N` lanes of `s` from `i`.
+#[inline(always)]
+fn lanes<const N: usize>(s: &[f64], i: usize) -> [f64; N] {
+    let a: &[f64; N] = s[i..i + N].try_into().expect("N lanes");
+    *a
+}
+
+/// `N` lanes of `s` from `i`, to write.
+#[inline(always)]
+fn lanes_mut<const N: usize>(s: &mut [f64], i: usize) -> &mut [f64; N] {
+    (&mut s[i..i + N]).try_into().expect("N lanes")
+}
+
+/// `out[j] += add[j]`.
+#[inline(always)]
+fn add_to<const N: usize>(out: &mut [f64; N], add: &[f64; N]) {
+    for j in 0..N {
+        out[j] += add[j];
+    }
+}
+
+/// One end of `N` springs: position, displacement so far, inverse mass.
+type End<const N: usize> = [[f64; N]; 7];
+
+/// [`correction`] on `N` springs at once: straight-line code over the lanes
+/// (selects, no branches), so each line is one vector instruction. A loop
+/// over slices with the same body stayed scalar.
+#[inline(always)]
+fn block<const N: usize>(
+    k: Coeffs,
+    a: &End<N>,
+    b: &End<N>,
+    rest: [f64; N],
+    inv_rest: [f64; N],
+) -> ([[f64; N]; 3], [[f64; N]; 3], [f64; N], [f64; N]) {
+    let mut out = ([[0.0; N]; 3], [[0.0; N]; 3], [0.0; N], [0.0; N]);
+    for j in 0..N {
+        let (ca, cb, c, e) = correction(
+            k,
+            ([a[0][j], a[1][j], a[2][j]], [a[3][j], a[4][j], a[5][j]], a[6][j]),
+            ([b[0][j], b[1][j], b[2][j]], [b[3][j], b[4][j], b[5][j]], b[6][j]),
+            rest[j],
+            inv_rest[j],
+        );
+        for c in 0..3 {
+            out.0[c][j] = ca[c];
+            out.1[c][j] = cb[c];
+        }
+        out.2[j] = c;
+        out.3[j] = e;
+    }
+    out
+}
+
+/// Lanes per block: 8 f64, one AVX-512 register.
+const LANES: usize = 8;
+
+/// Springs `a0 + i → a0 + i + o`, `i < len ≤ o`: independent, in blocks.
 #[inline(always)]
 fn contiguous(
     k: Coeffs,
@@ -311,83 +408,192 @@ fn contiguous(
     let (va, vb) = ends(qy, a0, o, len);
     let (ta, tb) = ends(qz, a0, o, len);
     let (wa, wb) = (&w[a0..a0 + len], &w[a0 + o..a0 + o + len]);
-    let (rest, inv_rest) = (&rest[..len], &inv_rest[..len]);
-    let (stretch, strain) = (&mut stretch[..len], &mut strain[..len]);
-    for i in 0..len {
-        let (ca, cb, c, e) = correction(
-            k,
-            ([xa[i], ya[i], za[i]], [ua[i], va[i], ta[i]], wa[i]),
-            ([xb[i], yb[i], zb[i]], [ub[i], vb[i], tb[i]], wb[i]),
-            rest[i],
-            inv_rest[i],
-        );
-        xa[i] += ca[0];
-        ya[i] += ca[1];
-        za[i] += ca[2];
-        ua[i] += ca[0];
-        va[i] += ca[1];
-        ta[i] += ca[2];
-        xb[i] += cb[0];
-        yb[i] += cb[1];
-        zb[i] += cb[2];
-        ub[i] += cb[0];
-        vb[i] += cb[1];
-        tb[i] += cb[2];
-        stretch[i] = c;
-        strain[i] = e;
+    let mut sa: [&mut [f64]; 6] = [xa, ya, za, ua, va, ta];
+    let mut sb: [&mut [f64]; 6] = [xb, yb, zb, ub, vb, tb];
+    #[inline(always)]
+    fn step<const N: usize>(
+        k: Coeffs,
+        i: usize,
+        sa: &mut [&mut [f64]; 6],
+        sb: &mut [&mut [f64]; 6],
+        (wa, wb): (&[f64], &[f64]),
+        (rest, inv_rest): (&[f64], &[f64]),
+        (stretch, strain): (&mut [f64], &mut [f64]),
+    ) {
+        let a: End<N> = [
+            lanes(sa[0], i),
+            lanes(sa[1], i),
+            lanes(sa[2], i),
+            lanes(sa[3], i),
+            lanes(sa[4], i),
+            lanes(sa[5], i),
+            lanes(wa, i),
+        ];
+        let b: End<N> = [
+            lanes(sb[0], i),
+            lanes(sb[1], i),
+            lanes(sb[2], i),
+            lanes(sb[3], i),
+            lanes(sb[4], i),
+            lanes(sb[5], i),
+            lanes(wb, i),
+        ];
+        let (ca, cb, c, e) = block::<N>(k, &a, &b, lanes(rest, i), lanes(inv_rest, i));
+        // Position and displacement move together; every field named, so
+        // each add is one vector instruction (a loop over the six fields
+        // kept the stores scalar).
+        let [xa, ya, za, ua, va, ta] = sa;
+        add_to(lanes_mut(xa, i), &ca[0]);
+        add_to(lanes_mut(ya, i), &ca[1]);
+        add_to(lanes_mut(za, i), &ca[2]);
+        add_to(lanes_mut(ua, i), &ca[0]);
+        add_to(lanes_mut(va, i), &ca[1]);
+        add_to(lanes_mut(ta, i), &ca[2]);
+        let [xb, yb, zb, ub, vb, tb] = sb;
+        add_to(lanes_mut(xb, i), &cb[0]);
+        add_to(lanes_mut(yb, i), &cb[1]);
+        add_to(lanes_mut(zb, i), &cb[2]);
+        add_to(lanes_mut(ub, i), &cb[0]);
+        add_to(lanes_mut(vb, i), &cb[1]);
+        add_to(lanes_mut(tb, i), &cb[2]);
+        stretch[i..i + N].copy_from_slice(&c);
+        strain[i..i + N].copy_from_slice(&e);
+    }
+    let mut i = 0;
+    while i + LANES <= len {
+        step::<LANES>(k, i, &mut sa, &mut sb, (wa, wb), (rest, inv_rest), (stretch, strain));
+        i += LANES;
+    }
+    while i < len {
+        step::<1>(k, i, &mut sa, &mut sb, (wa, wb), (rest, inv_rest), (stretch, strain));
+        i += 1;
     }
 }
 
-/// `count` chunks of `N = 2·O` nodes from `a0`, each with the `O` springs
-/// `r → r + O`: independent across chunks, one vector loop over them.
+/// Slots `a0 + k → a0 + k + o`, `k < count`, of which those with
+/// `colour[k] = 1` are springs of one colour: every slot's correction
+/// computed from the positions as they are (one vector loop; no two of the
+/// colour share a node, so none of them sees another's correction), then
+/// added (a second).
 #[inline(always)]
-fn chunks<const O: usize, const N: usize>(
+fn masked(
     k: Coeffs,
     f: &mut Fields<'_>,
     w: &[f64],
-    (a0, count): (usize, usize),
-    (rest, inv_rest): (&[f64], &[f64]),
+    (a0, o, count): (usize, usize, usize),
+    (slots, colour): (&Slots, &[f64]),
+    corr: &mut [Vec<f64>; 6],
     (stretch, strain): (&mut [f64], &mut [f64]),
 ) {
-    debug_assert_eq!(N, 2 * O);
-    let span = a0..a0 + N * count;
+    {
+        let [px, py, pz, qx, qy, qz] = &*f;
+        let b0 = a0 + o;
+        let [cax, cay, caz, cbx, cby, cbz] = corr;
+        masked_corrections(
+            k,
+            [&px[a0..], &py[a0..], &pz[a0..], &qx[a0..], &qy[a0..], &qz[a0..], &w[a0..]],
+            [&px[b0..], &py[b0..], &pz[b0..], &qx[b0..], &qy[b0..], &qz[b0..], &w[b0..]],
+            (&slots.rest[..count], &slots.inv_rest[..count], &colour[..count]),
+            (cax, cay, caz),
+            (cbx, cby, cbz),
+            (&mut stretch[..count], &mut strain[..count]),
+        );
+    }
+    // Node a0 + j gets slot j's a-side and slot j − o's b-side.
     let [px, py, pz, qx, qy, qz] = f;
-    let x = px[span.clone()].as_chunks_mut::<N>().0;
-    let y = py[span.clone()].as_chunks_mut::<N>().0;
-    let z = pz[span.clone()].as_chunks_mut::<N>().0;
-    let u = qx[span.clone()].as_chunks_mut::<N>().0;
-    let v = qy[span.clone()].as_chunks_mut::<N>().0;
-    let t = qz[span.clone()].as_chunks_mut::<N>().0;
-    let w = w[span].as_chunks::<N>().0;
-    let len = N * count;
-    let rest = rest[..len].as_chunks::<N>().0;
-    let inv_rest = inv_rest[..len].as_chunks::<N>().0;
-    let stretch = stretch[..len].as_chunks_mut::<N>().0;
-    let strain = strain[..len].as_chunks_mut::<N>().0;
-    for q in 0..count {
-        for r in 0..O {
-            let s = r + O;
-            let (ca, cb, c, e) = correction(
-                k,
-                ([x[q][r], y[q][r], z[q][r]], [u[q][r], v[q][r], t[q][r]], w[q][r]),
-                ([x[q][s], y[q][s], z[q][s]], [u[q][s], v[q][s], t[q][s]], w[q][s]),
-                rest[q][r],
-                inv_rest[q][r],
-            );
-            x[q][r] += ca[0];
-            y[q][r] += ca[1];
-            z[q][r] += ca[2];
-            u[q][r] += ca[0];
-            v[q][r] += ca[1];
-            t[q][r] += ca[2];
-            x[q][s] += cb[0];
-            y[q][s] += cb[1];
-            z[q][s] += cb[2];
-            u[q][s] += cb[0];
-            v[q][s] += cb[1];
-            t[q][s] += cb[2];
-            stretch[q][r] = c;
-            strain[q][r] = e;
+    let fields: [&mut [f64]; 6] = [px, py, pz, qx, qy, qz];
+    for (c, field) in fields.into_iter().enumerate() {
+        let (ca, cb) = (&corr[c % 3][..count], &corr[3 + c % 3][..count]);
+        let nodes = &mut field[a0..a0 + count + o];
+        let (head, rest) = nodes.split_at_mut(o.min(count));
+        for (x, a) in head.iter_mut().zip(ca) {
+            *x += a;
+        }
+        let (body, tail) = rest.split_at_mut(count - o.min(count));
+        let (ca_body, cb_body) = (&ca[o.min(count)..], &cb[..count - o.min(count)]);
+        for ((x, a), b) in body.iter_mut().zip(ca_body).zip(cb_body) {
+            *x += a + b;
+        }
+        for (x, b) in tail.iter_mut().zip(&cb[count - o.min(count)..]) {
+            *x += b;
+        }
+    }
+}
+
+/// The corrections of `count` slots (the length of `rest`), masked by
+/// `colour`, into `ca` and `cb`. Every output a parameter of its own: the
+/// compiler may then assume they do not overlap (a slice taken from a `Vec`
+/// in a struct carries no such promise), and vectorises the loop.
+#[inline(always)]
+fn masked_corrections(
+    k: Coeffs,
+    a: [&[f64]; 7],
+    b: [&[f64]; 7],
+    (rest, inv_rest, colour): (&[f64], &[f64], &[f64]),
+    (cax, cay, caz): (&mut [f64], &mut [f64], &mut [f64]),
+    (cbx, cby, cbz): (&mut [f64], &mut [f64], &mut [f64]),
+    (stretch, strain): (&mut [f64], &mut [f64]),
+) {
+    let count = rest.len();
+    #[inline(always)]
+    fn step<const N: usize>(
+        k: Coeffs,
+        i: usize,
+        (a, b): (&[&[f64]; 7], &[&[f64]; 7]),
+        (rest, inv_rest, colour): (&[f64], &[f64], &[f64]),
+        corr: [&mut [f64]; 6],
+        (stretch, strain): (&mut [f64], &mut [f64]),
+    ) {
+        let a: End<N> = [
+            lanes(a[0], i),
+            lanes(a[1], i),
+            lanes(a[2], i),
+            lanes(a[3], i),
+            lanes(a[4], i),
+            lanes(a[5], i),
+            lanes(a[6], i),
+        ];
+        let b: End<N> = [
+            lanes(b[0], i),
+            lanes(b[1], i),
+            lanes(b[2], i),
+            lanes(b[3], i),
+            lanes(b[4], i),
+            lanes(b[5], i),
+            lanes(b[6], i),
+        ];
+        let (ca, cb, c, e) = block::<N>(k, &a, &b, lanes(rest, i), lanes(inv_rest, i));
+        let m: [f64; N] = lanes(colour, i);
+        #[inline(always)]
+        fn put<const N: usize>(out: &mut [f64; N], m: &[f64; N], v: &[f64; N]) {
+            for j in 0..N {
+                out[j] = m[j] * v[j];
+            }
+        }
+        let [cax, cay, caz, cbx, cby, cbz] = corr;
+        put(lanes_mut(cax, i), &m, &ca[0]);
+        put(lanes_mut(cay, i), &m, &ca[1]);
+        put(lanes_mut(caz, i), &m, &ca[2]);
+        put(lanes_mut(cbx, i), &m, &cb[0]);
+        put(lanes_mut(cby, i), &m, &cb[1]);
+        put(lanes_mut(cbz, i), &m, &cb[2]);
+        // Selects, not branches: a branch per lane kept these stores scalar.
+        let (old_c, old_e): ([f64; N], [f64; N]) = (lanes(stretch, i), lanes(strain, i));
+        for j in 0..N {
+            stretch[i + j] = if m[j] > 0.0 { c[j] } else { old_c[j] };
+            strain[i + j] = if m[j] > 0.0 { e[j] } else { old_e[j] };
+        }
+    }
+    let mut i = 0;
+    while i < count {
+        let corr: [&mut [f64]; 6] = [&mut *cax, &mut *cay, &mut *caz, &mut *cbx, &mut *cby, &mut *cbz];
+        let springs = (rest, inv_rest, colour);
+        if i + LANES <= count {
+            step::<LANES>(k, i, (&a, &b), springs, corr, (&mut *stretch, &mut *strain));
+            i += LANES;
+        } else {
+            step::<1>(k, i, (&a, &b), springs, corr, (&mut *stretch, &mut *strain));
+            i += 1;
         }
     }
 }
@@ -420,13 +626,19 @@ pub(crate) fn sweep(inp: &SweepInputs<'_>, pos: &mut [f64], vel: &mut [f64], ws:
             let o = g.stencil_offset.expect("batches are of grid groups") as usize;
             let k = coeffs[g.class.index()];
             let (a0, first, count) = (b.a0 as usize, b.first as usize, b.count as usize);
-            let base = ws.group_base[b.group as usize] + first;
-            let springs = (&g.rest[first..], &g.inv_rest[first..]);
-            let out = (&mut ws.stretch[base..], &mut ws.strain[base..]);
-            match (b.shape, o) {
-                (Shape::Contiguous, _) => contiguous(k, &mut f, w, (a0, o, count), springs, out),
-                (Shape::Chunks, 1) => chunks::<1, 2>(k, &mut f, w, (a0, count), springs, out),
-                (Shape::Chunks, _) => chunks::<2, 4>(k, &mut f, w, (a0, count), springs, out),
+            match &ws.slots[b.group as usize] {
+                None => {
+                    let base = ws.group_base[b.group as usize] + first;
+                    let springs = (&g.rest[first..], &g.inv_rest[first..]);
+                    let out = (&mut ws.stretch[base..], &mut ws.strain[base..]);
+                    contiguous(k, &mut f, w, (a0, o, count), springs, out);
+                }
+                Some(slots) => {
+                    let base = ws.group_base[b.group as usize];
+                    let out = (&mut ws.stretch[base..], &mut ws.strain[base..]);
+                    let colour = &slots.colour[first];
+                    masked(k, &mut f, w, (a0, o, count), (slots, colour), &mut ws.corr, out);
+                }
             }
         }
         loose(&ws.loose, &coeffs, w, &mut f, (&mut ws.stretch, &mut ws.strain));
@@ -441,8 +653,8 @@ pub(crate) fn sweep(inp: &SweepInputs<'_>, pos: &mut [f64], vel: &mut [f64], ws:
         *v = if *wk > 0.0 { d * inv_h } else { *v };
     }
     let mut max_strain = [f64::NEG_INFINITY; 3];
-    for (g, &base) in topo.groups.iter().zip(&ws.group_base) {
-        let range = base..base + g.len();
+    for ((g, &base), slots) in topo.groups.iter().zip(&ws.group_base).zip(&ws.slots) {
+        let range = base..base + slots.as_ref().map_or(g.len(), |s| s.rest.len());
         let (sum, max) = sum_and_max(&ws.stretch[range.clone()], &ws.strain[range]);
         energy += 0.5 * inp.material.get(g.class).k * sum;
         let kind = g.kind().index();
@@ -551,8 +763,7 @@ mod tests {
     use super::*;
     use crate::sim::{GridShape, Orientation};
 
-    /// Every spring once, and no node twice in a colour of a group (grid
-    /// groups) or of the loose springs.
+    /// Every spring once, and no node twice in a colour of a group.
     #[test]
     fn every_spring_is_swept_once_and_no_two_of_a_colour_share_a_node() {
         for (nx, ny) in [(17, 11), (2, 2), (3, 7), (64, 64)] {
@@ -564,47 +775,46 @@ mod tests {
             };
             let topology = Topology::grid(shape, Orientation::Horizontal);
             let ws = XpbdWorkspace::new(&topology);
-            let mut swept = vec![0; topology.spring_count()];
+            let mut swept = vec![0; ws.stretch.len()];
             // (group, colour) → nodes seen
             let mut seen = std::collections::HashMap::<(u32, usize), Vec<bool>>::new();
             for b in &ws.batches {
                 let g = &topology.groups[b.group as usize];
                 let o = g.stencil_offset.unwrap() as usize;
-                let springs: Vec<usize> = match b.shape {
-                    Shape::Contiguous => (0..b.count as usize).collect(),
-                    Shape::Chunks => (0..b.count as usize)
-                        .flat_map(|q| (0..o).map(move |r| 2 * o * q + r))
-                        .collect(),
+                // (offset from a0, spring index)
+                let springs: Vec<(usize, usize)> = match b.shape {
+                    Shape::Contiguous => (0..b.count as usize).map(|i| (i, b.first as usize + i)).collect(),
+                    Shape::Masked => {
+                        let slots = ws.slots[b.group as usize].as_ref().unwrap();
+                        (0..b.count as usize)
+                            .filter(|&k| slots.colour[b.first as usize][k] == 1.0)
+                            .map(|k| (k, g.a.iter().position(|&a| a == b.a0 + k as u32).unwrap()))
+                            .collect()
+                    }
                 };
-                for i in springs {
-                    let s = b.first as usize + i;
+                for (i, s) in springs {
                     let (a, bb) = (g.a[s] as usize, g.b[s] as usize);
-                    assert_eq!(
-                        a,
-                        b.a0 as usize + i,
-                        "{nx}x{ny}: spring {s} is not where its batch says"
-                    );
+                    assert_eq!(a, b.a0 as usize + i, "{nx}x{ny}: spring {s} is not where its batch says");
                     assert_eq!(bb, a + o);
                     swept[ws.group_base[b.group as usize] + s] += 1;
                     let colour = (a / o) % 2;
+                    if b.shape == Shape::Masked {
+                        assert_eq!(colour, b.first as usize, "{nx}x{ny}: a masked spring in the other colour");
+                    }
                     let nodes = seen
                         .entry((b.group, colour))
                         .or_insert_with(|| vec![false; topology.n_nodes]);
                     for node in [a, bb] {
-                        assert!(
-                            !nodes[node],
-                            "{nx}x{ny}: node {node} twice in a colour of group {}",
-                            b.group
-                        );
+                        assert!(!nodes[node], "{nx}x{ny}: node {node} twice in a colour of group {}", b.group);
                         nodes[node] = true;
                     }
                 }
             }
-            assert!(
-                swept.iter().all(|&c| c == 1),
-                "{nx}x{ny}: a spring swept {:?} times",
-                swept.iter().find(|&&c| c != 1)
-            );
+            for (g, &base) in topology.groups.iter().zip(&ws.group_base) {
+                for s in 0..g.len() {
+                    assert_eq!(swept[base + s], 1, "{nx}x{ny}: a spring swept {} times", swept[base + s]);
+                }
+            }
             assert!(ws.loose.a.is_empty());
         }
     }
