@@ -28,7 +28,11 @@
 //! vertical and diagonal groups) or, for `o` = 1 and 2 (the springs along a
 //! row), every other block of `o` springs, swept as chunks of `2o` nodes.
 //! Springs without a stencil (a mesh's) are coloured greedily. The order, and
-//! with it every bit of the result, is fixed at construction. Bending
+//! with it every bit of the result, is fixed at construction. The sweep
+//! works on its own copies of the positions, each field at its own offset
+//! in the page (see [`super::paged`]): the state's x, y and z arrays of a
+//! 64×64 cloth are 32 KiB apart and would share one L1 set with every
+//! other stream. Bending
 //! stencils (a mesh cloth) are linear vector constraints `Σ_i w_i x_i` with
 //! compliance `1/D`, one correction each, after the springs.
 //!
@@ -36,8 +40,9 @@
 //! a mode ω at `h`: `(hω)²/2` of its amplitude per step.
 
 use super::bending::Bending;
+use super::paged::Paged;
 use super::params::{Material, SpringClass};
-use super::topology::Topology;
+use super::topology::{Run, SpringGroup, Topology};
 use super::SpringTotals;
 
 /// The sweep's plan (fixed at construction) and the step's buffers.
@@ -47,23 +52,37 @@ pub(crate) struct XpbdWorkspace {
     batches: Vec<Batch>,
     /// Springs without a stencil (meshes), greedy-coloured, in sweep order.
     loose: Loose,
-    /// Per group: its slots when it is swept masked.
-    slots: Vec<Option<Slots>>,
-    /// Where each group starts in `stretch` and `strain`: a spring (or a
-    /// masked group's slot) per entry.
+    /// Per group: where its entries start in the per-spring arrays (a
+    /// spring each, or a masked group's slot each), and how many.
     group_base: Vec<usize>,
-    /// `L − L0` and `L/L0 − 1` of each spring, read before its correction
-    /// (a masked group's slots that are no spring keep 0 and −∞).
-    stretch: Vec<f64>,
-    strain: Vec<f64>,
+    group_len: Vec<usize>,
+    /// Per entry: rest length and 1/rest (1 in a masked group's slots that
+    /// are no spring), and per colour 1 where the slot is a spring of it.
+    rest: Paged,
+    inv_rest: Paged,
+    colour: [Paged; 2],
+    /// Per entry: `L − L0` and `L/L0 − 1`, read before the spring's
+    /// correction (a slot that is no spring keeps 0 and −∞).
+    stretch: Paged,
+    strain: Paged,
+    /// The positions being corrected, by component.
+    x: [Paged; 3],
+    /// The positions at the start of the step, by component.
+    prev: [Paged; 3],
+    /// 1/m (0 for pins).
+    w: Paged,
     /// A masked batch's corrections of a (`[..3]`) and b (`[3..]`), per slot.
-    corr: [Vec<f64>; 6],
-    /// Positions at the start of the step.
-    pub prev: Vec<f64>,
-    /// External forces at the start of the step.
+    corr: [Paged; 6],
+    /// Per entry: `1 / ((K h² + C h)(w_a + w_b) + 1)`, the correction's
+    /// denominator without stiffness adjustment (fixed for a cloth: its dt,
+    /// material and masses do not change), and the (dt, K and C per class)
+    /// it was computed for.
+    inv_denom: Paged,
+    denom_for: Option<(f64, [[f64; 2]; 5])>,
+    /// Per entry: its two nodes (for `inv_denom`).
+    ends: Vec<[u32; 2]>,
+    /// External forces at the start of the step ([x…, y…, z…]).
     pub ext: Vec<f64>,
-    /// `x − x₀`, updated with every correction (for the damping).
-    disp: Vec<f64>,
 }
 
 /// A stretch of one grid group's springs of one colour.
@@ -71,11 +90,11 @@ pub(crate) struct XpbdWorkspace {
 struct Batch {
     group: u32,
     shape: Shape,
-    /// Node `a` of the first spring.
+    /// Node `a` of the first spring (slot).
     a0: u32,
-    /// Springs (`Contiguous`) or slots (`Masked`).
+    /// Springs or slots.
     count: u32,
-    /// The first spring's index in its group's arrays.
+    /// `Contiguous`: the first spring's index in its group; `Masked`: the colour.
     first: u32,
 }
 
@@ -85,8 +104,8 @@ enum Shape {
     Contiguous,
     /// Every slot `a0 + k → a0 + k + o`, `k < count`, of a group along the
     /// rows (`o` ≤ 2), computed at once and kept where the slot is a spring
-    /// of the batch's colour (`first` is the colour): one vector loop that
-    /// reads, one that adds the corrections, at twice the arithmetic.
+    /// of the batch's colour: one vector loop that reads, one that adds the
+    /// corrections, at twice the arithmetic.
     Masked,
 }
 
@@ -95,59 +114,99 @@ enum Shape {
 struct Loose {
     a: Vec<u32>,
     b: Vec<u32>,
-    rest: Vec<f64>,
-    inv_rest: Vec<f64>,
     class: Vec<u8>,
-    /// The spring's index in `stretch` and `strain`.
+    /// The spring's entry in the per-spring arrays.
     slot: Vec<u32>,
-    /// Where each colour starts (one more than colours).
-    colours: Vec<usize>,
+}
+
+/// Page offsets (bytes) of the sweep's streams: five lines apart.
+fn colour(i: usize) -> usize {
+    i * 320
 }
 
 impl XpbdWorkspace {
     pub(crate) fn new(topology: &Topology) -> XpbdWorkspace {
         let n = topology.n_nodes;
         let mut batches = Vec::new();
-        let mut slots = Vec::new();
-        let mut group_base = Vec::with_capacity(topology.groups.len());
+        let (mut group_base, mut group_len) = (Vec::new(), Vec::new());
         let (mut total, mut widest) = (0, 0);
         for (gi, g) in topology.groups.iter().enumerate() {
             let start = batches.len();
             if let Some(o) = g.stencil_offset {
                 plan_group(gi as u32, o as usize, &g.runs, &mut batches);
             }
-            let masked = batches[start..].iter().find(|b| b.shape == Shape::Masked).copied();
-            let o = g.stencil_offset.unwrap_or(0) as usize;
-            slots.push(masked.map(|b| Slots::new(o, g, b.a0 as usize, b.count as usize)));
+            let entries = match batches[start..].iter().find(|b| b.shape == Shape::Masked) {
+                Some(b) => {
+                    widest = widest.max(b.count as usize);
+                    b.count as usize
+                }
+                None => g.len(),
+            };
             group_base.push(total);
-            let entries = masked.map_or(g.len(), |b| b.count as usize);
+            group_len.push(entries);
             total += entries;
-            if masked.is_some() {
-                widest = widest.max(entries);
+        }
+        let mut ws = XpbdWorkspace {
+            batches,
+            loose: Loose::default(),
+            group_base,
+            group_len,
+            rest: Paged::new(total, colour(0)),
+            inv_rest: Paged::new(total, colour(1)),
+            colour: [Paged::new(total, colour(2)), Paged::new(total, colour(3))],
+            stretch: Paged::new(total, colour(4)),
+            strain: Paged::new(total, colour(5)),
+            x: [0, 1, 2].map(|c| Paged::new(n, colour(6 + c))),
+            prev: [0, 1, 2].map(|c| Paged::new(n, colour(9 + c))),
+            w: Paged::new(n, colour(12)),
+            corr: std::array::from_fn(|c| Paged::new(widest, colour(13 + c) + 160)),
+            inv_denom: Paged::new(total, colour(19) + 160),
+            denom_for: None,
+            ends: vec![[0, 0]; total],
+            ext: vec![0.0; 3 * n],
+        };
+        ws.rest.fill(1.0);
+        ws.inv_rest.fill(1.0);
+        ws.strain.fill(f64::NEG_INFINITY);
+        for (gi, g) in topology.groups.iter().enumerate() {
+            let (base, len) = (ws.group_base[gi], ws.group_len[gi]);
+            let o = g.stencil_offset.unwrap_or(1) as usize;
+            let masked = len != g.len()
+                || ws
+                    .batches
+                    .iter()
+                    .any(|b| b.group == gi as u32 && b.shape == Shape::Masked);
+            // A masked group's entry is its slot `a − a0`; any other's its spring.
+            let a0 = ws
+                .batches
+                .iter()
+                .find(|b| b.group == gi as u32)
+                .map_or(0, |b| b.a0 as usize);
+            for i in 0..g.len() {
+                let e = base + if masked { g.a[i] as usize - a0 } else { i };
+                ws.rest[e] = g.rest[i];
+                ws.inv_rest[e] = g.inv_rest[i];
+                ws.colour[(g.a[i] as usize / o) % 2][e] = 1.0;
+                ws.ends[e] = [g.a[i], g.b[i]];
+            }
+            if masked {
+                // The slots that are no spring: their (unused) ends.
+                for k in 0..len {
+                    if ws.ends[base + k] == [0, 0] {
+                        ws.ends[base + k] = [(a0 + k) as u32, (a0 + k + o) as u32];
+                    }
+                }
             }
         }
-        // Every spring's entries are written by every sweep; a masked
-        // group's other slots keep these (no energy, no strain).
-        let strain = vec![f64::NEG_INFINITY; total];
-        XpbdWorkspace {
-            batches,
-            loose: colour_loose(topology, &group_base),
-            slots,
-            group_base,
-            stretch: vec![0.0; total],
-            strain,
-            corr: std::array::from_fn(|_| vec![0.0; widest]),
-            prev: vec![0.0; 3 * n],
-            ext: vec![0.0; 3 * n],
-            disp: vec![0.0; 3 * n],
-        }
+        ws.loose = colour_loose(topology, &ws.group_base);
+        ws
     }
 }
 
 /// The batches of one grid group `a → a + o`: colour 0 (`⌊a/o⌋` even), then
 /// colour 1. A group along the rows (`o` ≤ 2) is one masked batch per
 /// colour over all its slots; any other, each run's blocks of that colour.
-fn plan_group(group: u32, o: usize, runs: &[super::topology::Run], out: &mut Vec<Batch>) {
+fn plan_group(group: u32, o: usize, runs: &[Run], out: &mut Vec<Batch>) {
     let (Some(head), Some(tail)) = (runs.first(), runs.last()) else {
         return;
     };
@@ -184,38 +243,12 @@ fn plan_group(group: u32, o: usize, runs: &[super::topology::Run], out: &mut Vec
     }
 }
 
-/// A masked group's slots: rest length, 1/rest and, per colour, 1 where the
-/// slot is a spring of that colour (0 elsewhere, and rest 1 there).
-#[derive(Debug, Clone)]
-struct Slots {
-    rest: Vec<f64>,
-    inv_rest: Vec<f64>,
-    colour: [Vec<f64>; 2],
-}
-
-impl Slots {
-    fn new(o: usize, g: &super::topology::SpringGroup, a0: usize, count: usize) -> Slots {
-        let mut slots = Slots {
-            rest: vec![1.0; count],
-            inv_rest: vec![1.0; count],
-            colour: [vec![0.0; count], vec![0.0; count]],
-        };
-        for i in 0..g.len() {
-            let k = g.a[i] as usize - a0;
-            slots.rest[k] = g.rest[i];
-            slots.inv_rest[k] = g.inv_rest[i];
-            slots.colour[(g.a[i] as usize / o) % 2][k] = 1.0;
-        }
-        slots
-    }
-}
-
 /// Greedy colouring of the springs without a stencil, in topology order: a
-/// spring takes the lowest colour neither endpoint has yet.
+/// spring takes the lowest colour neither endpoint has yet; the sweep
+/// visits them colour by colour.
 fn colour_loose(topology: &Topology, group_base: &[usize]) -> Loose {
     let mut used: Vec<[u64; 4]> = vec![[0; 4]; topology.n_nodes];
     let mut springs = Vec::new();
-    let mut count = 0;
     for (gi, g) in topology.groups.iter().enumerate() {
         if g.stencil_offset.is_some() {
             continue;
@@ -229,27 +262,17 @@ fn colour_loose(topology: &Topology, group_base: &[usize]) -> Loose {
             used[a][c / 64] |= 1 << (c % 64);
             used[b][c / 64] |= 1 << (c % 64);
             springs.push((c, gi, i));
-            count = count.max(c + 1);
         }
     }
     // Stable: within a colour, topology order.
     springs.sort_by_key(|&(c, _, _)| c);
-    let mut loose = Loose {
-        colours: vec![0; count + 1],
-        ..Loose::default()
-    };
-    for &(c, gi, i) in &springs {
-        let g = &topology.groups[gi];
+    let mut loose = Loose::default();
+    for &(_, gi, i) in &springs {
+        let g: &SpringGroup = &topology.groups[gi];
         loose.a.push(g.a[i]);
         loose.b.push(g.b[i]);
-        loose.rest.push(g.rest[i]);
-        loose.inv_rest.push(g.inv_rest[i]);
         loose.class.push(g.class.index() as u8);
         loose.slot.push((group_base[gi] + i) as u32);
-        loose.colours[c + 1] += 1;
-    }
-    for c in 0..count {
-        loose.colours[c + 1] += loose.colours[c];
     }
     loose
 }
@@ -273,7 +296,7 @@ pub(crate) fn predict(inv_mass: &[f64], dt: f64, pos: &mut [f64], vel: &mut [f64
     for c in 0..3 {
         let range = c * n..(c + 1) * n;
         let (x, v) = (&mut pos[range.clone()], &mut vel[range.clone()]);
-        let (prev, ext) = (&mut ws.prev[range.clone()], &ws.ext[range]);
+        let (prev, ext) = (&mut ws.prev[c][..n], &ws.ext[range]);
         for k in 0..n {
             v[k] += dt * ext[k] * inv_mass[k];
             prev[k] = x[k];
@@ -290,47 +313,57 @@ struct Coeffs {
     adjust: f64,
 }
 
-/// One spring's correction from its two ends (position, displacement so
-/// far, inverse mass): what to add to a's and to b's position (and
-/// displacement), with `L − L0` and the strain before it. Branch-free so
-/// that a batch vectorises: a degenerate spring (L ≈ 0) or one between two
-/// pins corrects nothing.
+/// One end of `N` springs, by lane: x, y, z now, x, y, z at the step's
+/// start, and the inverse mass.
+type End<const N: usize> = [[f64; N]; 7];
+
+/// The corrections of `N` springs from their ends: what to add to a's and
+/// to b's position, with `L − L0` and the strain before it. Straight-line
+/// code over the lanes with selects only, so each line is one vector
+/// instruction; a spring of length 0 (d = 0, so u = 0) or between two pins
+/// (w = 0) corrects nothing.
+///
+/// The correction multiplies by the entry's precomputed `1/denominator`;
+/// with stiffness adjustment (`ADJ`) a spring beyond the allowed length
+/// takes the reciprocal of its own (a division on every lane: only cloths
+/// with adjustment pay it).
 #[inline(always)]
-fn correction(
+fn block<const N: usize, const ADJ: bool>(
     k: Coeffs,
-    (xa, da, wa): ([f64; 3], [f64; 3], f64),
-    (xb, db, wb): ([f64; 3], [f64; 3], f64),
-    rest: f64,
-    inv_rest: f64,
-) -> ([f64; 3], [f64; 3], f64, f64) {
-    let d = [xb[0] - xa[0], xb[1] - xa[1], xb[2] - xa[2]];
-    let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-    let ratio = len * inv_rest;
-    let c = len - rest;
-    // No branch: a spring of length 0 has d = 0, so u = 0 (and no correction).
-    let inv = 1.0 / len.max(f64::MIN_POSITIVE);
-    let u = [d[0] * inv, d[1] * inv, d[2] * inv];
-    // ∇c·(x − x₀): the spring's lengthening over the step so far.
-    let moved = u[0] * (db[0] - da[0]) + u[1] * (db[1] - da[1]) + u[2] * (db[2] - da[2]);
-    let kh2 = if ratio > k.adjust { k.kh2 * ratio } else { k.kh2 };
-    let dl = -(kh2 * c + k.ch * moved) / ((kh2 + k.ch) * (wa + wb) + 1.0);
-    let (sa, sb) = (-wa * dl, wb * dl);
-    (
-        [sa * u[0], sa * u[1], sa * u[2]],
-        [sb * u[0], sb * u[1], sb * u[2]],
-        c,
-        ratio - 1.0,
-    )
-}
-
-/// The six fields a sweep changes: x, y, z and their displacements.
-type Fields<'a> = [&'a mut [f64]; 6];
-
-/// `v[a0..a0+len]` and `v[a0+o..a0+o+len]` (`len ≤ o`: disjoint).
-#[inline(always)]
-fn ends(v: &mut [f64], a0: usize, o: usize, len: usize) -> (&mut [f64], &mut [f64]) {
-    let (lo, hi) = v.split_at_mut(a0 + o);
-    (&mut lo[a0..a0 + len], &mut hi[..len])
+    a: &End<N>,
+    b: &End<N>,
+    [rest, inv_rest, inv_denom]: [[f64; N]; 3],
+) -> ([[f64; N]; 3], [[f64; N]; 3], [f64; N], [f64; N]) {
+    let mut out = ([[0.0; N]; 3], [[0.0; N]; 3], [0.0; N], [0.0; N]);
+    for j in 0..N {
+        let d = [b[0][j] - a[0][j], b[1][j] - a[1][j], b[2][j] - a[2][j]];
+        let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+        let ratio = len * inv_rest[j];
+        let c = len - rest[j];
+        let inv = 1.0 / len.max(f64::MIN_POSITIVE);
+        let u = [d[0] * inv, d[1] * inv, d[2] * inv];
+        // ∇c·(x − x₀): the spring's lengthening over the step so far.
+        let moved = u[0] * ((b[0][j] - b[3][j]) - (a[0][j] - a[3][j]))
+            + u[1] * ((b[1][j] - b[4][j]) - (a[1][j] - a[4][j]))
+            + u[2] * ((b[2][j] - b[5][j]) - (a[2][j] - a[5][j]));
+        let (wa, wb) = (a[6][j], b[6][j]);
+        let dl = if ADJ {
+            let over = ratio > k.adjust;
+            let kh2 = if over { k.kh2 * ratio } else { k.kh2 };
+            let own = 1.0 / ((kh2 + k.ch) * (wa + wb) + 1.0);
+            -(kh2 * c + k.ch * moved) * if over { own } else { inv_denom[j] }
+        } else {
+            -(k.kh2 * c + k.ch * moved) * inv_denom[j]
+        };
+        let (sa, sb) = (-wa * dl, wb * dl);
+        for i in 0..3 {
+            out.0[i][j] = sa * u[i];
+            out.1[i][j] = sb * u[i];
+        }
+        out.2[j] = c;
+        out.3[j] = ratio - 1.0;
+    }
+    out
 }
 
 /// `N` lanes of `s` from `i`.
@@ -354,120 +387,117 @@ fn add_to<const N: usize>(out: &mut [f64; N], add: &[f64; N]) {
     }
 }
 
-/// One end of `N` springs: position, displacement so far, inverse mass.
-type End<const N: usize> = [[f64; N]; 7];
-
-/// [`correction`] on `N` springs at once: straight-line code over the lanes
-/// (selects, no branches), so each line is one vector instruction. A loop
-/// over slices with the same body stayed scalar.
-#[inline(always)]
-fn block<const N: usize>(
-    k: Coeffs,
-    a: &End<N>,
-    b: &End<N>,
-    rest: [f64; N],
-    inv_rest: [f64; N],
-) -> ([[f64; N]; 3], [[f64; N]; 3], [f64; N], [f64; N]) {
-    let mut out = ([[0.0; N]; 3], [[0.0; N]; 3], [0.0; N], [0.0; N]);
-    for j in 0..N {
-        let (ca, cb, c, e) = correction(
-            k,
-            ([a[0][j], a[1][j], a[2][j]], [a[3][j], a[4][j], a[5][j]], a[6][j]),
-            ([b[0][j], b[1][j], b[2][j]], [b[3][j], b[4][j], b[5][j]], b[6][j]),
-            rest[j],
-            inv_rest[j],
-        );
-        for c in 0..3 {
-            out.0[c][j] = ca[c];
-            out.1[c][j] = cb[c];
-        }
-        out.2[j] = c;
-        out.3[j] = e;
-    }
-    out
-}
-
 /// Lanes per block: 8 f64, one AVX-512 register.
 const LANES: usize = 8;
 
+/// What every kernel reads and writes: the positions (corrected in place),
+/// the start positions and inverse masses (read).
+struct Nodes<'a> {
+    x: [&'a mut [f64]; 3],
+    prev: [&'a [f64]; 3],
+    w: &'a [f64],
+}
+
+/// `v[a0..a0+len]` and `v[a0+o..a0+o+len]` (`len ≤ o`: disjoint).
+#[inline(always)]
+fn ends(v: &mut [f64], a0: usize, o: usize, len: usize) -> (&mut [f64], &mut [f64]) {
+    let (lo, hi) = v.split_at_mut(a0 + o);
+    (&mut lo[a0..a0 + len], &mut hi[..len])
+}
+
 /// Springs `a0 + i → a0 + i + o`, `i < len ≤ o`: independent, in blocks.
 #[inline(always)]
-fn contiguous(
+fn contiguous<const ADJ: bool>(
     k: Coeffs,
-    f: &mut Fields<'_>,
-    w: &[f64],
+    nodes: &mut Nodes<'_>,
     (a0, o, len): (usize, usize, usize),
-    (rest, inv_rest): (&[f64], &[f64]),
-    (stretch, strain): (&mut [f64], &mut [f64]),
+    entries: Entries<'_>,
 ) {
-    let [px, py, pz, qx, qy, qz] = f;
+    let [px, py, pz] = &mut nodes.x;
     let (xa, xb) = ends(px, a0, o, len);
     let (ya, yb) = ends(py, a0, o, len);
     let (za, zb) = ends(pz, a0, o, len);
-    let (ua, ub) = ends(qx, a0, o, len);
-    let (va, vb) = ends(qy, a0, o, len);
-    let (ta, tb) = ends(qz, a0, o, len);
-    let (wa, wb) = (&w[a0..a0 + len], &w[a0 + o..a0 + o + len]);
-    let mut sa: [&mut [f64]; 6] = [xa, ya, za, ua, va, ta];
-    let mut sb: [&mut [f64]; 6] = [xb, yb, zb, ub, vb, tb];
+    let side = |at: usize| -> [&[f64]; 4] {
+        [
+            &nodes.prev[0][at..at + len],
+            &nodes.prev[1][at..at + len],
+            &nodes.prev[2][at..at + len],
+            &nodes.w[at..at + len],
+        ]
+    };
+    let (ra, rb) = (side(a0), side(a0 + o));
+    let Entries {
+        rest,
+        inv_rest,
+        inv_denom,
+        stretch,
+        strain,
+        ..
+    } = entries;
     #[inline(always)]
-    fn step<const N: usize>(
+    fn step<const N: usize, const ADJ: bool>(
         k: Coeffs,
         i: usize,
-        sa: &mut [&mut [f64]; 6],
-        sb: &mut [&mut [f64]; 6],
-        (wa, wb): (&[f64], &[f64]),
-        (rest, inv_rest): (&[f64], &[f64]),
+        (wa, wb): ([&mut [f64]; 3], [&mut [f64]; 3]),
+        (ra, rb): (&[&[f64]; 4], &[&[f64]; 4]),
+        (rest, inv_rest, inv_denom): (&[f64], &[f64], &[f64]),
         (stretch, strain): (&mut [f64], &mut [f64]),
     ) {
+        let [xa, ya, za] = wa;
+        let [xb, yb, zb] = wb;
         let a: End<N> = [
-            lanes(sa[0], i),
-            lanes(sa[1], i),
-            lanes(sa[2], i),
-            lanes(sa[3], i),
-            lanes(sa[4], i),
-            lanes(sa[5], i),
-            lanes(wa, i),
+            lanes(xa, i),
+            lanes(ya, i),
+            lanes(za, i),
+            lanes(ra[0], i),
+            lanes(ra[1], i),
+            lanes(ra[2], i),
+            lanes(ra[3], i),
         ];
         let b: End<N> = [
-            lanes(sb[0], i),
-            lanes(sb[1], i),
-            lanes(sb[2], i),
-            lanes(sb[3], i),
-            lanes(sb[4], i),
-            lanes(sb[5], i),
-            lanes(wb, i),
+            lanes(xb, i),
+            lanes(yb, i),
+            lanes(zb, i),
+            lanes(rb[0], i),
+            lanes(rb[1], i),
+            lanes(rb[2], i),
+            lanes(rb[3], i),
         ];
-        let (ca, cb, c, e) = block::<N>(k, &a, &b, lanes(rest, i), lanes(inv_rest, i));
-        // Position and displacement move together; every field named, so
-        // each add is one vector instruction (a loop over the six fields
-        // kept the stores scalar).
-        let [xa, ya, za, ua, va, ta] = sa;
+        let springs = [lanes(rest, i), lanes(inv_rest, i), lanes(inv_denom, i)];
+        let (ca, cb, c, e) = block::<N, ADJ>(k, &a, &b, springs);
+        // Every field named, so each add is one vector instruction.
         add_to(lanes_mut(xa, i), &ca[0]);
         add_to(lanes_mut(ya, i), &ca[1]);
         add_to(lanes_mut(za, i), &ca[2]);
-        add_to(lanes_mut(ua, i), &ca[0]);
-        add_to(lanes_mut(va, i), &ca[1]);
-        add_to(lanes_mut(ta, i), &ca[2]);
-        let [xb, yb, zb, ub, vb, tb] = sb;
         add_to(lanes_mut(xb, i), &cb[0]);
         add_to(lanes_mut(yb, i), &cb[1]);
         add_to(lanes_mut(zb, i), &cb[2]);
-        add_to(lanes_mut(ub, i), &cb[0]);
-        add_to(lanes_mut(vb, i), &cb[1]);
-        add_to(lanes_mut(tb, i), &cb[2]);
-        stretch[i..i + N].copy_from_slice(&c);
-        strain[i..i + N].copy_from_slice(&e);
+        *lanes_mut(stretch, i) = c;
+        *lanes_mut(strain, i) = e;
     }
     let mut i = 0;
-    while i + LANES <= len {
-        step::<LANES>(k, i, &mut sa, &mut sb, (wa, wb), (rest, inv_rest), (stretch, strain));
-        i += LANES;
-    }
     while i < len {
-        step::<1>(k, i, &mut sa, &mut sb, (wa, wb), (rest, inv_rest), (stretch, strain));
-        i += 1;
+        let w = ([&mut *xa, &mut *ya, &mut *za], [&mut *xb, &mut *yb, &mut *zb]);
+        let out = (&mut *stretch, &mut *strain);
+        let springs = (rest, inv_rest, inv_denom);
+        if i + LANES <= len {
+            step::<LANES, ADJ>(k, i, w, (&ra, &rb), springs, out);
+            i += LANES;
+        } else {
+            step::<1, ADJ>(k, i, w, (&ra, &rb), springs, out);
+            i += 1;
+        }
     }
+}
+
+/// One batch's per-spring arrays, from its first entry.
+struct Entries<'a> {
+    rest: &'a [f64],
+    inv_rest: &'a [f64],
+    inv_denom: &'a [f64],
+    colour: &'a [f64],
+    stretch: &'a mut [f64],
+    strain: &'a mut [f64],
 }
 
 /// Slots `a0 + k → a0 + k + o`, `k < count`, of which those with
@@ -476,124 +506,118 @@ fn contiguous(
 /// colour share a node, so none of them sees another's correction), then
 /// added (a second).
 #[inline(always)]
-fn masked(
+fn masked<const ADJ: bool>(
     k: Coeffs,
-    f: &mut Fields<'_>,
-    w: &[f64],
+    nodes: &mut Nodes<'_>,
     (a0, o, count): (usize, usize, usize),
-    (slots, colour): (&Slots, &[f64]),
-    corr: &mut [Vec<f64>; 6],
-    (stretch, strain): (&mut [f64], &mut [f64]),
+    entries: Entries<'_>,
+    corr: &mut [Paged; 6],
 ) {
     {
-        let [px, py, pz, qx, qy, qz] = &*f;
         let b0 = a0 + o;
-        let [cax, cay, caz, cbx, cby, cbz] = corr;
-        masked_corrections(
-            k,
-            [&px[a0..], &py[a0..], &pz[a0..], &qx[a0..], &qy[a0..], &qz[a0..], &w[a0..]],
-            [&px[b0..], &py[b0..], &pz[b0..], &qx[b0..], &qy[b0..], &qz[b0..], &w[b0..]],
-            (&slots.rest[..count], &slots.inv_rest[..count], &colour[..count]),
-            (cax, cay, caz),
-            (cbx, cby, cbz),
-            (&mut stretch[..count], &mut strain[..count]),
-        );
-    }
-    // Node a0 + j gets slot j's a-side and slot j − o's b-side.
-    let [px, py, pz, qx, qy, qz] = f;
-    let fields: [&mut [f64]; 6] = [px, py, pz, qx, qy, qz];
-    for (c, field) in fields.into_iter().enumerate() {
-        let (ca, cb) = (&corr[c % 3][..count], &corr[3 + c % 3][..count]);
-        let nodes = &mut field[a0..a0 + count + o];
-        let (head, rest) = nodes.split_at_mut(o.min(count));
-        for (x, a) in head.iter_mut().zip(ca) {
-            *x += a;
-        }
-        let (body, tail) = rest.split_at_mut(count - o.min(count));
-        let (ca_body, cb_body) = (&ca[o.min(count)..], &cb[..count - o.min(count)]);
-        for ((x, a), b) in body.iter_mut().zip(ca_body).zip(cb_body) {
-            *x += a + b;
-        }
-        for (x, b) in tail.iter_mut().zip(&cb[count - o.min(count)..]) {
-            *x += b;
-        }
-    }
-}
-
-/// The corrections of `count` slots (the length of `rest`), masked by
-/// `colour`, into `ca` and `cb`. Every output a parameter of its own: the
-/// compiler may then assume they do not overlap (a slice taken from a `Vec`
-/// in a struct carries no such promise), and vectorises the loop.
-#[inline(always)]
-fn masked_corrections(
-    k: Coeffs,
-    a: [&[f64]; 7],
-    b: [&[f64]; 7],
-    (rest, inv_rest, colour): (&[f64], &[f64], &[f64]),
-    (cax, cay, caz): (&mut [f64], &mut [f64], &mut [f64]),
-    (cbx, cby, cbz): (&mut [f64], &mut [f64], &mut [f64]),
-    (stretch, strain): (&mut [f64], &mut [f64]),
-) {
-    let count = rest.len();
-    #[inline(always)]
-    fn step<const N: usize>(
-        k: Coeffs,
-        i: usize,
-        (a, b): (&[&[f64]; 7], &[&[f64]; 7]),
-        (rest, inv_rest, colour): (&[f64], &[f64], &[f64]),
-        corr: [&mut [f64]; 6],
-        (stretch, strain): (&mut [f64], &mut [f64]),
-    ) {
-        let a: End<N> = [
-            lanes(a[0], i),
-            lanes(a[1], i),
-            lanes(a[2], i),
-            lanes(a[3], i),
-            lanes(a[4], i),
-            lanes(a[5], i),
-            lanes(a[6], i),
-        ];
-        let b: End<N> = [
-            lanes(b[0], i),
-            lanes(b[1], i),
-            lanes(b[2], i),
-            lanes(b[3], i),
-            lanes(b[4], i),
-            lanes(b[5], i),
-            lanes(b[6], i),
-        ];
-        let (ca, cb, c, e) = block::<N>(k, &a, &b, lanes(rest, i), lanes(inv_rest, i));
-        let m: [f64; N] = lanes(colour, i);
+        let side = |at: usize| -> [&[f64]; 7] {
+            [
+                &nodes.x[0][at..at + count],
+                &nodes.x[1][at..at + count],
+                &nodes.x[2][at..at + count],
+                &nodes.prev[0][at..at + count],
+                &nodes.prev[1][at..at + count],
+                &nodes.prev[2][at..at + count],
+                &nodes.w[at..at + count],
+            ]
+        };
+        let (a, b) = (side(a0), side(b0));
+        let Entries {
+            rest,
+            inv_rest,
+            inv_denom,
+            colour,
+            stretch,
+            strain,
+        } = entries;
+        /// One end's `N` lanes from `i` (a function, not a closure: a
+        /// closure was not inlined, and ran baseline code).
         #[inline(always)]
-        fn put<const N: usize>(out: &mut [f64; N], m: &[f64; N], v: &[f64; N]) {
+        fn load<const N: usize>(s: &[&[f64]; 7], i: usize) -> End<N> {
+            [
+                lanes(s[0], i),
+                lanes(s[1], i),
+                lanes(s[2], i),
+                lanes(s[3], i),
+                lanes(s[4], i),
+                lanes(s[5], i),
+                lanes(s[6], i),
+            ]
+        }
+        #[inline(always)]
+        fn step<const N: usize, const ADJ: bool>(
+            k: Coeffs,
+            i: usize,
+            (a, b): (&[&[f64]; 7], &[&[f64]; 7]),
+            [rest, inv_rest, inv_denom, colour]: [&[f64]; 4],
+            corr: [&mut [f64]; 6],
+            (stretch, strain): (&mut [f64], &mut [f64]),
+        ) {
+            let springs = [lanes(rest, i), lanes(inv_rest, i), lanes(inv_denom, i)];
+            let (ca, cb, c, e) = block::<N, ADJ>(k, &load(a, i), &load(b, i), springs);
+            let m: [f64; N] = lanes(colour, i);
+            #[inline(always)]
+            fn put<const N: usize>(out: &mut [f64; N], m: &[f64; N], v: &[f64; N]) {
+                for j in 0..N {
+                    out[j] = m[j] * v[j];
+                }
+            }
+            let [cax, cay, caz, cbx, cby, cbz] = corr;
+            put(lanes_mut(cax, i), &m, &ca[0]);
+            put(lanes_mut(cay, i), &m, &ca[1]);
+            put(lanes_mut(caz, i), &m, &ca[2]);
+            put(lanes_mut(cbx, i), &m, &cb[0]);
+            put(lanes_mut(cby, i), &m, &cb[1]);
+            put(lanes_mut(cbz, i), &m, &cb[2]);
+            // Selects, not branches: a branch per lane kept these stores scalar.
+            let (old_c, old_e): ([f64; N], [f64; N]) = (lanes(stretch, i), lanes(strain, i));
+            let (sc, se) = (lanes_mut::<N>(stretch, i), lanes_mut::<N>(strain, i));
             for j in 0..N {
-                out[j] = m[j] * v[j];
+                sc[j] = if m[j] > 0.0 { c[j] } else { old_c[j] };
+                se[j] = if m[j] > 0.0 { e[j] } else { old_e[j] };
             }
         }
-        let [cax, cay, caz, cbx, cby, cbz] = corr;
-        put(lanes_mut(cax, i), &m, &ca[0]);
-        put(lanes_mut(cay, i), &m, &ca[1]);
-        put(lanes_mut(caz, i), &m, &ca[2]);
-        put(lanes_mut(cbx, i), &m, &cb[0]);
-        put(lanes_mut(cby, i), &m, &cb[1]);
-        put(lanes_mut(cbz, i), &m, &cb[2]);
-        // Selects, not branches: a branch per lane kept these stores scalar.
-        let (old_c, old_e): ([f64; N], [f64; N]) = (lanes(stretch, i), lanes(strain, i));
-        for j in 0..N {
-            stretch[i + j] = if m[j] > 0.0 { c[j] } else { old_c[j] };
-            strain[i + j] = if m[j] > 0.0 { e[j] } else { old_e[j] };
+        let [c0, c1, c2, c3, c4, c5] = &mut *corr;
+        let mut i = 0;
+        while i < count {
+            let out: [&mut [f64]; 6] = [
+                &mut c0[..],
+                &mut c1[..],
+                &mut c2[..],
+                &mut c3[..],
+                &mut c4[..],
+                &mut c5[..],
+            ];
+            let springs = [rest, inv_rest, inv_denom, colour];
+            if i + LANES <= count {
+                step::<LANES, ADJ>(k, i, (&a, &b), springs, out, (&mut *stretch, &mut *strain));
+                i += LANES;
+            } else {
+                step::<1, ADJ>(k, i, (&a, &b), springs, out, (&mut *stretch, &mut *strain));
+                i += 1;
+            }
         }
     }
-    let mut i = 0;
-    while i < count {
-        let corr: [&mut [f64]; 6] = [&mut *cax, &mut *cay, &mut *caz, &mut *cbx, &mut *cby, &mut *cbz];
-        let springs = (rest, inv_rest, colour);
-        if i + LANES <= count {
-            step::<LANES>(k, i, (&a, &b), springs, corr, (&mut *stretch, &mut *strain));
-            i += LANES;
-        } else {
-            step::<1>(k, i, (&a, &b), springs, corr, (&mut *stretch, &mut *strain));
-            i += 1;
+    // Node a0 + j gets slot j's a-side and slot j − o's b-side.
+    let head = o.min(count);
+    for (c, field) in nodes.x.iter_mut().enumerate() {
+        let (ca, cb) = (&corr[c][..count], &corr[3 + c][..count]);
+        let nodes = &mut field[a0..a0 + count + o];
+        let (first, rest) = nodes.split_at_mut(head);
+        for (x, a) in first.iter_mut().zip(ca) {
+            *x += a;
+        }
+        let (body, tail) = rest.split_at_mut(count - head);
+        for ((x, a), b) in body.iter_mut().zip(&ca[head..]).zip(&cb[..count - head]) {
+            *x += a + b;
+        }
+        for (x, b) in tail.iter_mut().zip(&cb[count - head..]) {
+            *x += b;
         }
     }
 }
@@ -606,56 +630,53 @@ pub(crate) fn sweep(inp: &SweepInputs<'_>, pos: &mut [f64], vel: &mut [f64], ws:
     let topo = inp.topology;
     let n = inp.inv_mass.len();
     let h = inp.dt;
-    let w = inp.inv_mass;
-    for ((d, x), q) in ws.disp.iter_mut().zip(pos.iter()).zip(&ws.prev) {
-        *d = x - q;
+    for c in 0..3 {
+        ws.x[c][..n].copy_from_slice(&pos[c * n..(c + 1) * n]);
     }
+    ws.w[..n].copy_from_slice(inp.inv_mass);
     let coeffs = inp.material.springs.map(|s| Coeffs {
         kh2: s.k * h * h,
         ch: s.c * h,
         adjust: inp.adjust_ratio,
     });
-    {
-        let (px, rest) = pos.split_at_mut(n);
-        let (py, pz) = rest.split_at_mut(n);
-        let (qx, rest) = ws.disp.split_at_mut(n);
-        let (qy, qz) = rest.split_at_mut(n);
-        let mut f: Fields<'_> = [px, py, pz, qx, qy, qz];
-        for b in &ws.batches {
-            let g = &topo.groups[b.group as usize];
-            let o = g.stencil_offset.expect("batches are of grid groups") as usize;
+    let key = (h, inp.material.springs.map(|s| [s.k, s.c]));
+    if ws.denom_for != Some(key) {
+        // Once per cloth (its dt, material and masses are fixed).
+        for (gi, g) in topo.groups.iter().enumerate() {
             let k = coeffs[g.class.index()];
-            let (a0, first, count) = (b.a0 as usize, b.first as usize, b.count as usize);
-            match &ws.slots[b.group as usize] {
-                None => {
-                    let base = ws.group_base[b.group as usize] + first;
-                    let springs = (&g.rest[first..], &g.inv_rest[first..]);
-                    let out = (&mut ws.stretch[base..], &mut ws.strain[base..]);
-                    contiguous(k, &mut f, w, (a0, o, count), springs, out);
-                }
-                Some(slots) => {
-                    let base = ws.group_base[b.group as usize];
-                    let out = (&mut ws.stretch[base..], &mut ws.strain[base..]);
-                    let colour = &slots.colour[first];
-                    masked(k, &mut f, w, (a0, o, count), (slots, colour), &mut ws.corr, out);
-                }
+            for e in ws.group_base[gi]..ws.group_base[gi] + ws.group_len[gi] {
+                let [a, b] = ws.ends[e];
+                ws.inv_denom[e] = 1.0 / ((k.kh2 + k.ch) * (ws.w[a as usize] + ws.w[b as usize]) + 1.0);
             }
         }
-        loose(&ws.loose, &coeffs, w, &mut f, (&mut ws.stretch, &mut ws.strain));
+        ws.denom_for = Some(key);
+    }
+    if inp.adjust_ratio.is_finite() {
+        sweep_springs::<true>(topo, &coeffs, ws, n);
+    } else {
+        sweep_springs::<false>(topo, &coeffs, ws, n);
     }
     let mut energy = 0.0;
     if !topo.bending.is_empty() {
         let bend = inp.material.get(SpringClass::BendU);
-        energy += stencils(&topo.bending, bend.k, bend.c, h, w, pos, &mut ws.disp);
+        energy += stencils(&topo.bending, bend.k, bend.c, h, ws);
     }
     let inv_h = 1.0 / h;
-    for ((v, d), wk) in vel.iter_mut().zip(&ws.disp).zip(w.iter().cycle()) {
-        *v = if *wk > 0.0 { d * inv_h } else { *v };
+    for c in 0..3 {
+        let (x, q) = (&ws.x[c][..n], &ws.prev[c][..n]);
+        let (p, v) = (&mut pos[c * n..(c + 1) * n], &mut vel[c * n..(c + 1) * n]);
+        for k in 0..n {
+            p[k] = x[k];
+            v[k] = if inp.inv_mass[k] > 0.0 {
+                (x[k] - q[k]) * inv_h
+            } else {
+                v[k]
+            };
+        }
     }
     let mut max_strain = [f64::NEG_INFINITY; 3];
-    for ((g, &base), slots) in topo.groups.iter().zip(&ws.group_base).zip(&ws.slots) {
-        let range = base..base + slots.as_ref().map_or(g.len(), |s| s.rest.len());
-        let (sum, max) = sum_and_max(&ws.stretch[range.clone()], &ws.strain[range]);
+    for (g, (&base, &len)) in topo.groups.iter().zip(ws.group_base.iter().zip(&ws.group_len)) {
+        let (sum, max) = sum_and_max(&ws.stretch[base..base + len], &ws.strain[base..base + len]);
         energy += 0.5 * inp.material.get(g.class).k * sum;
         let kind = g.kind().index();
         max_strain[kind] = max_strain[kind].max(max);
@@ -666,15 +687,83 @@ pub(crate) fn sweep(inp: &SweepInputs<'_>, pos: &mut [f64], vel: &mut [f64], ws:
     }
 }
 
+/// Every spring's correction, batch by batch, then the loose springs.
+#[inline(always)]
+fn sweep_springs<const ADJ: bool>(topo: &Topology, coeffs: &[Coeffs; 5], ws: &mut XpbdWorkspace, n: usize) {
+    {
+        let XpbdWorkspace {
+            batches,
+            loose,
+            group_base,
+            rest,
+            inv_rest,
+            inv_denom,
+            colour,
+            stretch,
+            strain,
+            x,
+            prev,
+            w,
+            corr,
+            ..
+        } = ws;
+        let [x0, x1, x2] = x;
+        let mut nodes = Nodes {
+            x: [&mut x0[..n], &mut x1[..n], &mut x2[..n]],
+            prev: [&prev[0][..n], &prev[1][..n], &prev[2][..n]],
+            w: &w[..n],
+        };
+        for b in batches.iter() {
+            let g = &topo.groups[b.group as usize];
+            let o = g.stencil_offset.expect("batches are of grid groups") as usize;
+            let k = coeffs[g.class.index()];
+            let (a0, first, count) = (b.a0 as usize, b.first as usize, b.count as usize);
+            let base = group_base[b.group as usize];
+            match b.shape {
+                Shape::Contiguous => {
+                    let e = base + first;
+                    let entries = Entries {
+                        rest: &rest[e..e + count],
+                        inv_rest: &inv_rest[e..e + count],
+                        inv_denom: &inv_denom[e..e + count],
+                        colour: &[],
+                        stretch: &mut stretch[e..e + count],
+                        strain: &mut strain[e..e + count],
+                    };
+                    contiguous::<ADJ>(k, &mut nodes, (a0, o, count), entries);
+                }
+                Shape::Masked => {
+                    let e = base..base + count;
+                    let entries = Entries {
+                        rest: &rest[e.clone()],
+                        inv_rest: &inv_rest[e.clone()],
+                        inv_denom: &inv_denom[e.clone()],
+                        colour: &colour[first][e.clone()],
+                        stretch: &mut stretch[e.clone()],
+                        strain: &mut strain[e],
+                    };
+                    masked::<ADJ>(k, &mut nodes, (a0, o, count), entries, corr);
+                }
+            }
+        }
+        sweep_loose::<ADJ>(
+            loose,
+            coeffs,
+            &mut nodes,
+            [rest, inv_rest, inv_denom],
+            (stretch, strain),
+        );
+    }
+}
+
 /// Σ c² and max e, in eight lanes (a fixed order: the same bits every run).
 #[inline(always)]
 fn sum_and_max(c: &[f64], e: &[f64]) -> (f64, f64) {
-    const L: usize = 8;
-    let (mut sum, mut max) = ([0.0; L], [f64::NEG_INFINITY; L]);
-    let (cc, ct) = c.as_chunks::<L>();
-    let (ec, et) = e.as_chunks::<L>();
+    let (mut sum, mut max) = ([0.0; LANES], [f64::NEG_INFINITY; LANES]);
+    let (cc, ct) = c.as_chunks::<LANES>();
+    let (ec, et) = e.as_chunks::<LANES>();
     for (c, e) in cc.iter().zip(ec) {
-        for j in 0..L {
+        for j in 0..LANES {
             sum[j] += c[j] * c[j];
             max[j] = if e[j] > max[j] { e[j] } else { max[j] };
         }
@@ -686,49 +775,44 @@ fn sum_and_max(c: &[f64], e: &[f64]) -> (f64, f64) {
     (sum.iter().sum(), max.iter().copied().fold(f64::NEG_INFINITY, f64::max))
 }
 
-/// The springs without a stencil, colour by colour.
+/// The springs without a stencil, colour by colour, one at a time.
 #[inline(always)]
-fn loose(l: &Loose, coeffs: &[Coeffs; 5], w: &[f64], f: &mut Fields<'_>, (stretch, strain): (&mut [f64], &mut [f64])) {
-    let [px, py, pz, qx, qy, qz] = f;
+fn sweep_loose<const ADJ: bool>(
+    l: &Loose,
+    coeffs: &[Coeffs; 5],
+    nodes: &mut Nodes<'_>,
+    [rest, inv_rest, inv_denom]: [&[f64]; 3],
+    (stretch, strain): (&mut [f64], &mut [f64]),
+) {
     for s in 0..l.a.len() {
         let (a, b) = (l.a[s] as usize, l.b[s] as usize);
-        let (ca, cb, c, e) = correction(
-            coeffs[l.class[s] as usize],
-            ([px[a], py[a], pz[a]], [qx[a], qy[a], qz[a]], w[a]),
-            ([px[b], py[b], pz[b]], [qx[b], qy[b], qz[b]], w[b]),
-            l.rest[s],
-            l.inv_rest[s],
-        );
-        px[a] += ca[0];
-        py[a] += ca[1];
-        pz[a] += ca[2];
-        qx[a] += ca[0];
-        qy[a] += ca[1];
-        qz[a] += ca[2];
-        px[b] += cb[0];
-        py[b] += cb[1];
-        pz[b] += cb[2];
-        qx[b] += cb[0];
-        qy[b] += cb[1];
-        qz[b] += cb[2];
-        stretch[l.slot[s] as usize] = c;
-        strain[l.slot[s] as usize] = e;
+        let end = |k: usize| -> End<1> {
+            [
+                [nodes.x[0][k]],
+                [nodes.x[1][k]],
+                [nodes.x[2][k]],
+                [nodes.prev[0][k]],
+                [nodes.prev[1][k]],
+                [nodes.prev[2][k]],
+                [nodes.w[k]],
+            ]
+        };
+        let e = l.slot[s] as usize;
+        let springs = [[rest[e]], [inv_rest[e]], [inv_denom[e]]];
+        let (ca, cb, c, strain_e) = block::<1, ADJ>(coeffs[l.class[s] as usize], &end(a), &end(b), springs);
+        for i in 0..3 {
+            nodes.x[i][a] += ca[i][0];
+            nodes.x[i][b] += cb[i][0];
+        }
+        stretch[e] = c[0];
+        strain[e] = strain_e[0];
     }
 }
 
 /// One correction per bending stencil `Σ_i w_i x_i` (a vector constraint
 /// with compliance 1/D and damping C, per component); their energy
 /// `½D|Σ w x|²` before the corrections.
-fn stencils(
-    bending: &Bending,
-    stiffness: f64,
-    damping: f64,
-    h: f64,
-    inv_mass: &[f64],
-    pos: &mut [f64],
-    disp: &mut [f64],
-) -> f64 {
-    let n = inv_mass.len();
+fn stencils(bending: &Bending, stiffness: f64, damping: f64, h: f64, ws: &mut XpbdWorkspace) -> f64 {
     let mut energy = 0.0;
     let (dh2, ch) = (stiffness * h * h, damping * h);
     for s in 0..bending.len() {
@@ -739,19 +823,18 @@ fn stencils(
         for (&i, &wt) in nodes.iter().zip(weights) {
             let i = i as usize;
             for j in 0..3 {
-                c[j] += wt * pos[j * n + i];
-                moved[j] += wt * disp[j * n + i];
+                c[j] += wt * ws.x[j][i];
+                moved[j] += wt * (ws.x[j][i] - ws.prev[j][i]);
             }
-            wsum += wt * wt * inv_mass[i];
+            wsum += wt * wt * ws.w[i];
         }
         energy += 0.5 * stiffness * (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]);
         let dl = [0, 1, 2].map(|j| -(dh2 * c[j] + ch * moved[j]) / ((dh2 + ch) * wsum + 1.0));
         for (&i, &wt) in nodes.iter().zip(weights) {
             let i = i as usize;
-            let f = wt * inv_mass[i];
+            let f = wt * ws.w[i];
             for j in 0..3 {
-                pos[j * n + i] += f * dl[j];
-                disp[j * n + i] += f * dl[j];
+                ws.x[j][i] += f * dl[j];
             }
         }
     }
@@ -785,34 +868,50 @@ mod tests {
                 let springs: Vec<(usize, usize)> = match b.shape {
                     Shape::Contiguous => (0..b.count as usize).map(|i| (i, b.first as usize + i)).collect(),
                     Shape::Masked => {
-                        let slots = ws.slots[b.group as usize].as_ref().unwrap();
+                        let base = ws.group_base[b.group as usize];
                         (0..b.count as usize)
-                            .filter(|&k| slots.colour[b.first as usize][k] == 1.0)
+                            .filter(|&k| ws.colour[b.first as usize][base + k] == 1.0)
                             .map(|k| (k, g.a.iter().position(|&a| a == b.a0 + k as u32).unwrap()))
                             .collect()
                     }
                 };
                 for (i, s) in springs {
                     let (a, bb) = (g.a[s] as usize, g.b[s] as usize);
-                    assert_eq!(a, b.a0 as usize + i, "{nx}x{ny}: spring {s} is not where its batch says");
+                    assert_eq!(
+                        a,
+                        b.a0 as usize + i,
+                        "{nx}x{ny}: spring {s} is not where its batch says"
+                    );
                     assert_eq!(bb, a + o);
                     swept[ws.group_base[b.group as usize] + s] += 1;
                     let colour = (a / o) % 2;
                     if b.shape == Shape::Masked {
-                        assert_eq!(colour, b.first as usize, "{nx}x{ny}: a masked spring in the other colour");
+                        assert_eq!(
+                            colour, b.first as usize,
+                            "{nx}x{ny}: a masked spring in the other colour"
+                        );
                     }
                     let nodes = seen
                         .entry((b.group, colour))
                         .or_insert_with(|| vec![false; topology.n_nodes]);
                     for node in [a, bb] {
-                        assert!(!nodes[node], "{nx}x{ny}: node {node} twice in a colour of group {}", b.group);
+                        assert!(
+                            !nodes[node],
+                            "{nx}x{ny}: node {node} twice in a colour of group {}",
+                            b.group
+                        );
                         nodes[node] = true;
                     }
                 }
             }
             for (g, &base) in topology.groups.iter().zip(&ws.group_base) {
                 for s in 0..g.len() {
-                    assert_eq!(swept[base + s], 1, "{nx}x{ny}: a spring swept {} times", swept[base + s]);
+                    assert_eq!(
+                        swept[base + s],
+                        1,
+                        "{nx}x{ny}: a spring swept {} times",
+                        swept[base + s]
+                    );
                 }
             }
             assert!(ws.loose.a.is_empty());
