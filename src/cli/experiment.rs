@@ -954,19 +954,28 @@ fn pareto_cmd(
         ])?;
     }
     csv.finish()?;
-    let names: Vec<String> = methods.iter().map(|m| m.name().to_string()).collect();
-    let mut series: Vec<Series<'_>> = methods
+    // One series per (method, integrator): which integrator a point is
+    // matters as much as which coefficients.
+    let pairs: Vec<(Method, Integrator)> = methods
+        .iter()
+        .flat_map(|&m| integrators.iter().map(move |&i| (m, i)))
+        .collect();
+    let names: Vec<String> = pairs
+        .iter()
+        .map(|(m, i)| format!("{} {}", m.name(), i.name()))
+        .collect();
+    let mut series: Vec<Series<'_>> = pairs
         .iter()
         .enumerate()
-        .map(|(i, m)| Series {
-            name: &names[i],
+        .map(|(k, &(m, i))| Series {
+            name: &names[k],
             points: points
                 .iter()
-                .filter(|p| p.method == *m)
+                .filter(|p| p.method == m && p.integrator == i)
                 .map(|p| (p.cost, 100.0 * p.mean_error))
                 .collect(),
             markers: true,
-            color: PALETTE[i % PALETTE.len()],
+            color: PALETTE[k % PALETTE.len()],
         })
         .collect();
     let mut front: Vec<(f64, f64)> = points

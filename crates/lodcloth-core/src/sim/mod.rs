@@ -843,6 +843,7 @@ impl Simulation {
             return last;
         }
         let xpbd = self.model.params.integrator == Integrator::Xpbd;
+        let mut bending_energy = 0.0;
         // XPBD needs no acceleration: its constraints replace the springs' forces.
         if !xpbd {
             self.ensure_cache(par);
@@ -924,7 +925,7 @@ impl Simulation {
                 dt,
             };
             let ws = self.ws.xpbd.as_deref_mut().expect("XPBD workspace exists for XPBD");
-            self.totals = xpbd::sweep(&inputs, &mut self.state.pos, &mut self.state.vel, ws);
+            bending_energy = xpbd::sweep(&inputs, &mut self.state.pos, &mut self.state.vel, ws);
         }
 
         // Strain limiting runs before the force evaluation, not after it: its
@@ -949,7 +950,12 @@ impl Simulation {
         // Contact last, so no state a reader sees has a node inside a body.
         let contacts = self.resolve_contact(t0);
         self.cached = false;
-        if !xpbd {
+        if xpbd {
+            // No force evaluation: the report's spring figures from one pass
+            // of lengths over the final state.
+            let m = &self.model;
+            self.totals = xpbd::spring_totals(&m.topology, &m.params.material, &self.state.pos, bending_energy);
+        } else {
             self.ensure_cache(par);
         }
 

@@ -61,10 +61,6 @@ pub(crate) struct XpbdWorkspace {
     rest: Paged,
     inv_rest: Paged,
     colour: [Paged; 2],
-    /// Per entry: `L − L0` and `L/L0 − 1`, read before the spring's
-    /// correction (a slot that is no spring keeps 0 and −∞).
-    stretch: Paged,
-    strain: Paged,
     /// The positions being corrected, by component.
     x: [Paged; 3],
     /// The positions at the start of the step, by component.
@@ -154,8 +150,6 @@ impl XpbdWorkspace {
             rest: Paged::new(total, colour(0)),
             inv_rest: Paged::new(total, colour(1)),
             colour: [Paged::new(total, colour(2)), Paged::new(total, colour(3))],
-            stretch: Paged::new(total, colour(4)),
-            strain: Paged::new(total, colour(5)),
             x: [0, 1, 2].map(|c| Paged::new(n, colour(6 + c))),
             prev: [0, 1, 2].map(|c| Paged::new(n, colour(9 + c))),
             w: Paged::new(n, colour(12)),
@@ -167,7 +161,6 @@ impl XpbdWorkspace {
         };
         ws.rest.fill(1.0);
         ws.inv_rest.fill(1.0);
-        ws.strain.fill(f64::NEG_INFINITY);
         for (gi, g) in topology.groups.iter().enumerate() {
             let (base, len) = (ws.group_base[gi], ws.group_len[gi]);
             let o = g.stencil_offset.unwrap_or(1) as usize;
@@ -333,8 +326,8 @@ fn block<const N: usize, const ADJ: bool>(
     a: &End<N>,
     b: &End<N>,
     [rest, inv_rest, inv_denom]: [[f64; N]; 3],
-) -> ([[f64; N]; 3], [[f64; N]; 3], [f64; N], [f64; N]) {
-    let mut out = ([[0.0; N]; 3], [[0.0; N]; 3], [0.0; N], [0.0; N]);
+) -> ([[f64; N]; 3], [[f64; N]; 3]) {
+    let mut out = ([[0.0; N]; 3], [[0.0; N]; 3]);
     for j in 0..N {
         let d = [b[0][j] - a[0][j], b[1][j] - a[1][j], b[2][j] - a[2][j]];
         let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
@@ -360,8 +353,6 @@ fn block<const N: usize, const ADJ: bool>(
             out.0[i][j] = sa * u[i];
             out.1[i][j] = sb * u[i];
         }
-        out.2[j] = c;
-        out.3[j] = ratio - 1.0;
     }
     out
 }
@@ -430,8 +421,6 @@ fn contiguous<const ADJ: bool>(
         rest,
         inv_rest,
         inv_denom,
-        stretch,
-        strain,
         ..
     } = entries;
     #[inline(always)]
@@ -441,7 +430,6 @@ fn contiguous<const ADJ: bool>(
         (wa, wb): ([&mut [f64]; 3], [&mut [f64]; 3]),
         (ra, rb): (&[&[f64]; 4], &[&[f64]; 4]),
         (rest, inv_rest, inv_denom): (&[f64], &[f64], &[f64]),
-        (stretch, strain): (&mut [f64], &mut [f64]),
     ) {
         let [xa, ya, za] = wa;
         let [xb, yb, zb] = wb;
@@ -464,7 +452,7 @@ fn contiguous<const ADJ: bool>(
             lanes(rb[3], i),
         ];
         let springs = [lanes(rest, i), lanes(inv_rest, i), lanes(inv_denom, i)];
-        let (ca, cb, c, e) = block::<N, ADJ>(k, &a, &b, springs);
+        let (ca, cb) = block::<N, ADJ>(k, &a, &b, springs);
         // Every field named, so each add is one vector instruction.
         add_to(lanes_mut(xa, i), &ca[0]);
         add_to(lanes_mut(ya, i), &ca[1]);
@@ -472,19 +460,16 @@ fn contiguous<const ADJ: bool>(
         add_to(lanes_mut(xb, i), &cb[0]);
         add_to(lanes_mut(yb, i), &cb[1]);
         add_to(lanes_mut(zb, i), &cb[2]);
-        *lanes_mut(stretch, i) = c;
-        *lanes_mut(strain, i) = e;
     }
     let mut i = 0;
     while i < len {
         let w = ([&mut *xa, &mut *ya, &mut *za], [&mut *xb, &mut *yb, &mut *zb]);
-        let out = (&mut *stretch, &mut *strain);
         let springs = (rest, inv_rest, inv_denom);
         if i + LANES <= len {
-            step::<LANES, ADJ>(k, i, w, (&ra, &rb), springs, out);
+            step::<LANES, ADJ>(k, i, w, (&ra, &rb), springs);
             i += LANES;
         } else {
-            step::<1, ADJ>(k, i, w, (&ra, &rb), springs, out);
+            step::<1, ADJ>(k, i, w, (&ra, &rb), springs);
             i += 1;
         }
     }
@@ -496,8 +481,6 @@ struct Entries<'a> {
     inv_rest: &'a [f64],
     inv_denom: &'a [f64],
     colour: &'a [f64],
-    stretch: &'a mut [f64],
-    strain: &'a mut [f64],
 }
 
 /// Slots `a0 + k → a0 + k + o`, `k < count`, of which those with
@@ -532,8 +515,6 @@ fn masked<const ADJ: bool>(
             inv_rest,
             inv_denom,
             colour,
-            stretch,
-            strain,
         } = entries;
         /// One end's `N` lanes from `i` (a function, not a closure: a
         /// closure was not inlined, and ran baseline code).
@@ -556,10 +537,9 @@ fn masked<const ADJ: bool>(
             (a, b): (&[&[f64]; 7], &[&[f64]; 7]),
             [rest, inv_rest, inv_denom, colour]: [&[f64]; 4],
             corr: [&mut [f64]; 6],
-            (stretch, strain): (&mut [f64], &mut [f64]),
         ) {
             let springs = [lanes(rest, i), lanes(inv_rest, i), lanes(inv_denom, i)];
-            let (ca, cb, c, e) = block::<N, ADJ>(k, &load(a, i), &load(b, i), springs);
+            let (ca, cb) = block::<N, ADJ>(k, &load(a, i), &load(b, i), springs);
             let m: [f64; N] = lanes(colour, i);
             #[inline(always)]
             fn put<const N: usize>(out: &mut [f64; N], m: &[f64; N], v: &[f64; N]) {
@@ -574,13 +554,6 @@ fn masked<const ADJ: bool>(
             put(lanes_mut(cbx, i), &m, &cb[0]);
             put(lanes_mut(cby, i), &m, &cb[1]);
             put(lanes_mut(cbz, i), &m, &cb[2]);
-            // Selects, not branches: a branch per lane kept these stores scalar.
-            let (old_c, old_e): ([f64; N], [f64; N]) = (lanes(stretch, i), lanes(strain, i));
-            let (sc, se) = (lanes_mut::<N>(stretch, i), lanes_mut::<N>(strain, i));
-            for j in 0..N {
-                sc[j] = if m[j] > 0.0 { c[j] } else { old_c[j] };
-                se[j] = if m[j] > 0.0 { e[j] } else { old_e[j] };
-            }
         }
         let [c0, c1, c2, c3, c4, c5] = &mut *corr;
         let mut i = 0;
@@ -595,10 +568,10 @@ fn masked<const ADJ: bool>(
             ];
             let springs = [rest, inv_rest, inv_denom, colour];
             if i + LANES <= count {
-                step::<LANES, ADJ>(k, i, (&a, &b), springs, out, (&mut *stretch, &mut *strain));
+                step::<LANES, ADJ>(k, i, (&a, &b), springs, out);
                 i += LANES;
             } else {
-                step::<1, ADJ>(k, i, (&a, &b), springs, out, (&mut *stretch, &mut *strain));
+                step::<1, ADJ>(k, i, (&a, &b), springs, out);
                 i += 1;
             }
         }
@@ -623,10 +596,11 @@ fn masked<const ADJ: bool>(
 }
 
 /// One Gauss–Seidel sweep over every constraint, then `v = (x − x₀)/h` for
-/// free nodes. Returns the springs' energy and largest strains, read before
-/// each spring's correction (the stencils' energy added).
+/// free nodes. Returns the bending stencils' energy, read before their
+/// corrections (the springs' is measured on the final state, see
+/// [`spring_totals`]).
 #[inline(always)]
-pub(crate) fn sweep(inp: &SweepInputs<'_>, pos: &mut [f64], vel: &mut [f64], ws: &mut XpbdWorkspace) -> SpringTotals {
+pub(crate) fn sweep(inp: &SweepInputs<'_>, pos: &mut [f64], vel: &mut [f64], ws: &mut XpbdWorkspace) -> f64 {
     let topo = inp.topology;
     let n = inp.inv_mass.len();
     let h = inp.dt;
@@ -674,17 +648,7 @@ pub(crate) fn sweep(inp: &SweepInputs<'_>, pos: &mut [f64], vel: &mut [f64], ws:
             };
         }
     }
-    let mut max_strain = [f64::NEG_INFINITY; 3];
-    for (g, (&base, &len)) in topo.groups.iter().zip(ws.group_base.iter().zip(&ws.group_len)) {
-        let (sum, max) = sum_and_max(&ws.stretch[base..base + len], &ws.strain[base..base + len]);
-        energy += 0.5 * inp.material.get(g.class).k * sum;
-        let kind = g.kind().index();
-        max_strain[kind] = max_strain[kind].max(max);
-    }
-    SpringTotals {
-        elastic_energy: energy,
-        max_strain,
-    }
+    energy
 }
 
 /// Every spring's correction, batch by batch, then the loose springs.
@@ -699,8 +663,6 @@ fn sweep_springs<const ADJ: bool>(topo: &Topology, coeffs: &[Coeffs; 5], ws: &mu
             inv_rest,
             inv_denom,
             colour,
-            stretch,
-            strain,
             x,
             prev,
             w,
@@ -727,8 +689,6 @@ fn sweep_springs<const ADJ: bool>(topo: &Topology, coeffs: &[Coeffs; 5], ws: &mu
                         inv_rest: &inv_rest[e..e + count],
                         inv_denom: &inv_denom[e..e + count],
                         colour: &[],
-                        stretch: &mut stretch[e..e + count],
-                        strain: &mut strain[e..e + count],
                     };
                     contiguous::<ADJ>(k, &mut nodes, (a0, o, count), entries);
                 }
@@ -738,41 +698,89 @@ fn sweep_springs<const ADJ: bool>(topo: &Topology, coeffs: &[Coeffs; 5], ws: &mu
                         rest: &rest[e.clone()],
                         inv_rest: &inv_rest[e.clone()],
                         inv_denom: &inv_denom[e.clone()],
-                        colour: &colour[first][e.clone()],
-                        stretch: &mut stretch[e.clone()],
-                        strain: &mut strain[e],
+                        colour: &colour[first][e],
                     };
                     masked::<ADJ>(k, &mut nodes, (a0, o, count), entries, corr);
                 }
             }
         }
-        sweep_loose::<ADJ>(
-            loose,
-            coeffs,
-            &mut nodes,
-            [rest, inv_rest, inv_denom],
-            (stretch, strain),
-        );
+        sweep_loose::<ADJ>(loose, coeffs, &mut nodes, [rest, inv_rest, inv_denom]);
     }
 }
 
-/// Σ c² and max e, in eight lanes (a fixed order: the same bits every run).
+/// The springs' energy `Σ ½K(L − L0)²` and largest strain per kind at
+/// `pos` (the state after the whole step: strain limiting and contact
+/// included), plus `bending`, the stencils' energy from the sweep. One pass
+/// of lengths, in blocks of [`LANES`] along each run.
 #[inline(always)]
-fn sum_and_max(c: &[f64], e: &[f64]) -> (f64, f64) {
-    let (mut sum, mut max) = ([0.0; LANES], [f64::NEG_INFINITY; LANES]);
-    let (cc, ct) = c.as_chunks::<LANES>();
-    let (ec, et) = e.as_chunks::<LANES>();
-    for (c, e) in cc.iter().zip(ec) {
-        for j in 0..LANES {
-            sum[j] += c[j] * c[j];
-            max[j] = if e[j] > max[j] { e[j] } else { max[j] };
+pub(crate) fn spring_totals(topology: &Topology, material: &Material, pos: &[f64], bending: f64) -> SpringTotals {
+    let n = topology.n_nodes;
+    let (px, py, pz) = (&pos[..n], &pos[n..2 * n], &pos[2 * n..3 * n]);
+    let mut energy = bending;
+    let mut max_strain = [f64::NEG_INFINITY; 3];
+    /// Lanes `j < N` of springs `i..i+N`: Σ (L − L0)² and max L/L0 − 1 into
+    /// the lane accumulators (straight-line code over the lanes: vectorised).
+    #[inline(always)]
+    fn lengths<const N: usize>(
+        i: usize,
+        (a, b): (&[&[f64]; 3], &[&[f64]; 3]),
+        (rest, inv_rest): (&[f64], &[f64]),
+        (sum, max): (&mut [f64; LANES], &mut [f64; LANES]),
+    ) {
+        let (ax, ay, az): ([f64; N], [f64; N], [f64; N]) = (lanes(a[0], i), lanes(a[1], i), lanes(a[2], i));
+        let (bx, by, bz): ([f64; N], [f64; N], [f64; N]) = (lanes(b[0], i), lanes(b[1], i), lanes(b[2], i));
+        let (r, ir): ([f64; N], [f64; N]) = (lanes(rest, i), lanes(inv_rest, i));
+        for j in 0..N {
+            let d = [bx[j] - ax[j], by[j] - ay[j], bz[j] - az[j]];
+            let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+            let c = len - r[j];
+            let e = len * ir[j] - 1.0;
+            sum[j] += c * c;
+            max[j] = if e > max[j] { e } else { max[j] };
         }
     }
-    for (c, e) in ct.iter().zip(et) {
-        sum[0] += c * c;
-        max[0] = max[0].max(*e);
+    for g in &topology.groups {
+        let (mut sum, mut max) = ([0.0; LANES], [f64::NEG_INFINITY; LANES]);
+        match g.stencil_offset {
+            Some(o) => {
+                let o = o as usize;
+                for run in &g.runs {
+                    let (a0, len, first) = (run.start as usize, run.len as usize, run.first as usize);
+                    let springs = (&g.rest[first..first + len], &g.inv_rest[first..first + len]);
+                    let a = [&px[a0..a0 + len], &py[a0..a0 + len], &pz[a0..a0 + len]];
+                    let b0 = a0 + o;
+                    let b = [&px[b0..b0 + len], &py[b0..b0 + len], &pz[b0..b0 + len]];
+                    let mut i = 0;
+                    while i + LANES <= len {
+                        lengths::<LANES>(i, (&a, &b), springs, (&mut sum, &mut max));
+                        i += LANES;
+                    }
+                    while i < len {
+                        lengths::<1>(i, (&a, &b), springs, (&mut sum, &mut max));
+                        i += 1;
+                    }
+                }
+            }
+            None => {
+                for s in 0..g.len() {
+                    let (a, b) = (g.a[s] as usize, g.b[s] as usize);
+                    let ends = (
+                        [&px[a..=a], &py[a..=a], &pz[a..=a]],
+                        [&px[b..=b], &py[b..=b], &pz[b..=b]],
+                    );
+                    let springs = (&g.rest[s..=s], &g.inv_rest[s..=s]);
+                    lengths::<1>(0, (&ends.0, &ends.1), springs, (&mut sum, &mut max));
+                }
+            }
+        }
+        energy += 0.5 * material.get(g.class).k * sum.iter().sum::<f64>();
+        let kind = g.kind().index();
+        max_strain[kind] = max.iter().copied().fold(max_strain[kind], f64::max);
     }
-    (sum.iter().sum(), max.iter().copied().fold(f64::NEG_INFINITY, f64::max))
+    SpringTotals {
+        elastic_energy: energy,
+        max_strain,
+    }
 }
 
 /// The springs without a stencil, colour by colour, one at a time.
@@ -782,7 +790,6 @@ fn sweep_loose<const ADJ: bool>(
     coeffs: &[Coeffs; 5],
     nodes: &mut Nodes<'_>,
     [rest, inv_rest, inv_denom]: [&[f64]; 3],
-    (stretch, strain): (&mut [f64], &mut [f64]),
 ) {
     for s in 0..l.a.len() {
         let (a, b) = (l.a[s] as usize, l.b[s] as usize);
@@ -799,13 +806,11 @@ fn sweep_loose<const ADJ: bool>(
         };
         let e = l.slot[s] as usize;
         let springs = [[rest[e]], [inv_rest[e]], [inv_denom[e]]];
-        let (ca, cb, c, strain_e) = block::<1, ADJ>(coeffs[l.class[s] as usize], &end(a), &end(b), springs);
+        let (ca, cb) = block::<1, ADJ>(coeffs[l.class[s] as usize], &end(a), &end(b), springs);
         for i in 0..3 {
             nodes.x[i][a] += ca[i][0];
             nodes.x[i][b] += cb[i][0];
         }
-        stretch[e] = c[0];
-        strain[e] = strain_e[0];
     }
 }
 
@@ -858,7 +863,7 @@ mod tests {
             };
             let topology = Topology::grid(shape, Orientation::Horizontal);
             let ws = XpbdWorkspace::new(&topology);
-            let mut swept = vec![0; ws.stretch.len()];
+            let mut swept = vec![0; ws.rest.len()];
             // (group, colour) → nodes seen
             let mut seen = std::collections::HashMap::<(u32, usize), Vec<bool>>::new();
             for b in &ws.batches {
