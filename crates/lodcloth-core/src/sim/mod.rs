@@ -293,7 +293,7 @@ impl Model {
     /// Every force but the springs' and the bending stencils' at (t, pos,
     /// vel) into `out`: loads, wind, grabs, gravity and drag; zero on pinned
     /// nodes.
-    fn external_forces(&self, t: f64, pos: &[f64], vel: &[f64], out: &mut [f64], normals: &mut Vec<f64>) {
+    fn external_forces(&self, t: f64, pos: &[f64], vel: &[f64], out: &mut [f64], normals: &mut [f64]) {
         let n = self.topology.n_nodes;
         out.fill(0.0);
         self.loads.add_forces(&self.topology, t, pos, vel, out, normals);

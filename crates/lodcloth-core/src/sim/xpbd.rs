@@ -290,9 +290,9 @@ pub(crate) fn predict(inv_mass: &[f64], dt: f64, pos: &mut [f64], vel: &mut [f64
         let range = c * n..(c + 1) * n;
         let (x, v) = (&mut pos[range.clone()], &mut vel[range.clone()]);
         let (prev, ext) = (&mut ws.prev[c][..n], &ws.ext[range]);
+        prev.copy_from_slice(x);
         for k in 0..n {
             v[k] += dt * ext[k] * inv_mass[k];
-            prev[k] = x[k];
             x[k] += dt * v[k];
         }
     }
