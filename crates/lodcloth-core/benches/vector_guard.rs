@@ -1,6 +1,6 @@
 //! The vectorisation guard (CI, issue 21): the 64×64 step of the step
 //! benchmark (the hanging scene's fabric, strain control off), symplectic
-//! Euler and RK4, timed on this CPU's best vector path and on the target's
+//! Euler, RK4 and XPBD, timed on this CPU's best vector path and on the target's
 //! baseline (x86-64: SSE2) in one run, interleaved. Prints both and their
 //! ratio; exits 1 when the best path is not at least `--min-ratio` (default
 //! 3) times faster, which is what happens when a function on the hot path
@@ -36,8 +36,22 @@ use lodcloth_core::sim::{
 const SCENE: &str = include_str!("../../../config/scenes/hanging.toml");
 /// Steps per timed batch, and batches per path (the fastest batch counts:
 /// the other core of a 2-core machine only ever slows a batch down).
-const STEPS: [(Integrator, usize); 2] = [(Integrator::SymplecticEuler, 400), (Integrator::Rk4, 100)];
+const STEPS: [(Integrator, usize); 3] = [
+    (Integrator::SymplecticEuler, 400),
+    (Integrator::Rk4, 100),
+    (Integrator::Xpbd, 200),
+];
 const BATCHES: usize = 15;
+
+/// Every (integrator, steps) with each spring precision; XPBD once (its
+/// sweep is f64 whatever the precision).
+fn cases() -> Vec<((Integrator, usize), SpringPrecision)> {
+    STEPS
+        .into_iter()
+        .flat_map(|s| SpringPrecision::ALL.map(|p| (s, p)))
+        .filter(|&((i, _), p)| i != Integrator::Xpbd || p == SpringPrecision::F64)
+        .collect()
+}
 
 fn sim(integrator: Integrator, n: usize, precision: SpringPrecision) -> Simulation {
     let mut scene = Scene::from_toml(SCENE, "hanging.toml").expect("shipped scene is valid");
@@ -45,7 +59,12 @@ fn sim(integrator: Integrator, n: usize, precision: SpringPrecision) -> Simulati
     scene.params.integrator = integrator;
     scene.params.strain_limit = None;
     scene.params.stiffness_adjustment = None;
-    let limit = scene.build_at(n, n).expect("builds").dt_limit();
+    let probe = scene.build_at(n, n).expect("builds");
+    // XPBD has no limit: half the symplectic one, as for the others.
+    let limit = match probe.dt_limit() {
+        l if l.is_finite() => l,
+        _ => probe.modal().dt_limit(Integrator::SymplecticEuler),
+    };
     scene.params.dt = 0.5 * limit;
     let mut sim = scene.build_at(n, n).expect("builds");
     sim.set_spring_precision(precision);
@@ -86,7 +105,7 @@ fn main() {
         println!("vector guard: this CPU has no vector path beyond the baseline; nothing to guard");
         return finish(&failed, best, min_ratio);
     }
-    for ((integrator, steps), precision) in STEPS.into_iter().flat_map(|s| SpringPrecision::ALL.map(|p| (s, p))) {
+    for ((integrator, steps), precision) in cases() {
         // One cloth per path, stepped in alternation, so both see the same
         // machine at the same time.
         let mut fast = sim(integrator, 64, precision);
@@ -128,7 +147,7 @@ fn layout_guard(max_ratio: f64, failed: &mut Vec<String>) {
     println!(
         "layout guard: time per spring, 64x64 (32-KiB component arrays) against 62x62, fastest of {BATCHES} batches"
     );
-    for ((integrator, steps), precision) in STEPS.into_iter().flat_map(|s| SpringPrecision::ALL.map(|p| (s, p))) {
+    for ((integrator, steps), precision) in cases() {
         let mut pow2 = sim(integrator, 64, precision);
         let mut other = sim(integrator, 62, precision);
         let per_spring = |sim: &Simulation, t: f64| t * 1e3 / sim.topology().spring_count() as f64;

@@ -88,7 +88,7 @@ mod tests {
         let e = parse::<Integrator>("leapfrog").unwrap_err();
         assert_eq!(
             e.to_string(),
-            "'leapfrog' is not one of explicit_euler, symplectic_euler, rk4, implicit_euler"
+            "'leapfrog' is not one of explicit_euler, symplectic_euler, rk4, implicit_euler, xpbd"
         );
         assert_eq!(parse_arg::<Integrator>("implicit-euler"), Ok(Integrator::ImplicitEuler));
         assert_eq!(parse_arg::<Integrator>("rk-5").unwrap_err().given, "rk-5");

@@ -36,6 +36,9 @@
 //! stencils (a mesh cloth) are linear vector constraints `Σ_i w_i x_i` with
 //! compliance `1/D`, one correction each, after the springs.
 //!
+//! The sweep is f64 whatever [`super::SpringPrecision`] asks (that setting
+//! is the explicit integrators' spring kernel).
+//!
 //! Unconditionally stable like backward Euler, with its numerical damping of
 //! a mode ω at `h`: `(hω)²/2` of its amplitude per step.
 
@@ -364,6 +367,21 @@ fn lanes<const N: usize>(s: &[f64], i: usize) -> [f64; N] {
     *a
 }
 
+/// One end's `N` lanes from `i`: the seven fields of [`End`] (a function,
+/// not a closure: a closure was not inlined, and ran baseline code).
+#[inline(always)]
+fn load<const N: usize>(s: &[&[f64]; 7], i: usize) -> End<N> {
+    [
+        lanes(s[0], i),
+        lanes(s[1], i),
+        lanes(s[2], i),
+        lanes(s[3], i),
+        lanes(s[4], i),
+        lanes(s[5], i),
+        lanes(s[6], i),
+    ]
+}
+
 /// `N` lanes of `s` from `i`, to write.
 #[inline(always)]
 fn lanes_mut<const N: usize>(s: &mut [f64], i: usize) -> &mut [f64; N] {
@@ -433,24 +451,8 @@ fn contiguous<const ADJ: bool>(
     ) {
         let [xa, ya, za] = wa;
         let [xb, yb, zb] = wb;
-        let a: End<N> = [
-            lanes(xa, i),
-            lanes(ya, i),
-            lanes(za, i),
-            lanes(ra[0], i),
-            lanes(ra[1], i),
-            lanes(ra[2], i),
-            lanes(ra[3], i),
-        ];
-        let b: End<N> = [
-            lanes(xb, i),
-            lanes(yb, i),
-            lanes(zb, i),
-            lanes(rb[0], i),
-            lanes(rb[1], i),
-            lanes(rb[2], i),
-            lanes(rb[3], i),
-        ];
+        let a = load::<N>(&[&*xa, &*ya, &*za, ra[0], ra[1], ra[2], ra[3]], i);
+        let b = load::<N>(&[&*xb, &*yb, &*zb, rb[0], rb[1], rb[2], rb[3]], i);
         let springs = [lanes(rest, i), lanes(inv_rest, i), lanes(inv_denom, i)];
         let (ca, cb) = block::<N, ADJ>(k, &a, &b, springs);
         // Every field named, so each add is one vector instruction.
@@ -516,20 +518,6 @@ fn masked<const ADJ: bool>(
             inv_denom,
             colour,
         } = entries;
-        /// One end's `N` lanes from `i` (a function, not a closure: a
-        /// closure was not inlined, and ran baseline code).
-        #[inline(always)]
-        fn load<const N: usize>(s: &[&[f64]; 7], i: usize) -> End<N> {
-            [
-                lanes(s[0], i),
-                lanes(s[1], i),
-                lanes(s[2], i),
-                lanes(s[3], i),
-                lanes(s[4], i),
-                lanes(s[5], i),
-                lanes(s[6], i),
-            ]
-        }
         #[inline(always)]
         fn step<const N: usize, const ADJ: bool>(
             k: Coeffs,
