@@ -11,7 +11,10 @@
 //! `cloth_peers.py --lodcloth PATH`. `--path avx2` times the AVX2+FMA path
 //! on a CPU with AVX-512 (what AVX2-only CPUs run).
 //!
-//! `cargo bench -p lodcloth-core --bench peer_step -- [--steps 1000] [--repeats 7] [--json PATH] [--path avx2]`
+//! `--only KEY` times one entry (`symplectic_euler`, `symplectic_euler_f32`,
+//! `rk4`, `rk4_f32`), e.g. under a profiler.
+//!
+//! `cargo bench -p lodcloth-core --bench peer_step -- [--steps 1000] [--repeats 7] [--json PATH] [--path avx2] [--only KEY]`
 
 use std::time::Instant;
 
@@ -37,11 +40,19 @@ fn main() {
         Some(other) => panic!("--path {other}: expected best or avx2"),
     }
     let repeats: usize = arg("--repeats").map_or(7, |s| s.parse().expect("--repeats: a count"));
+    let only = arg("--only");
     let mut entries = Vec::new();
     for (integrator, precision) in [Integrator::SymplecticEuler, Integrator::Rk4]
         .into_iter()
         .flat_map(|i| SpringPrecision::ALL.map(|p| (i, p)))
     {
+        let key = match precision {
+            SpringPrecision::F64 => integrator.name().to_string(),
+            SpringPrecision::F32 => format!("{integrator}_f32"),
+        };
+        if only.as_ref().is_some_and(|o| *o != key) {
+            continue;
+        }
         let mut scene = Scene::from_toml(SCENE, "hanging.toml").expect("shipped scene is valid");
         scene.stability = StabilityCheck::Force;
         scene.params.integrator = integrator;
@@ -76,10 +87,6 @@ fn main() {
             active_isa_name(),
             sim.topology().spring_count()
         );
-        let key = match precision {
-            SpringPrecision::F64 => integrator.name().to_string(),
-            SpringPrecision::F32 => format!("{integrator}_f32"),
-        };
         entries.push(format!(
             "\"{key}\": {{\"us_per_step\": {median}, \"us_min\": {min}, \"isa\": \"{}\"}}",
             active_isa_name()

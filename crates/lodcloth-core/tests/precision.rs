@@ -126,3 +126,138 @@ fn f32_springs_keep_a_level_within_its_error() {
         );
     }
 }
+
+/// Symplectic Euler and RK4 update x and v, write the f32 copies the next
+/// force evaluation reads and sum the report in one pass (`sim/nodes.rs`;
+/// RK4's stage passes write their stages' copies too). Here against their
+/// definition, step by step over 150–2,000 steps of three scenes (the windy
+/// flag: f64 forces beside f32 springs; the shaken curtain: moving pins;
+/// the hanging sheet with its strain limiter: the pass's results discarded
+/// whenever the limiter moves a node), in both precisions:
+/// - every free node is, to the bit, where the integrator's formula puts it
+///   from accelerations taken afresh: symplectic Euler's v + dt·a and
+///   x + dt·v' from the acceleration before the step; RK4's weighted sum of
+///   four stages, each stage's acceleration from a copy of the cloth set to
+///   that stage's state (its pins where their paths are then), so each
+///   stage's f32 copies are those a fresh rounding makes;
+/// - the report's kinetic and gravity energies are the sums over free
+///   nodes of the new state;
+/// - the acceleration after the step is, to the bit, what the same state
+///   gives when set afresh (the copies of the new state, pins included).
+#[test]
+fn a_fused_step_is_its_definition_to_the_bit() {
+    for (text, name) in [
+        (FLAG, "flag-2to1-wind.toml"),
+        (CURTAIN, "curtain-shaken.toml"),
+        (HANGING, "hanging.toml"),
+    ] {
+        for integrator in [Integrator::SymplecticEuler, Integrator::Rk4] {
+            let mut scene = Scene::from_toml(text, name).expect("shipped scene");
+            scene.params.integrator = integrator;
+            scene.stability = StabilityCheck::Force;
+            let (nx, ny) = (24, 20);
+            scene.params.dt = 0.5 * scene.build_at(nx, ny).expect("builds").dt_limit();
+            let dt = scene.params.dt;
+            for precision in SpringPrecision::ALL {
+                let mut sim = scene.build_at(nx, ny).expect("builds");
+                sim.set_spring_precision(precision);
+                let n = sim.topology().n_nodes;
+                let masses = sim.masses().to_vec();
+                let pinned: Vec<bool> = {
+                    let mut p = vec![false; n];
+                    for pin in &sim.loads().pins {
+                        p[pin.node as usize] = true;
+                    }
+                    p
+                };
+                let g = sim.params().gravity;
+                let mut limited = 0;
+                // The hanging sheet's limiter acts once it has fallen.
+                let steps = if name == "hanging.toml" { 2000 } else { 150 };
+                for step in 0..steps {
+                    let acc = sim.accelerations().to_vec();
+                    let (x0, v0) = (sim.state().pos.clone(), sim.state().vel.clone());
+                    let expected = match integrator {
+                        Integrator::Rk4 => rk4_by_hand(&sim, &acc),
+                        _ => {
+                            let v: Vec<f64> = (0..3 * n).map(|i| v0[i] + dt * acc[i]).collect();
+                            let x = (0..3 * n).map(|i| x0[i] + dt * v[i]).collect();
+                            (x, v)
+                        }
+                    };
+                    let report = sim.step();
+                    assert!(report.finite, "{name} {integrator} {precision:?}: diverged");
+                    limited += usize::from(report.strain_iterations > 0);
+                    let s = sim.state();
+                    let (mut ke, mut pe) = (0.0, 0.0);
+                    for k in (0..n).filter(|&k| !pinned[k]) {
+                        let mut v2 = 0.0;
+                        for c in 0..3 {
+                            let i = c * n + k;
+                            if report.strain_iterations == 0 {
+                                assert_eq!(
+                                    (s.vel[i].to_bits(), s.pos[i].to_bits()),
+                                    (expected.1[i].to_bits(), expected.0[i].to_bits()),
+                                    "{name} {integrator} {precision:?} step {step}: node {k} component {c}"
+                                );
+                            }
+                            v2 += s.vel[i] * s.vel[i];
+                            pe -= masses[k] * g[c] * s.pos[i];
+                        }
+                        ke += 0.5 * masses[k] * v2;
+                    }
+                    let close = |a: f64, b: f64| (a - b).abs() <= 1e-9 * (a.abs() + b.abs()) + 1e-15;
+                    assert!(
+                        close(report.kinetic_energy, ke) && close(report.gravity_energy, pe),
+                        "{name} {precision:?} step {step}: report ({}, {}) against sums ({ke}, {pe})",
+                        report.kinetic_energy,
+                        report.gravity_energy
+                    );
+                    let after: Vec<u64> = sim.accelerations().iter().map(|a| a.to_bits()).collect();
+                    let mut fresh = sim.clone();
+                    fresh.set_state(sim.state().clone()).expect("same cloth");
+                    let again: Vec<u64> = fresh.accelerations().iter().map(|a| a.to_bits()).collect();
+                    assert!(
+                        after == again,
+                        "{name} {precision:?} step {step}: the acceleration after the step is not the state's"
+                    );
+                }
+                if name == "hanging.toml" {
+                    assert!(limited > 0, "the limiter never acted: its path is not tested");
+                }
+            }
+        }
+    }
+}
+
+/// One classic RK4 step of `sim` (whose acceleration is `acc`) by hand:
+/// each stage's acceleration from a copy of the cloth set to the stage's
+/// state and time. Returns the new (x, v); pinned nodes are not meaningful.
+fn rk4_by_hand(sim: &Simulation, acc: &[f64]) -> (Vec<f64>, Vec<f64>) {
+    let (s0, dt) = (sim.state().clone(), sim.params().dt);
+    let len = s0.pos.len();
+    let (mut sum_pos, mut sum_vel) = (s0.vel.clone(), acc.to_vec());
+    let mut stage = s0.clone();
+    for i in 0..len {
+        stage.pos[i] = s0.pos[i] + 0.5 * dt * s0.vel[i];
+        stage.vel[i] = s0.vel[i] + 0.5 * dt * acc[i];
+    }
+    for (weight, t_stage, next) in [(2.0, 0.5 * dt, 0.5 * dt), (2.0, 0.5 * dt, dt), (1.0, dt, 0.0)] {
+        stage.time = s0.time + t_stage;
+        let mut at = sim.clone();
+        // Puts the pins where their paths are at the stage's time.
+        at.set_state(stage.clone()).expect("same cloth");
+        let a = at.accelerations().to_vec();
+        let sv = at.state().vel.clone();
+        for i in 0..len {
+            sum_pos[i] += weight * sv[i];
+            sum_vel[i] += weight * a[i];
+            stage.pos[i] = s0.pos[i] + next * sv[i];
+            stage.vel[i] = s0.vel[i] + next * a[i];
+        }
+    }
+    let h6 = dt / 6.0;
+    let x = (0..len).map(|i| s0.pos[i] + h6 * sum_pos[i]).collect();
+    let v = (0..len).map(|i| s0.vel[i] + h6 * sum_vel[i]).collect();
+    (x, v)
+}

@@ -298,6 +298,11 @@ pub struct Loads {
 }
 
 impl Loads {
+    /// True when [`Loads::add_forces`] adds anything (forces, tethers or wind).
+    pub(crate) fn adds_forces(&self) -> bool {
+        !self.forces.is_empty() || !self.tethers.is_empty() || self.wind.is_some()
+    }
+
     /// Add the scene forces and the wind force at (t, pos, vel) to `f` (SoA).
     /// `normals` is scratch of length 3n when there is wind (unused otherwise).
     pub(crate) fn add_forces(

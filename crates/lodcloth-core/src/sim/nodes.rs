@@ -1,0 +1,271 @@
+//! The per-node passes of a step around the spring kernel: the Euler
+//! updates, the f32 copies the kernel reads, and the report's sums.
+//!
+//! A 64×64 step with f32 springs spent about a third of its time in these
+//! passes (profiled on the AVX2 path, 2026-12-02): the update read the
+//! accelerations and wrote x and v, a second pass read x and v again to
+//! round them for the kernel, and a third read them again for the report.
+//! Each pass streams arrays of 32 KiB per component through L2 (the state,
+//! accelerations, forces and f32 copies of a 64×64 cloth are over 0.6 MB,
+//! more than a Zen 3 core's L2). Symplectic Euler now does all three in one
+//! pass ([`symplectic`]), while the values are in registers.
+
+/// Lanes of the report's partial sums (a sequential sum is one long chain
+/// of dependent additions, several µs at 64×64).
+pub(super) const LANES: usize = 8;
+
+/// Partial sums of the report, lane by lane: kinetic energy, gravity
+/// energy, and `x·0` over every position and velocity (0 exactly when all
+/// are finite).
+pub(super) type Sums = ([f64; LANES], [f64; LANES], [f64; LANES]);
+
+/// No nodes summed yet.
+pub(super) const NO_SUMS: Sums = ([0.0; LANES], [0.0; LANES], [0.0; LANES]);
+
+/// Node data of a block of `N` nodes: mass, free flag, position and
+/// velocity by component.
+pub(super) struct Block<const N: usize> {
+    pub(super) mass: [f64; N],
+    pub(super) free: [f64; N],
+    pub(super) x: [[f64; N]; 3],
+    pub(super) v: [[f64; N]; 3],
+}
+
+/// Nodes of `block` into lanes `0..N` of the partial sums. Both the fused
+/// pass and [`super::Simulation`]'s separate report pass sum through here,
+/// with the same lane structure: the same bits either way.
+#[inline(always)]
+pub(super) fn add_to_sums<const N: usize>(block: &Block<N>, g: [f64; 3], (ke, pe, zero): &mut Sums) {
+    let [x, y, z] = &block.x;
+    let [u, v, w] = &block.v;
+    for j in 0..N {
+        let m = block.mass[j] * block.free[j];
+        ke[j] += 0.5 * m * (u[j] * u[j] + v[j] * v[j] + w[j] * w[j]);
+        pe[j] -= m * (g[0] * x[j] + g[1] * y[j] + g[2] * z[j]);
+        // x·0 is 0 for finite x and NaN otherwise.
+        zero[j] += x[j] * 0.0 + y[j] * 0.0 + z[j] * 0.0 + u[j] * 0.0 + v[j] * 0.0 + w[j] * 0.0;
+    }
+}
+
+/// Lane `j` of `b` added to lane `j` of `a`: the halves of a split step.
+#[inline(always)]
+pub(super) fn merge(a: &mut Sums, b: &Sums) {
+    for j in 0..LANES {
+        a.0[j] += b.0[j];
+        a.1[j] += b.1[j];
+        a.2[j] += b.2[j];
+    }
+}
+
+/// One (explicit or symplectic) Euler update of x and v from a.
+#[inline(always)]
+pub(super) fn euler_update<const SYMPLECTIC: bool>(pos: &mut [f64], vel: &mut [f64], acc: &[f64], dt: f64) {
+    for ((x, v), a) in pos.iter_mut().zip(vel).zip(acc) {
+        if SYMPLECTIC {
+            *v += dt * a;
+            *x += dt * *v;
+        } else {
+            *x += dt * *v;
+            *v += dt * a;
+        }
+    }
+}
+
+/// The slices of one piece of the nodes (a whole cloth, or one half of a
+/// split step) for [`symplectic`] and [`rk4_last`], each component
+/// separately.
+pub(super) struct Piece<'a> {
+    pub(super) x: [&'a mut [f64]; 3],
+    pub(super) v: [&'a mut [f64]; 3],
+    /// Symplectic Euler: the acceleration; RK4: the weighted sum of the
+    /// stages' accelerations.
+    pub(super) a: [&'a [f64]; 3],
+    /// RK4: the weighted sum of the stages' velocities (empty for
+    /// symplectic Euler).
+    pub(super) b: [&'a [f64]; 3],
+    /// The f32 copies of x and v for the spring kernel; empty slices with
+    /// f64 springs (`copy` false).
+    pub(super) x32: [&'a mut [f32]; 3],
+    pub(super) v32: [&'a mut [f32]; 3],
+    pub(super) copy: bool,
+    pub(super) mass: &'a [f64],
+    pub(super) free: &'a [f64],
+}
+
+/// Symplectic Euler (v += dt·a, then x += dt·v) over `piece`, writing the
+/// f32 copies of the new x and v and summing the report over them, in one
+/// pass. Bit for bit what [`euler_update`], the kernel's rounding and the
+/// report's pass give one after the other.
+#[inline(always)]
+pub(super) fn symplectic(piece: Piece, dt: f64, g: [f64; 3]) -> Sums {
+    update::<false>(piece, dt, g)
+}
+
+/// RK4's last pass (x += h·b, v += h·a with h = dt/6 and the weighted
+/// sums of the stages), fused like [`symplectic`].
+#[inline(always)]
+pub(super) fn rk4_last(piece: Piece, h: f64, g: [f64; 3]) -> Sums {
+    update::<true>(piece, h, g)
+}
+
+#[inline(always)]
+fn update<const RK4: bool>(piece: Piece, dt: f64, g: [f64; 3]) -> Sums {
+    let mut sums = NO_SUMS;
+    if piece.copy {
+        blocks::<true, RK4>(piece, dt, g, &mut sums);
+    } else {
+        blocks::<false, RK4>(piece, dt, g, &mut sums);
+    }
+    sums
+}
+
+#[inline(always)]
+fn blocks<const COPY: bool, const RK4: bool>(mut piece: Piece, dt: f64, g: [f64; 3], sums: &mut Sums) {
+    let n = piece.mass.len();
+    let mut k = 0;
+    while k + LANES <= n {
+        nodes::<LANES, COPY, RK4>(&mut piece, k, dt, g, sums);
+        k += LANES;
+    }
+    for k in k..n {
+        nodes::<1, COPY, RK4>(&mut piece, k, dt, g, sums);
+    }
+}
+
+/// Nodes `k..k+N` of [`update`].
+#[inline(always)]
+fn nodes<const N: usize, const COPY: bool, const RK4: bool>(
+    piece: &mut Piece,
+    k: usize,
+    dt: f64,
+    g: [f64; 3],
+    sums: &mut Sums,
+) {
+    #[inline(always)]
+    fn arr<const N: usize>(s: &[f64], k: usize) -> [f64; N] {
+        *<&[f64; N]>::try_from(&s[k..k + N]).expect("N")
+    }
+    let mut block = Block::<N> {
+        mass: arr(piece.mass, k),
+        free: arr(piece.free, k),
+        x: [[0.0; N]; 3],
+        v: [[0.0; N]; 3],
+    };
+    for c in 0..3 {
+        let a = arr::<N>(piece.a[c], k);
+        let mut x = arr::<N>(piece.x[c], k);
+        let mut v = arr::<N>(piece.v[c], k);
+        if RK4 {
+            let b = arr::<N>(piece.b[c], k);
+            for j in 0..N {
+                x[j] += dt * b[j];
+                v[j] += dt * a[j];
+            }
+        } else {
+            for j in 0..N {
+                v[j] += dt * a[j];
+                x[j] += dt * v[j];
+            }
+        }
+        piece.x[c][k..k + N].copy_from_slice(&x);
+        piece.v[c][k..k + N].copy_from_slice(&v);
+        if COPY {
+            // Rounded to nearest, ties to even: the same on every instruction
+            // set, and what the kernel's own rounding gives.
+            let (mut x32, mut v32) = ([0.0f32; N], [0.0f32; N]);
+            for j in 0..N {
+                x32[j] = x[j] as f32;
+                v32[j] = v[j] as f32;
+            }
+            piece.x32[c][k..k + N].copy_from_slice(&x32);
+            piece.v32[c][k..k + N].copy_from_slice(&v32);
+        }
+        block.x[c] = x;
+        block.v[c] = v;
+    }
+    add_to_sums(&block, g, sums);
+}
+
+/// f32 copies of a stage's positions and velocities for the spring kernel
+/// (flat `[x…, y…, z…]` slices), written by the pass that makes the stage.
+pub(super) type Copies<'a> = Option<(&'a mut [f32], &'a mut [f32])>;
+
+/// RK4's first pass: the sums start at (v, a), the midpoint stage is
+/// x + ½dt·v, v + ½dt·a, and its f32 copies are written when asked.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+pub(super) fn rk4_first(
+    [pos, vel, acc]: [&[f64]; 3],
+    [sum_pos, sum_vel, stage_pos, stage_vel]: [&mut [f64]; 4],
+    copies: Copies,
+    dt: f64,
+) {
+    let len = pos.len();
+    let (vel, acc) = (&vel[..len], &acc[..len]);
+    let (sum_pos, sum_vel) = (&mut sum_pos[..len], &mut sum_vel[..len]);
+    let (stage_pos, stage_vel) = (&mut stage_pos[..len], &mut stage_vel[..len]);
+    match copies {
+        Some((p32, v32)) => {
+            let (p32, v32) = (&mut p32[..len], &mut v32[..len]);
+            for i in 0..len {
+                sum_pos[i] = vel[i];
+                sum_vel[i] = acc[i];
+                let (p, v) = (pos[i] + 0.5 * dt * vel[i], vel[i] + 0.5 * dt * acc[i]);
+                stage_pos[i] = p;
+                stage_vel[i] = v;
+                p32[i] = p as f32;
+                v32[i] = v as f32;
+            }
+        }
+        None => {
+            for i in 0..len {
+                sum_pos[i] = vel[i];
+                sum_vel[i] = acc[i];
+                stage_pos[i] = pos[i] + 0.5 * dt * vel[i];
+                stage_vel[i] = vel[i] + 0.5 * dt * acc[i];
+            }
+        }
+    }
+}
+
+/// One of RK4's middle passes: the stage just evaluated joins the sums with
+/// `weight`, and the next stage is x + `next`·v_stage, v + `next`·a_stage
+/// (its f32 copies written when asked).
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+pub(super) fn rk4_stage(
+    [pos, vel, stage_acc]: [&[f64]; 3],
+    [sum_pos, sum_vel, stage_pos, stage_vel]: [&mut [f64]; 4],
+    copies: Copies,
+    weight: f64,
+    next: f64,
+) {
+    let len = pos.len();
+    let (vel, stage_acc) = (&vel[..len], &stage_acc[..len]);
+    let (sum_pos, sum_vel) = (&mut sum_pos[..len], &mut sum_vel[..len]);
+    let (stage_pos, stage_vel) = (&mut stage_pos[..len], &mut stage_vel[..len]);
+    match copies {
+        Some((p32, v32)) => {
+            let (p32, v32) = (&mut p32[..len], &mut v32[..len]);
+            for i in 0..len {
+                sum_pos[i] += weight * stage_vel[i];
+                sum_vel[i] += weight * stage_acc[i];
+                let sv = stage_vel[i];
+                let (p, v) = (pos[i] + next * sv, vel[i] + next * stage_acc[i]);
+                stage_pos[i] = p;
+                stage_vel[i] = v;
+                p32[i] = p as f32;
+                v32[i] = v as f32;
+            }
+        }
+        None => {
+            for i in 0..len {
+                sum_pos[i] += weight * stage_vel[i];
+                sum_vel[i] += weight * stage_acc[i];
+                let sv = stage_vel[i];
+                stage_pos[i] = pos[i] + next * sv;
+                stage_vel[i] = vel[i] + next * stage_acc[i];
+            }
+        }
+    }
+}
