@@ -52,6 +52,9 @@ pub(super) struct Run<'a, R> {
     pub(super) inv_rest: &'a [R],
     /// Per-slot mask (1 spring, 0 none), or empty when every slot is a spring.
     pub(super) live: &'a [R],
+    /// The rest length and its inverse shared by every spring of the run,
+    /// when they are (then `rest` and `inv_rest` are not read).
+    pub(super) uniform: Option<(R, R)>,
 }
 
 impl<R> Run<'_, R> {
@@ -251,6 +254,7 @@ pub(super) fn gather_group<R: KernelReal, const L: usize, const ADJ: bool>(
         rest,
         inv_rest,
         live: &[],
+        uniform: None,
     };
     let out = &mut *ws.out;
     let mut local = *acc;
@@ -337,8 +341,10 @@ fn block<R: Real, const N: usize, const ADJ: bool>(
         arr::<R, N>(run.vb[1], i),
         arr::<R, N>(run.vb[2], i),
     );
-    let l0 = arr::<R, N>(run.rest, i);
-    let il0 = arr::<R, N>(run.inv_rest, i);
+    let (l0, il0) = match run.uniform {
+        Some((l0, il0)) => ([l0; N], [il0; N]),
+        None => (arr::<R, N>(run.rest, i), arr::<R, N>(run.inv_rest, i)),
+    };
     let mask: [R; N] = if run.live.is_empty() {
         [R::ONE; N]
     } else {

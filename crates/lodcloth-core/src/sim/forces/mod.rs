@@ -234,7 +234,7 @@ fn stencil_springs<R: KernelReal, const L: usize, const ADJ: bool>(
         // rows), else its runs one by one.
         let padded = R::padded(group, own)
             .zip(group.padded.as_ref())
-            .map(|([rest, inv_rest, live], pd)| (pd.start as usize, rest, inv_rest, live));
+            .map(|([rest, inv_rest, live], pd)| (pd.start as usize, rest, inv_rest, live, own.uniform));
         let (rest_all, inv_all) = R::rest(group, own);
         let runs = group.runs.iter().map(|r| {
             let (first, len) = (r.first as usize, r.len as usize);
@@ -243,13 +243,15 @@ fn stencil_springs<R: KernelReal, const L: usize, const ADJ: bool>(
                 sl(rest_all, first, len),
                 sl(inv_all, first, len),
                 &[][..],
+                None,
             )
         });
-        let all: &mut dyn Iterator<Item = (usize, &[R], &[R], &[R])> = match padded {
+        type Piece<'a, R> = (usize, &'a [R], &'a [R], &'a [R], Option<(R, R)>);
+        let all: &mut dyn Iterator<Item = Piece<R>> = match padded {
             Some(one) => &mut std::iter::once(one),
             None => &mut { runs },
         };
-        for (start, rest, inv_rest, live) in all {
+        for (start, rest, inv_rest, live, uniform) in all {
             // The part of the run with `a` in lo..hi.
             let i0 = lo.saturating_sub(start).min(rest.len());
             let i1 = hi.saturating_sub(start).min(rest.len());
@@ -269,6 +271,7 @@ fn stencil_springs<R: KernelReal, const L: usize, const ADJ: bool>(
                 rest,
                 inv_rest,
                 live,
+                uniform,
             };
             let (wa, wb) = (a0 - base, b0 - base);
             match offset {

@@ -16,6 +16,12 @@ pub struct GroupRest<R> {
     inv_rest: Vec<R>,
     /// [`super::topology::Padded`]'s rest, inverse rest and live mask.
     padded: [Vec<R>; 3],
+    /// The rest length and its inverse (in this precision) when every
+    /// spring of the padded run has the same: a regular grid's groups. The
+    /// kernel then broadcasts them instead of streaming two arrays per group
+    /// (at 64×64 in f32 about 190 KB of the step's working set, which a Zen 3
+    /// core's 512 KB L2 does not hold beside the fields).
+    pub(super) uniform: Option<(R, R)>,
 }
 
 /// The rest data of every group in the kernel's precision.
@@ -44,6 +50,18 @@ impl<R: RestView> RestTable<R> {
                         Some(pd) => [round(&pd.rest), round(&pd.inv_rest), round(&pd.live)],
                         None => Default::default(),
                     },
+                    uniform: g.padded.as_ref().and_then(|pd| {
+                        // Rounded to R slot by slot: the same bits the arrays hold.
+                        let mut live = pd
+                            .live
+                            .iter()
+                            .zip(pd.rest.iter().zip(&pd.inv_rest))
+                            .filter(|(l, _)| **l != 0.0);
+                        let (_, first) = live.next()?;
+                        let first = (R::from_f64(*first.0), R::from_f64(*first.1));
+                        live.all(|(_, (r, i))| R::from_f64(*r) == first.0 && R::from_f64(*i) == first.1)
+                            .then_some(first)
+                    }),
                 })
                 .collect(),
         }
