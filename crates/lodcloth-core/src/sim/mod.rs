@@ -537,6 +537,80 @@ fn node_halves_mut<T>(field: &mut [T], n: usize, cut: usize) -> ([&mut [T]; 3], 
     ([x0, y0, z0], [x1, y1, z1])
 }
 
+/// The fused last pass of a step (see [`nodes`]) over both halves:
+/// symplectic Euler's from the acceleration `a` (`b` None), or RK4's from
+/// the weighted sums of the stages' accelerations `a` and velocities `b`
+/// with `h` = dt/6. Returns the report's sums.
+#[inline(always)]
+fn fused_last(
+    par: Par,
+    model: &Model,
+    state: &mut State,
+    mixed: Option<&mut Mixed>,
+    a: &[f64],
+    b: Option<&[f64]>,
+    h: f64,
+) -> Sums {
+    let n = model.topology.n_nodes;
+    let cut = par.split.unwrap_or(n);
+    let (x0, x1) = node_halves_mut(&mut state.pos, n, cut);
+    let (v0, v1) = node_halves_mut(&mut state.vel, n, cut);
+    let (a0, a1) = node_halves(a, n, cut);
+    let (b0, b1) = match b {
+        Some(b) => node_halves(b, n, cut),
+        None => ([&[][..]; 3], [&[][..]; 3]),
+    };
+    let copy = mixed.is_some();
+    let ((p0, p1), (q0, q1)) = f32_halves(mixed, n, cut);
+    let (mass, free) = (&model.masses[..n], &model.free[..n]);
+    let (lo, hi) = (
+        nodes::Piece {
+            x: x0,
+            v: v0,
+            a: a0,
+            b: b0,
+            x32: p0,
+            v32: q0,
+            copy,
+            mass: &mass[..cut],
+            free: &free[..cut],
+        },
+        nodes::Piece {
+            x: x1,
+            v: v1,
+            a: a1,
+            b: b1,
+            x32: p1,
+            v32: q1,
+            copy,
+            mass: &mass[cut..],
+            free: &free[cut..],
+        },
+    );
+    let (rk4, g) = (b.is_some(), model.params.gravity);
+    let pass = inlined(
+        #[inline(always)]
+        |piece: nodes::Piece| {
+            if rk4 {
+                nodes::rk4_last(piece, h, g)
+            } else {
+                nodes::symplectic(piece, h, g)
+            }
+        },
+    );
+    let (mut s0, mut s1) = (NO_SUMS, NO_SUMS);
+    par.both(
+        #[inline(always)]
+        || s0 = pass(lo),
+        #[inline(always)]
+        || s1 = pass(hi),
+    );
+    if par.split.is_some() {
+        nodes::merge(&mut s0, &s1);
+    }
+    s0
+}
+
 /// [`node_halves_mut`] for reading.
 #[inline(always)]
 fn node_halves(field: &[f64], n: usize, cut: usize) -> ([&[f64]; 3], [&[f64]; 3]) {
@@ -1086,50 +1160,15 @@ impl Simulation {
     /// report's sums (see [`nodes`]); returns the sums.
     #[inline(always)]
     fn symplectic(&mut self, dt: f64, par: Par) -> Sums {
-        let n = self.model.topology.n_nodes;
-        let cut = par.split.unwrap_or(n);
-        let (x0, x1) = node_halves_mut(&mut self.state.pos, n, cut);
-        let (v0, v1) = node_halves_mut(&mut self.state.vel, n, cut);
-        let (a0, a1) = node_halves(&self.acc, n, cut);
-        let copy = self.ws.mixed.is_some();
-        let ((p0, p1), (q0, q1)) = f32_halves(self.ws.mixed.as_deref_mut(), n, cut);
-        let (mass, free) = (&self.model.masses[..n], &self.model.free[..n]);
-        let g = self.model.params.gravity;
-        let (mut s0, mut s1) = (NO_SUMS, NO_SUMS);
-        let (lo, hi) = (
-            nodes::Piece {
-                x: x0,
-                v: v0,
-                a: a0,
-                b: [&[]; 3],
-                x32: p0,
-                v32: q0,
-                copy,
-                mass: &mass[..cut],
-                free: &free[..cut],
-            },
-            nodes::Piece {
-                x: x1,
-                v: v1,
-                a: a1,
-                b: [&[]; 3],
-                x32: p1,
-                v32: q1,
-                copy,
-                mass: &mass[cut..],
-                free: &free[cut..],
-            },
-        );
-        par.both(
-            #[inline(always)]
-            || s0 = nodes::symplectic(lo, dt, g),
-            #[inline(always)]
-            || s1 = nodes::symplectic(hi, dt, g),
-        );
-        if par.split.is_some() {
-            nodes::merge(&mut s0, &s1);
-        }
-        s0
+        fused_last(
+            par,
+            &self.model,
+            &mut self.state,
+            self.ws.mixed.as_deref_mut(),
+            &self.acc,
+            None,
+            dt,
+        )
     }
 
     /// Classic RK4 on y = (x, v), y' = (v, a(t, x, v)); k1 is the cached
@@ -1232,51 +1271,16 @@ impl Simulation {
         self.ws.stage_pos = stage_pos;
         self.ws.stage_vel = stage_vel;
         self.ws.stage_acc = stage_acc;
-        let cut = par.split.unwrap_or(n);
-        let (sp, sv) = (&self.ws.sum_pos[..], &self.ws.sum_vel[..]);
-        let (b0, b1) = node_halves(sp, n, cut);
-        let (a0, a1) = node_halves(sv, n, cut);
-        let (x0, x1) = node_halves_mut(&mut self.state.pos, n, cut);
-        let (v0, v1) = node_halves_mut(&mut self.state.vel, n, cut);
-        let copy = self.ws.mixed.is_some();
-        let ((p0, p1), (q0, q1)) = f32_halves(self.ws.mixed.as_deref_mut(), n, cut);
-        let (mass, free) = (&self.model.masses[..n], &self.model.free[..n]);
-        let (lo, hi) = (
-            nodes::Piece {
-                x: x0,
-                v: v0,
-                a: a0,
-                b: b0,
-                x32: p0,
-                v32: q0,
-                copy,
-                mass: &mass[..cut],
-                free: &free[..cut],
-            },
-            nodes::Piece {
-                x: x1,
-                v: v1,
-                a: a1,
-                b: b1,
-                x32: p1,
-                v32: q1,
-                copy,
-                mass: &mass[cut..],
-                free: &free[cut..],
-            },
-        );
-        let (h6, g) = (dt / 6.0, self.model.params.gravity);
-        let (mut s0, mut s1) = (NO_SUMS, NO_SUMS);
-        par.both(
-            #[inline(always)]
-            || s0 = nodes::rk4_last(lo, h6, g),
-            #[inline(always)]
-            || s1 = nodes::rk4_last(hi, h6, g),
-        );
-        if par.split.is_some() {
-            nodes::merge(&mut s0, &s1);
-        }
-        s0
+        let ws = &mut self.ws;
+        fused_last(
+            par,
+            &self.model,
+            &mut self.state,
+            ws.mixed.as_deref_mut(),
+            &ws.sum_vel,
+            Some(&ws.sum_pos),
+            dt / 6.0,
+        )
     }
 
     /// The report of the current state. One pass over the nodes gives the
