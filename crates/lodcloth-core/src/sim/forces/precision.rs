@@ -31,7 +31,7 @@ pub struct RestTable<R> {
 }
 
 impl<R: RestView> RestTable<R> {
-    fn new(topology: &Topology) -> RestTable<R> {
+    pub(super) fn new(topology: &Topology) -> RestTable<R> {
         let round = |v: &[f64]| -> Vec<R> {
             if R::NATIVE {
                 Vec::new()

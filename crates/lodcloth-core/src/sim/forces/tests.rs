@@ -212,3 +212,36 @@ fn a_split_evaluation_adds_every_spring_once() {
     stop.store(true, Ordering::Relaxed);
     helper.join().expect("helper");
 }
+
+/// Which padded groups of a regular grid the kernel runs with one shared
+/// rest length (`GroupRest::uniform`): in f32 every one (the rest lengths,
+/// which differ in their last f64 bits, round to one f32), so the f32 step
+/// streams no rest arrays; and the shared value is the arrays' own.
+#[test]
+fn a_regular_grid_shares_its_rest_lengths_in_f32() {
+    for (nx, ny) in [(64, 64), (63, 17), (24, 20)] {
+        let shape = GridShape {
+            nx,
+            ny,
+            width: 0.4,
+            height: 0.3,
+        };
+        let topology = Topology::grid(shape, Orientation::Horizontal);
+        let table = RestTable::<f32>::new(&topology);
+        let f64_table = RestTable::<f64>::new(&topology);
+        let mut shared64 = 0;
+        for ((group, own), own64) in topology.groups.iter().zip(&table.groups).zip(&f64_table.groups) {
+            let Some(pd) = group.padded.as_ref() else { continue };
+            let (l0, il0) = own
+                .uniform
+                .unwrap_or_else(|| panic!("{nx}x{ny} {:?}: no shared f32 rest length", group.class));
+            for (k, &live) in pd.live.iter().enumerate() {
+                if live != 0.0 {
+                    assert_eq!((pd.rest[k] as f32, pd.inv_rest[k] as f32), (l0, il0));
+                }
+            }
+            shared64 += usize::from(own64.uniform.is_some());
+        }
+        eprintln!("{nx}x{ny}: padded groups with one f64 rest length: {shared64}");
+    }
+}
