@@ -325,7 +325,7 @@ impl Model {
     /// turns forces into accelerations, clears it while it is in cache,
     /// instead of a separate pass to clear it before the next evaluation.
     /// `rounded`: with f32 springs, their copies of pos and vel are already
-    /// written (by symplectic Euler's fused pass).
+    /// written (by the pass that made pos and vel, see [`nodes`]).
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
     fn accelerations(
@@ -992,9 +992,9 @@ impl Simulation {
                 let (a0, a1) = self.acc.split_at(mid);
                 par.both(
                     #[inline(always)]
-                    || nodes::euler_update::<false>(p0, v0, a0, dt),
+                    || nodes::explicit_euler(p0, v0, a0, dt),
                     #[inline(always)]
-                    || nodes::euler_update::<false>(p1, v1, a1, dt),
+                    || nodes::explicit_euler(p1, v1, a1, dt),
                 );
             }
             Integrator::Rk4 => fused = Some(self.rk4(t0, dt, par)),
@@ -1142,7 +1142,7 @@ impl Simulation {
     }
 
     /// [`Simulation::ensure_cache`]; `rounded`: the f32 copies of the state
-    /// are already written (by the fused symplectic pass), the kernel need not
+    /// are already written (by a fused last pass), the kernel need not
     /// round them again.
     #[inline(always)]
     fn ensure_cache_from(&mut self, par: Par, rounded: bool) {
@@ -1303,7 +1303,7 @@ impl Simulation {
         }
         /// Nodes `k..k+N` into lanes `0..N` of the partial sums.
         #[inline(always)]
-        fn nodes<const N: usize>(
+        fn block<const N: usize>(
             k: usize,
             [masses, free, px, py, pz, vx, vy, vz]: [&[f64]; 8],
             g: [f64; 3],
@@ -1324,11 +1324,11 @@ impl Simulation {
                 let mut s = NO_SUMS;
                 let mut k = 0;
                 while k + LANES <= n {
-                    nodes::<LANES>(k, arrays, g, &mut s);
+                    block::<LANES>(k, arrays, g, &mut s);
                     k += LANES;
                 }
                 for k in k..n {
-                    nodes::<1>(k, arrays, g, &mut s);
+                    block::<1>(k, arrays, g, &mut s);
                 }
                 *out = s;
             },

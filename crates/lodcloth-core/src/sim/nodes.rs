@@ -1,5 +1,5 @@
 //! The per-node passes of a step around the spring kernel: the Euler
-//! updates, the f32 copies the kernel reads, and the report's sums.
+//! and RK4 updates, the f32 copies the kernel reads, and the report's sums.
 //!
 //! A 64×64 step with f32 springs spent about a third of its time in these
 //! passes (profiled on the AVX2 path, 2026-12-02): the update read the
@@ -57,17 +57,12 @@ pub(super) fn merge(a: &mut Sums, b: &Sums) {
     }
 }
 
-/// One (explicit or symplectic) Euler update of x and v from a.
+/// Explicit Euler's update of x (with the old v) and v from a.
 #[inline(always)]
-pub(super) fn euler_update<const SYMPLECTIC: bool>(pos: &mut [f64], vel: &mut [f64], acc: &[f64], dt: f64) {
+pub(super) fn explicit_euler(pos: &mut [f64], vel: &mut [f64], acc: &[f64], dt: f64) {
     for ((x, v), a) in pos.iter_mut().zip(vel).zip(acc) {
-        if SYMPLECTIC {
-            *v += dt * a;
-            *x += dt * *v;
-        } else {
-            *x += dt * *v;
-            *v += dt * a;
-        }
+        *x += dt * *v;
+        *v += dt * a;
     }
 }
 
@@ -94,7 +89,7 @@ pub(super) struct Piece<'a> {
 
 /// Symplectic Euler (v += dt·a, then x += dt·v) over `piece`, writing the
 /// f32 copies of the new x and v and summing the report over them, in one
-/// pass. Bit for bit what [`euler_update`], the kernel's rounding and the
+/// pass. Bit for bit what the update alone, the kernel's rounding and the
 /// report's pass give one after the other.
 #[inline(always)]
 pub(super) fn symplectic(piece: Piece, dt: f64, g: [f64; 3]) -> Sums {
@@ -192,51 +187,36 @@ pub(super) type Copies<'a> = Option<(&'a mut [f32], &'a mut [f32])>;
 
 /// RK4's first pass: the sums start at (v, a), the midpoint stage is
 /// x + ½dt·v, v + ½dt·a, and its f32 copies are written when asked.
-#[allow(clippy::too_many_arguments)]
 #[inline(always)]
-pub(super) fn rk4_first(
-    [pos, vel, acc]: [&[f64]; 3],
-    [sum_pos, sum_vel, stage_pos, stage_vel]: [&mut [f64]; 4],
-    copies: Copies,
-    dt: f64,
-) {
-    let len = pos.len();
-    let (vel, acc) = (&vel[..len], &acc[..len]);
-    let (sum_pos, sum_vel) = (&mut sum_pos[..len], &mut sum_vel[..len]);
-    let (stage_pos, stage_vel) = (&mut stage_pos[..len], &mut stage_vel[..len]);
-    match copies {
-        Some((p32, v32)) => {
-            let (p32, v32) = (&mut p32[..len], &mut v32[..len]);
-            for i in 0..len {
-                sum_pos[i] = vel[i];
-                sum_vel[i] = acc[i];
-                let (p, v) = (pos[i] + 0.5 * dt * vel[i], vel[i] + 0.5 * dt * acc[i]);
-                stage_pos[i] = p;
-                stage_vel[i] = v;
-                p32[i] = p as f32;
-                v32[i] = v as f32;
-            }
-        }
-        None => {
-            for i in 0..len {
-                sum_pos[i] = vel[i];
-                sum_vel[i] = acc[i];
-                stage_pos[i] = pos[i] + 0.5 * dt * vel[i];
-                stage_vel[i] = vel[i] + 0.5 * dt * acc[i];
-            }
-        }
-    }
+pub(super) fn rk4_first(read: [&[f64]; 3], write: [&mut [f64]; 4], copies: Copies, dt: f64) {
+    stage_pass::<true>(read, write, copies, 1.0, 0.5 * dt);
 }
 
 /// One of RK4's middle passes: the stage just evaluated joins the sums with
 /// `weight`, and the next stage is x + `next`·v_stage, v + `next`·a_stage
 /// (its f32 copies written when asked).
-#[allow(clippy::too_many_arguments)]
 #[inline(always)]
-pub(super) fn rk4_stage(
+pub(super) fn rk4_stage(read: [&[f64]; 3], write: [&mut [f64]; 4], copies: Copies, weight: f64, next: f64) {
+    stage_pass::<false>(read, write, copies, weight, next);
+}
+
+#[inline(always)]
+fn stage_pass<const FIRST: bool>(read: [&[f64]; 3], write: [&mut [f64]; 4], copies: Copies, weight: f64, next: f64) {
+    // The choice outside the loop, so each loop vectorises on its own.
+    match copies {
+        Some((p32, v32)) => stage_loop::<FIRST, true>(read, write, p32, v32, weight, next),
+        None => stage_loop::<FIRST, false>(read, write, &mut [], &mut [], weight, next),
+    }
+}
+
+/// [`stage_pass`]'s loop: in the first pass the stage is the state itself
+/// (`stage_acc` is its acceleration) and the sums are set, not added to.
+#[inline(always)]
+fn stage_loop<const FIRST: bool, const COPY: bool>(
     [pos, vel, stage_acc]: [&[f64]; 3],
     [sum_pos, sum_vel, stage_pos, stage_vel]: [&mut [f64]; 4],
-    copies: Copies,
+    p32: &mut [f32],
+    v32: &mut [f32],
     weight: f64,
     next: f64,
 ) {
@@ -244,28 +224,27 @@ pub(super) fn rk4_stage(
     let (vel, stage_acc) = (&vel[..len], &stage_acc[..len]);
     let (sum_pos, sum_vel) = (&mut sum_pos[..len], &mut sum_vel[..len]);
     let (stage_pos, stage_vel) = (&mut stage_pos[..len], &mut stage_vel[..len]);
-    match copies {
-        Some((p32, v32)) => {
-            let (p32, v32) = (&mut p32[..len], &mut v32[..len]);
-            for i in 0..len {
-                sum_pos[i] += weight * stage_vel[i];
-                sum_vel[i] += weight * stage_acc[i];
-                let sv = stage_vel[i];
-                let (p, v) = (pos[i] + next * sv, vel[i] + next * stage_acc[i]);
-                stage_pos[i] = p;
-                stage_vel[i] = v;
-                p32[i] = p as f32;
-                v32[i] = v as f32;
-            }
-        }
-        None => {
-            for i in 0..len {
-                sum_pos[i] += weight * stage_vel[i];
-                sum_vel[i] += weight * stage_acc[i];
-                let sv = stage_vel[i];
-                stage_pos[i] = pos[i] + next * sv;
-                stage_vel[i] = vel[i] + next * stage_acc[i];
-            }
+    let (p32, v32) = if COPY {
+        (&mut p32[..len], &mut v32[..len])
+    } else {
+        (p32, v32)
+    };
+    for i in 0..len {
+        let sv = if FIRST {
+            sum_pos[i] = vel[i];
+            sum_vel[i] = stage_acc[i];
+            vel[i]
+        } else {
+            sum_pos[i] += weight * stage_vel[i];
+            sum_vel[i] += weight * stage_acc[i];
+            stage_vel[i]
+        };
+        let (p, v) = (pos[i] + next * sv, vel[i] + next * stage_acc[i]);
+        stage_pos[i] = p;
+        stage_vel[i] = v;
+        if COPY {
+            p32[i] = p as f32;
+            v32[i] = v as f32;
         }
     }
 }
