@@ -316,10 +316,11 @@ fn block<R: Real, const N: usize, const ADJ: bool>(
     coef: Coef<R>,
     skip: usize,
 ) -> BlockOut<R, N> {
+    // References, not copies: each lane loop below then reads the data
+    // where it uses it, and fewer vectors are live at a time.
     #[inline(always)]
-    fn arr<R: Copy, const N: usize>(s: &[R], i: usize) -> [R; N] {
-        let a: &[R; N] = s[i..i + N].try_into().expect("slice of N");
-        *a
+    fn arr<R: Copy, const N: usize>(s: &[R], i: usize) -> &[R; N] {
+        s[i..i + N].try_into().expect("slice of N")
     }
     let (ax, ay, az) = (
         arr::<R, N>(run.xa[0], i),
@@ -343,12 +344,12 @@ fn block<R: Real, const N: usize, const ADJ: bool>(
     );
     let (l0, il0) = match run.uniform {
         Some((l0, il0)) => ([l0; N], [il0; N]),
-        None => (arr::<R, N>(run.rest, i), arr::<R, N>(run.inv_rest, i)),
+        None => (*arr::<R, N>(run.rest, i), *arr::<R, N>(run.inv_rest, i)),
     };
     let mask: [R; N] = if run.live.is_empty() {
         [R::ONE; N]
     } else {
-        arr::<R, N>(run.live, i)
+        *arr::<R, N>(run.live, i)
     };
     let min2 = R::from_f64(MIN_LENGTH * MIN_LENGTH);
     let mut out = BlockOut {
