@@ -18,6 +18,12 @@
 //! - The ends of a run that do not fill a block of `L` are one more
 //!   block overlapping the previous one, with the already-counted lanes
 //!   masked out, not a scalar loop (a 64-node row has 63 or 62 springs).
+//! - A block borrows its endpoint arrays and reads them inside its one
+//!   lane loop: copied up front, a 16-lane f32 block's endpoint data took
+//!   24 of AVX2's 16 registers and went through the stack. Keep the lane
+//!   arithmetic one loop: split into several short loops, LLVM unrolls
+//!   them at 8 lanes and its SLP vectoriser made scalar code of the f64
+//!   block (docs/results.md, "The AVX2 kernel's spills").
 //! - Horizontal neighbours (offsets 1 and 2) add +F and −F to overlapping
 //!   node ranges; the kernel nets them in registers (`run_carry`) and writes
 //!   each force once, instead of going through a scratch buffer.
