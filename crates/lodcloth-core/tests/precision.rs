@@ -7,7 +7,7 @@
 use lodcloth::estimate::{no_progress, RecordSpec};
 use lodcloth::plan::{default_problem, record_reference};
 use lodcloth::scene::Scene;
-use lodcloth::sim::{force_path, Integrator, Simulation, SpringPrecision, StabilityCheck, VectorPath};
+use lodcloth::sim::{force_path, Integrator, Profile, Simulation, SpringPrecision, StabilityCheck, VectorPath, Wind};
 
 const FLAG: &str = include_str!("../../../config/scenes/flag-2to1-wind.toml");
 const CURTAIN: &str = include_str!("../../../config/scenes/curtain-shaken.toml");
@@ -225,6 +225,63 @@ fn a_fused_step_is_its_definition_to_the_bit() {
                 if name == "hanging.toml" {
                     assert!(limited > 0, "the limiter never acted: its path is not tested");
                 }
+            }
+        }
+    }
+}
+
+/// With f32 springs and no other force, symplectic Euler takes the kernel's
+/// f32 forces into its update pass instead of reading accelerations a
+/// separate pass wrote (`Simulation::pending`). A cloth stepped that way
+/// gives, step by step, the bits of a copy made to write its accelerations
+/// after every step (reading them does); and a state set, a wind changed
+/// or a copy taken while the forces wait changes nothing either (set, the
+/// waiting forces must be dropped: the kernel adds to them).
+#[test]
+fn symplectic_euler_from_the_f32_forces_is_the_cached_acceleration_to_the_bit() {
+    for (text, name) in [(HANGING, "hanging.toml"), (CURTAIN, "curtain-shaken.toml")] {
+        let mut scene = Scene::from_toml(text, name).expect("shipped scene");
+        scene.params.integrator = Integrator::SymplecticEuler;
+        scene.stability = StabilityCheck::Force;
+        // 64 wide: the step splits its nodes in two halves.
+        let (nx, ny) = (64, 40);
+        scene.params.dt = 0.5 * scene.build_at(nx, ny).expect("builds").dt_limit();
+        let mut deferred = scene.build_at(nx, ny).expect("builds");
+        deferred.set_spring_precision(SpringPrecision::F32);
+        let mut flushed = deferred.clone();
+        for step in 0..400 {
+            let (a, b) = (deferred.step(), flushed.step());
+            // Written at once, so `flushed` never has forces waiting when
+            // the state, the wind or a copy is made below.
+            let _ = flushed.accelerations();
+            assert!(a.finite && b.finite, "{name} step {step}: diverged");
+            assert!(
+                bits(&deferred) == bits(&flushed),
+                "{name} step {step}: the update from the f32 forces differs"
+            );
+            assert_eq!(a.elastic_energy.to_bits(), b.elastic_energy.to_bits());
+            match step {
+                // The same state set again: the cache is made afresh.
+                100 => {
+                    for sim in [&mut deferred, &mut flushed] {
+                        let state = sim.state().clone();
+                        sim.set_state(state).expect("same cloth");
+                    }
+                }
+                // A copy taken while the forces wait carries on alike.
+                200 => deferred = deferred.clone(),
+                // A wind: forces in f64 beside the springs from now on.
+                300 => {
+                    let wind = Some(Wind {
+                        velocity: [2.0, 0.0, 1.0],
+                        profile: Profile::Constant,
+                        air_density: 1.2,
+                        drag_coefficient: 1.0,
+                    });
+                    deferred.set_wind(wind).expect("a valid wind");
+                    flushed.set_wind(wind).expect("a valid wind");
+                }
+                _ => {}
             }
         }
     }

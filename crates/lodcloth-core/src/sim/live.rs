@@ -55,7 +55,7 @@ impl Simulation {
             }
         }
         self.model.grabs = grabs;
-        self.cached = false;
+        self.invalidate();
         Ok(())
     }
 
@@ -155,7 +155,7 @@ impl Simulation {
             }
         }
         self.model.loads.wind = wind;
-        self.cached = false;
+        self.invalidate();
         Ok(())
     }
 
@@ -178,7 +178,7 @@ impl Simulation {
             self.model.pin_shifts[i] = shift;
         }
         self.apply_pins();
-        self.cached = false;
+        self.invalidate();
         Ok(())
     }
 
@@ -207,7 +207,7 @@ impl Simulation {
                 self.state.vel[c * n + k as usize] += w * impulse[c] * inv;
             }
         }
-        self.cached = false;
+        self.invalidate();
         Ok(())
     }
 }

@@ -337,9 +337,9 @@ impl Model {
         ws: &mut Workspace,
         par: Par,
         rounded: bool,
-    ) -> SpringTotals {
+        defer: bool,
+    ) -> (SpringTotals, bool) {
         let topo = &*self.topology;
-        let n = topo.n_nodes;
         debug_assert!(ws.force.all_zero(), "force buffer not cleared");
         let f = ws.force.window_away_from([pos.as_ptr(), vel.as_ptr()]);
         let (material, adjust) = (&self.params.material, self.adjust_ratio());
@@ -403,6 +403,19 @@ impl Model {
         for grab in &self.grabs {
             grab.add_force(pos, vel, f);
         }
+        if defer && ws.mixed.is_some() && !self.f64_forces() {
+            return (totals, true);
+        }
+        self.to_accelerations(vel, f, acc, ws.mixed.as_deref_mut(), par);
+        (totals, false)
+    }
+
+    /// The force-to-acceleration pass: the f64 forces `f` (and the f32
+    /// spring forces in `mixed`) at velocity `vel` into `acc`, clearing
+    /// both force buffers.
+    #[inline(always)]
+    fn to_accelerations(&self, vel: &[f64], f: &mut [f64], acc: &mut [f64], mixed: Option<&mut Mixed>, par: Par) {
+        let n = self.topology.n_nodes;
         let (g, drag) = (self.params.gravity, self.params.drag);
         let f64_forces = self.f64_forces();
         // Force → acceleration node by node: any split gives the same bits.
@@ -412,7 +425,7 @@ impl Model {
         let (f0, f1) = node_halves_mut(f, n, cut);
         let (a0, a1) = node_halves_mut(acc, n, cut);
         // The f32 spring forces, when there are, added here and cleared.
-        let (s0, s1) = match ws.mixed.as_deref_mut() {
+        let (s0, s1) = match mixed {
             Some(m) => {
                 let (s0, s1) = node_halves_mut(&mut m.force, n, cut);
                 (s0.map(Some), s1.map(Some))
@@ -462,7 +475,6 @@ impl Model {
             #[inline(always)]
             || convert(cut, f1, a1, s1),
         );
-        totals
     }
 }
 
@@ -547,7 +559,7 @@ fn fused_last(
     model: &Model,
     state: &mut State,
     mixed: Option<&mut Mixed>,
-    a: &[f64],
+    a: Option<&[f64]>,
     b: Option<&[f64]>,
     h: f64,
 ) -> Sums {
@@ -555,7 +567,20 @@ fn fused_last(
     let cut = par.split.unwrap_or(n);
     let (x0, x1) = node_halves_mut(&mut state.pos, n, cut);
     let (v0, v1) = node_halves_mut(&mut state.vel, n, cut);
-    let (a0, a1) = node_halves(a, n, cut);
+    // Without `a`, symplectic Euler makes the acceleration from the f32
+    // spring forces (see `Simulation::pending`).
+    let (mixed, forces) = match (a, mixed) {
+        (None, Some(m)) => {
+            let Mixed { pos, vel, force, .. } = m;
+            let (f0, f1) = node_halves_mut(force, n, cut);
+            (Some((pos, vel)), Some((f0, f1)))
+        }
+        (_, m) => (m.map(|m| (&mut m.pos, &mut m.vel)), None),
+    };
+    let (a0, a1) = match a {
+        Some(a) => node_halves(a, n, cut),
+        None => ([&[][..]; 3], [&[][..]; 3]),
+    };
     let (b0, b1) = match b {
         Some(b) => node_halves(b, n, cut),
         None => ([&[][..]; 3], [&[][..]; 3]),
@@ -563,6 +588,22 @@ fn fused_last(
     let copy = mixed.is_some();
     let ((p0, p1), (q0, q1)) = f32_halves(mixed, n, cut);
     let (mass, free) = (&model.masses[..n], &model.free[..n]);
+    let (inv_mass, drag) = (&model.inv_mass[..n], model.params.drag);
+    let (r0, r1) = match forces {
+        Some((f0, f1)) => (
+            Some(nodes::Forces {
+                f: f0,
+                inv_mass: &inv_mass[..cut],
+                drag,
+            }),
+            Some(nodes::Forces {
+                f: f1,
+                inv_mass: &inv_mass[cut..],
+                drag,
+            }),
+        ),
+        None => (None, None),
+    };
     let (lo, hi) = (
         nodes::Piece {
             x: x0,
@@ -574,6 +615,7 @@ fn fused_last(
             copy,
             mass: &mass[..cut],
             free: &free[..cut],
+            forces: r0,
         },
         nodes::Piece {
             x: x1,
@@ -585,6 +627,7 @@ fn fused_last(
             copy,
             mass: &mass[cut..],
             free: &free[cut..],
+            forces: r1,
         },
     );
     let (rk4, g) = (b.is_some(), model.params.gravity);
@@ -627,9 +670,13 @@ fn node_halves(field: &[f64], n: usize, cut: usize) -> ([&[f64]; 3], [&[f64]; 3]
 type F32Halves<'a> = ([&'a mut [f32]; 3], [&'a mut [f32]; 3]);
 
 #[inline(always)]
-fn f32_halves(mixed: Option<&mut Mixed>, n: usize, cut: usize) -> (F32Halves<'_>, F32Halves<'_>) {
+fn f32_halves<'a>(
+    mixed: Option<(&'a mut Paged<f32>, &'a mut Paged<f32>)>,
+    n: usize,
+    cut: usize,
+) -> (F32Halves<'a>, F32Halves<'a>) {
     match mixed {
-        Some(m) => (node_halves_mut(&mut m.pos, n, cut), node_halves_mut(&mut m.vel, n, cut)),
+        Some((pos, vel)) => (node_halves_mut(pos, n, cut), node_halves_mut(vel, n, cut)),
         None => (
             ([&mut [][..], &mut [], &mut []], [&mut [][..], &mut [], &mut []]),
             ([&mut [][..], &mut [], &mut []], [&mut [][..], &mut [], &mut []]),
@@ -686,6 +733,12 @@ pub struct Simulation {
     acc: Paged,
     totals: SpringTotals,
     cached: bool,
+    /// `acc` is not written yet: the cache's forces wait as f32 spring
+    /// forces in `ws.mixed` for symplectic Euler's update, which turns them
+    /// into accelerations in its own pass (one pass over the nodes fewer;
+    /// see [`Simulation::ensure_cache_from`]). Anything else that reads
+    /// `acc` writes it first ([`Simulation::flush`]).
+    pending: bool,
     modal: ModalEstimate,
     last: Option<StepReport>,
     /// (time, step) of the state the clock counts from: the initial state or
@@ -776,6 +829,7 @@ impl Simulation {
             ws,
             totals: SpringTotals::default(),
             cached: false,
+            pending: false,
             modal,
             last: None,
             epoch: (0.0, 0),
@@ -806,7 +860,7 @@ impl Simulation {
             SpringPrecision::F64 => None,
             SpringPrecision::F32 => Some(Box::new(Mixed::new(&self.model.topology))),
         };
-        self.cached = false;
+        self.invalidate();
     }
 
     /// The current state.
@@ -844,7 +898,7 @@ impl Simulation {
         }
         self.epoch = self.epoch_of(&state);
         self.state = state;
-        self.cached = false;
+        self.invalidate();
         self.last = None;
         self.apply_pins();
         // A state made elsewhere (another level's, mapped) may have nodes
@@ -906,7 +960,10 @@ impl Simulation {
         simd::run(
             par.isa,
             #[inline(always)]
-            || self.ensure_cache(par),
+            || {
+                self.ensure_cache(par);
+                self.flush(par);
+            },
         );
         &self.acc
     }
@@ -972,6 +1029,9 @@ impl Simulation {
         // XPBD needs no acceleration: its constraints replace the springs' forces.
         if !xpbd {
             self.ensure_cache(par);
+            if self.model.params.integrator != Integrator::SymplecticEuler {
+                self.flush(par);
+            }
         }
         let dt = self.model.params.dt;
         let t0 = self.state.time;
@@ -1071,7 +1131,7 @@ impl Simulation {
         // massless terms were exact zeros, as they are now).
         let fused = fused
             .filter(|s: &Sums| pins_finite && strain_iterations == 0 && contacts == 0 && s.2.iter().all(|&z| z == 0.0));
-        self.cached = false;
+        self.invalidate();
         if xpbd {
             // No force evaluation: the report's spring figures from one pass
             // of lengths over the final state.
@@ -1148,11 +1208,38 @@ impl Simulation {
     fn ensure_cache_from(&mut self, par: Par, rounded: bool) {
         if !self.cached {
             let s = &self.state;
-            self.totals = self
-                .model
-                .accelerations(s.time, &s.pos, &s.vel, &mut self.acc, &mut self.ws, par, rounded);
+            // Symplectic Euler takes the f32 spring forces as they are.
+            let defer = self.model.params.integrator == Integrator::SymplecticEuler;
+            let (totals, pending) =
+                self.model
+                    .accelerations(s.time, &s.pos, &s.vel, &mut self.acc, &mut self.ws, par, rounded, defer);
+            (self.totals, self.pending) = (totals, pending);
             self.cached = true;
         }
+    }
+
+    /// The cache complete: `acc` written if the forces wait in f32.
+    #[inline(always)]
+    fn flush(&mut self, par: Par) {
+        if self.pending {
+            let (pos, vel) = (&self.state.pos[..], &self.state.vel[..]);
+            let f = self.ws.force.window_away_from([pos.as_ptr(), vel.as_ptr()]);
+            self.model
+                .to_accelerations(vel, f, &mut self.acc, self.ws.mixed.as_deref_mut(), par);
+            self.pending = false;
+        }
+    }
+
+    /// The cache no longer describes the state: evaluated again before it
+    /// is read, the f32 forces waiting for the update (if any) cleared,
+    /// since the kernel adds to them.
+    fn invalidate(&mut self) {
+        if std::mem::take(&mut self.pending) {
+            if let Some(m) = self.ws.mixed.as_deref_mut() {
+                m.force.fill(0.0);
+            }
+        }
+        self.cached = false;
     }
 
     /// Symplectic Euler's update of the state from the cached acceleration,
@@ -1160,12 +1247,13 @@ impl Simulation {
     /// report's sums (see [`nodes`]); returns the sums.
     #[inline(always)]
     fn symplectic(&mut self, dt: f64, par: Par) -> Sums {
+        let from_forces = std::mem::take(&mut self.pending);
         fused_last(
             par,
             &self.model,
             &mut self.state,
             self.ws.mixed.as_deref_mut(),
-            &self.acc,
+            (!from_forces).then_some(&self.acc[..]),
             None,
             dt,
         )
@@ -1244,6 +1332,7 @@ impl Simulation {
                 &mut self.ws,
                 par,
                 rounded,
+                false,
             );
             let (r0, r1) = halves([&pos[..len], &vel[..len], &stage_acc[..len]], mid);
             let (w0, w1) = halves_mut(
@@ -1277,7 +1366,7 @@ impl Simulation {
             &self.model,
             &mut self.state,
             ws.mixed.as_deref_mut(),
-            &ws.sum_vel,
+            Some(&ws.sum_vel),
             Some(&ws.sum_pos),
             dt / 6.0,
         )

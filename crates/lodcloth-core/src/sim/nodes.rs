@@ -8,7 +8,11 @@
 //! Each pass streams arrays of 32 KiB per component through L2 (the state,
 //! accelerations, forces and f32 copies of a 64×64 cloth are over 0.6 MB,
 //! more than a Zen 3 core's L2). Symplectic Euler now does all three in one
-//! pass ([`symplectic`]), while the values are in registers.
+//! pass ([`symplectic`]), while the values are in registers, and with f32
+//! springs and no other force it also turns the kernel's f32 forces into
+//! accelerations there ([`Forces`]), instead of a pass that wrote them to
+//! an f64 array for the update to read back (cachegrind with a Zen 3-sized
+//! L2: 8.1 k → 4.1 k misses per 64² step; docs/results.md).
 
 /// Lanes of the report's partial sums (a sequential sum is one long chain
 /// of dependent additions, several µs at 64×64).
@@ -85,6 +89,18 @@ pub(super) struct Piece<'a> {
     pub(super) copy: bool,
     pub(super) mass: &'a [f64],
     pub(super) free: &'a [f64],
+    /// Symplectic Euler from the kernel's f32 spring forces, when they are
+    /// all the forces there are (`a` then empty): the acceleration is made
+    /// here, node by node, as the force-to-acceleration pass would have
+    /// made it, and the forces are cleared for the next evaluation.
+    pub(super) forces: Option<Forces<'a>>,
+}
+
+/// The f32 spring forces and what turns them into accelerations.
+pub(super) struct Forces<'a> {
+    pub(super) f: [&'a mut [f32]; 3],
+    pub(super) inv_mass: &'a [f64],
+    pub(super) drag: f64,
 }
 
 /// Symplectic Euler (v += dt·a, then x += dt·v) over `piece`, writing the
@@ -106,30 +122,35 @@ pub(super) fn rk4_last(piece: Piece, h: f64, g: [f64; 3]) -> Sums {
 #[inline(always)]
 fn update<const RK4: bool>(piece: Piece, dt: f64, g: [f64; 3]) -> Sums {
     let mut sums = NO_SUMS;
-    if piece.copy {
-        blocks::<true, RK4>(piece, dt, g, &mut sums);
-    } else {
-        blocks::<false, RK4>(piece, dt, g, &mut sums);
+    match (piece.copy, piece.forces.is_some()) {
+        (true, true) if !RK4 => blocks::<true, RK4, true>(piece, dt, g, &mut sums),
+        (true, _) => blocks::<true, RK4, false>(piece, dt, g, &mut sums),
+        (false, _) => blocks::<false, RK4, false>(piece, dt, g, &mut sums),
     }
     sums
 }
 
 #[inline(always)]
-fn blocks<const COPY: bool, const RK4: bool>(mut piece: Piece, dt: f64, g: [f64; 3], sums: &mut Sums) {
+fn blocks<const COPY: bool, const RK4: bool, const FORCES: bool>(
+    mut piece: Piece,
+    dt: f64,
+    g: [f64; 3],
+    sums: &mut Sums,
+) {
     let n = piece.mass.len();
     let mut k = 0;
     while k + LANES <= n {
-        nodes::<LANES, COPY, RK4>(&mut piece, k, dt, g, sums);
+        nodes::<LANES, COPY, RK4, FORCES>(&mut piece, k, dt, g, sums);
         k += LANES;
     }
     for k in k..n {
-        nodes::<1, COPY, RK4>(&mut piece, k, dt, g, sums);
+        nodes::<1, COPY, RK4, FORCES>(&mut piece, k, dt, g, sums);
     }
 }
 
 /// Nodes `k..k+N` of [`update`].
 #[inline(always)]
-fn nodes<const N: usize, const COPY: bool, const RK4: bool>(
+fn nodes<const N: usize, const COPY: bool, const RK4: bool, const FORCES: bool>(
     piece: &mut Piece,
     k: usize,
     dt: f64,
@@ -147,9 +168,25 @@ fn nodes<const N: usize, const COPY: bool, const RK4: bool>(
         v: [[0.0; N]; 3],
     };
     for c in 0..3 {
-        let a = arr::<N>(piece.a[c], k);
         let mut x = arr::<N>(piece.x[c], k);
         let mut v = arr::<N>(piece.v[c], k);
+        let a = match piece.forces.as_mut() {
+            Some(forces) if FORCES => {
+                // The force-to-acceleration pass's own expression (the f64
+                // forces are all zero: + 0.0), on the velocity before the
+                // update.
+                let fc = &mut forces.f[c][k..k + N];
+                let inv_mass = arr::<N>(forces.inv_mass, k);
+                let mut a = [0.0; N];
+                for j in 0..N {
+                    let fk = 0.0 + f64::from(fc[j]);
+                    a[j] = fk * inv_mass[j] + block.free[j] * (g[c] - forces.drag * v[j]);
+                }
+                fc.fill(0.0);
+                a
+            }
+            _ => arr::<N>(piece.a[c], k),
+        };
         if RK4 {
             let b = arr::<N>(piece.b[c], k);
             for j in 0..N {
