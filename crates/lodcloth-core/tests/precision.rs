@@ -243,10 +243,12 @@ fn symplectic_euler_from_the_f32_forces_is_the_cached_acceleration_to_the_bit() 
         let mut scene = Scene::from_toml(text, name).expect("shipped scene");
         scene.params.integrator = Integrator::SymplecticEuler;
         scene.stability = StabilityCheck::Force;
-        // 64 wide: the step splits its nodes in two halves.
-        let (nx, ny) = (64, 40);
+        // 8,192 nodes: the step splits its nodes in two halves
+        // (`SPLIT_MIN_NODES`), each with its half of the forces.
+        let (nx, ny) = (128, 64);
         scene.params.dt = 0.5 * scene.build_at(nx, ny).expect("builds").dt_limit();
         let mut deferred = scene.build_at(nx, ny).expect("builds");
+        assert!(deferred.split().is_some(), "{name}: not split");
         deferred.set_spring_precision(SpringPrecision::F32);
         let mut flushed = deferred.clone();
         for step in 0..400 {
