@@ -443,7 +443,7 @@ impl Model {
                     match sc {
                         None => {
                             for k in 0..len {
-                                ac[k] = fc[k] * inv_mass[k] + free[k] * (g[c] - drag * vc[k]);
+                                ac[k] = nodes::acceleration(fc[k], inv_mass[k], free[k], g[c], drag, vc[k]);
                                 fc[k] = 0.0;
                             }
                         }
@@ -451,7 +451,7 @@ impl Model {
                             let sc = &mut sc[..len];
                             for k in 0..len {
                                 let fk = fc[k] + f64::from(sc[k]);
-                                ac[k] = fk * inv_mass[k] + free[k] * (g[c] - drag * vc[k]);
+                                ac[k] = nodes::acceleration(fk, inv_mass[k], free[k], g[c], drag, vc[k]);
                                 fc[k] = 0.0;
                                 sc[k] = 0.0;
                             }
@@ -461,7 +461,7 @@ impl Model {
                             let sc = &mut sc[..len];
                             for k in 0..len {
                                 let fk = 0.0 + f64::from(sc[k]);
-                                ac[k] = fk * inv_mass[k] + free[k] * (g[c] - drag * vc[k]);
+                                ac[k] = nodes::acceleration(fk, inv_mass[k], free[k], g[c], drag, vc[k]);
                                 sc[k] = 0.0;
                             }
                         }

@@ -103,6 +103,16 @@ pub(super) struct Forces<'a> {
     pub(super) drag: f64,
 }
 
+/// A node's acceleration from the force `f` on it: `f/m + g − drag·v` for
+/// a free node, 0 for a pinned one (its `inv_mass` and `free` are 0). The
+/// one expression of
+/// the force-to-acceleration pass and of [`symplectic`]'s update from the
+/// f32 forces, so the two give the same bits.
+#[inline(always)]
+pub(super) fn acceleration(f: f64, inv_mass: f64, free: f64, g: f64, drag: f64, v: f64) -> f64 {
+    f * inv_mass + free * (g - drag * v)
+}
+
 /// Symplectic Euler (v += dt·a, then x += dt·v) over `piece`, writing the
 /// f32 copies of the new x and v and summing the report over them, in one
 /// pass. Bit for bit what the update alone, the kernel's rounding and the
@@ -122,9 +132,11 @@ pub(super) fn rk4_last(piece: Piece, h: f64, g: [f64; 3]) -> Sums {
 #[inline(always)]
 fn update<const RK4: bool>(piece: Piece, dt: f64, g: [f64; 3]) -> Sums {
     let mut sums = NO_SUMS;
+    // The f32 forces come with f32 springs (`copy`), for symplectic Euler only.
+    debug_assert!(piece.forces.is_none() || (piece.copy && !RK4));
     match (piece.copy, piece.forces.is_some()) {
-        (true, true) if !RK4 => blocks::<true, RK4, true>(piece, dt, g, &mut sums),
-        (true, _) => blocks::<true, RK4, false>(piece, dt, g, &mut sums),
+        (true, true) => blocks::<true, RK4, true>(piece, dt, g, &mut sums),
+        (true, false) => blocks::<true, RK4, false>(piece, dt, g, &mut sums),
         (false, _) => blocks::<false, RK4, false>(piece, dt, g, &mut sums),
     }
     sums
@@ -180,7 +192,7 @@ fn nodes<const N: usize, const COPY: bool, const RK4: bool, const FORCES: bool>(
                 let mut a = [0.0; N];
                 for j in 0..N {
                     let fk = 0.0 + f64::from(fc[j]);
-                    a[j] = fk * inv_mass[j] + block.free[j] * (g[c] - forces.drag * v[j]);
+                    a[j] = acceleration(fk, inv_mass[j], block.free[j], g[c], forces.drag, v[j]);
                 }
                 fc.fill(0.0);
                 a
