@@ -169,8 +169,11 @@ def print_ratio(results, path):
             if key + suffix not in ours:
                 continue
             us = ours[key + suffix]["us_per_step"]
+            # The report's figures the step computed: "lean" (no spring
+            # energy or strain, as a peer's step) or "full".
+            report = ours[key + suffix].get("report", "full")
             print(
-                f"| {INTEGRATOR_NAMES[integ]} | {us:.1f} ({label}, {ours[key + suffix]['isa']}) | {best['framework']} "
+                f"| {INTEGRATOR_NAMES[integ]} | {us:.1f} ({label}, {ours[key + suffix]['isa']}, {report} report) | {best['framework']} "
                 f"{best['variant']} {best['precision']} | {best['us_per_step']:.1f} | {best['us_per_step'] / us:.2f}x |"
             )
 

@@ -14,7 +14,14 @@
 //! `--only KEY` times one entry (`symplectic_euler`, `symplectic_euler_f32`,
 //! `rk4`, `rk4_f32`), e.g. under a profiler.
 //!
-//! `cargo bench -p lodcloth-core --bench peer_step -- [--steps 1000] [--repeats 7] [--json PATH] [--path avx2] [--only KEY]`
+//! The step is `Simulation::step_lean` (since 2026-12-02): a peer's step
+//! computes forces and integrates, and reports no energies; the lean step
+//! leaves out the springs' energy and largest strain too (it still sums the
+//! kinetic and gravity energy and checks every value is finite).
+//! `--report full` times `Simulation::step`, with every figure of the
+//! report (what the figures before that date were).
+//!
+//! `cargo bench -p lodcloth-core --bench peer_step -- [--steps 1000] [--repeats 7] [--json PATH] [--path avx2] [--only KEY] [--report lean|full]`
 
 use std::time::Instant;
 
@@ -41,6 +48,12 @@ fn main() {
     }
     let repeats: usize = arg("--repeats").map_or(7, |s| s.parse().expect("--repeats: a count"));
     let only = arg("--only");
+    let full = match arg("--report").as_deref() {
+        None | Some("lean") => false,
+        Some("full") => true,
+        Some(other) => panic!("--report {other}: expected lean or full"),
+    };
+    let step = |sim: &mut lodcloth_core::sim::Simulation| if full { sim.step() } else { sim.step_lean() };
     let mut entries = Vec::new();
     for (integrator, precision) in [Integrator::SymplecticEuler, Integrator::Rk4]
         .into_iter()
@@ -70,7 +83,7 @@ fn main() {
             sim.clone_from(&start);
             let t = Instant::now();
             for _ in 0..steps {
-                std::hint::black_box(sim.step());
+                std::hint::black_box(step(&mut sim));
             }
             times.push(t.elapsed().as_secs_f64() * 1e6 / steps as f64);
         }
@@ -82,14 +95,16 @@ fn main() {
             SpringPrecision::F32 => "f32 springs",
         };
         println!(
-            "  lodcloth {:<17} {springs:<11} ({}): {median:9.1} us/step (min {min:.1}), {} springs",
+            "  lodcloth {:<17} {springs:<11} ({}, {} report): {median:9.1} us/step (min {min:.1}), {} springs",
             integrator.name(),
             active_isa_name(),
+            if full { "full" } else { "lean" },
             sim.topology().spring_count()
         );
         entries.push(format!(
-            "\"{key}\": {{\"us_per_step\": {median}, \"us_min\": {min}, \"isa\": \"{}\"}}",
-            active_isa_name()
+            "\"{key}\": {{\"us_per_step\": {median}, \"us_min\": {min}, \"isa\": \"{}\", \"report\": \"{}\"}}",
+            active_isa_name(),
+            if full { "full" } else { "lean" }
         ));
     }
     if let Some(path) = arg("--json") {

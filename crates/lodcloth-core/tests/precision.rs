@@ -289,6 +289,121 @@ fn symplectic_euler_from_the_f32_forces_is_the_cached_acceleration_to_the_bit() 
     }
 }
 
+/// A lean step (`Simulation::step_lean`: the kernel sums no spring energy
+/// or strain) is a step: every integrator, both spring precisions, on the
+/// strain-limited hanging sheet, the shaken curtain (moving pins) and the
+/// windy flag, split in two halves (8,192 nodes). A cloth stepped lean on
+/// two steps of three gives the bits of one stepped in full, its report
+/// the same kinetic and gravity energy and finiteness, and NaN for the
+/// spring figures; the full step after a lean one reports the figures of
+/// its own state (the full run's to the bit), not stale ones.
+#[test]
+fn a_lean_step_is_a_full_step_without_its_spring_figures() {
+    for (text, name) in [
+        (HANGING, "hanging.toml"),
+        (CURTAIN, "curtain-shaken.toml"),
+        (FLAG, "flag-2to1-wind.toml"),
+    ] {
+        for integrator in Integrator::ALL {
+            let mut scene = Scene::from_toml(text, name).expect("shipped scene");
+            scene.params.integrator = integrator;
+            scene.stability = StabilityCheck::Force;
+            let (nx, ny) = (128, 64);
+            let probe = scene.build_at(nx, ny).expect("builds");
+            let limit = match probe.dt_limit() {
+                l if l.is_finite() => l,
+                _ => probe.modal().dt_limit(Integrator::SymplecticEuler),
+            };
+            scene.params.dt = 0.4 * limit;
+            // Implicit Euler solves a system a step: fewer of them.
+            let steps = if integrator == Integrator::ImplicitEuler {
+                12
+            } else {
+                60
+            };
+            for precision in SpringPrecision::ALL {
+                let mut full = scene.build_at(nx, ny).expect("builds");
+                assert!(full.split().is_some(), "{name}: not split");
+                full.set_spring_precision(precision);
+                let mut lean = full.clone();
+                let what = format!("{name} {integrator} {precision:?}");
+                for step in 0..steps {
+                    let a = full.step();
+                    let b = if step % 3 == 2 { lean.step() } else { lean.step_lean() };
+                    assert!(a.finite && b.finite, "{what} step {step}: diverged");
+                    assert!(bits(&full) == bits(&lean), "{what} step {step}: the lean state differs");
+                    assert_eq!(
+                        (a.kinetic_energy.to_bits(), a.gravity_energy.to_bits()),
+                        (b.kinetic_energy.to_bits(), b.gravity_energy.to_bits()),
+                        "{what} step {step}"
+                    );
+                    assert!(a.elastic_energy.is_finite() && a.elastic_energy > 0.0, "{what}");
+                    if step % 3 == 2 {
+                        assert_eq!(
+                            (a.elastic_energy.to_bits(), a.max_strain.map(f64::to_bits)),
+                            (b.elastic_energy.to_bits(), b.max_strain.map(f64::to_bits)),
+                            "{what} step {step}: the full step after lean ones"
+                        );
+                    } else {
+                        assert!(
+                            b.elastic_energy.is_nan() && b.max_strain.iter().all(|s| s.is_nan()),
+                            "{what} step {step}: a lean step reported spring figures"
+                        );
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// The report's `finite` is the state's (`State::is_finite`, an
+/// independent pass) after a NaN or an infinity is put into one position or
+/// velocity of a free node and of a pinned one, full and lean, for
+/// symplectic Euler (whose fused pass sums the report) and RK4.
+#[test]
+fn a_report_is_finite_exactly_when_the_state_is() {
+    for integrator in [Integrator::SymplecticEuler, Integrator::Rk4] {
+        let mut scene = Scene::from_toml(HANGING, "hanging.toml").expect("shipped scene");
+        scene.params.integrator = integrator;
+        let sim = scene.build_at(16, 16).expect("builds");
+        let n = sim.topology().n_nodes;
+        let pinned = sim.loads().pins[0].node as usize;
+        let free = n / 2 + 3;
+        assert!(sim.loads().pins.iter().all(|p| p.node as usize != free));
+        let mut seen_bad = 0;
+        for node in [free, pinned] {
+            for (field, c, value) in [
+                (0, 2, f64::NAN),
+                (1, 0, f64::INFINITY),
+                (1, 1, f64::NEG_INFINITY),
+                (0, 0, f64::INFINITY),
+            ] {
+                for lean in [false, true] {
+                    let mut s = sim.clone();
+                    for _ in 0..5 {
+                        s.step();
+                    }
+                    let mut state = s.state().clone();
+                    let f = if field == 0 { &mut state.pos } else { &mut state.vel };
+                    f[c * n + node] = value;
+                    s.set_state(state).expect("same cloth");
+                    let r = if lean { s.step_lean() } else { s.step() };
+                    assert_eq!(
+                        r.finite,
+                        s.state().is_finite(),
+                        "{integrator} node {node} field {field} component {c} = {value}, lean {lean}"
+                    );
+                    seen_bad += usize::from(!r.finite);
+                }
+            }
+        }
+        assert!(
+            seen_bad > 0,
+            "{integrator}: no state went non-finite: the test tests nothing"
+        );
+    }
+}
+
 /// One classic RK4 step of `sim` (whose acceleration is `acc`) by hand:
 /// each stage's acceleration from a copy of the cloth set to the stage's
 /// state and time. Returns the new (x, v); pinned nodes are not meaningful.

@@ -68,7 +68,7 @@ impl<R> Run<'_, R> {
 /// ending at the run's end with the lanes already counted masked out (or
 /// single springs, for runs shorter than a block).
 #[inline(always)]
-pub(super) fn run_direct<R: Real, const L: usize, const ADJ: bool>(
+pub(super) fn run_direct<R: Real, const L: usize, const ADJ: bool, const STATS: bool>(
     run: &Run<R>,
     a0: usize,
     b0: usize,
@@ -82,17 +82,19 @@ pub(super) fn run_direct<R: Real, const L: usize, const ADJ: bool>(
     let mut i = 0;
     while i + L <= len {
         let o = block::<R, L, ADJ>(run, i, coef, 0);
-        local.add(&o);
+        if STATS {
+            local.add(&o);
+        }
         add_pair(f, a0 + i, b0 + i, &o.f);
         i += L;
     }
-    tail::<R, L, ADJ>(run, i, a0, b0, coef, f, &mut local);
+    tail::<R, L, ADJ, STATS>(run, i, a0, b0, coef, f, &mut local);
     *acc = local;
 }
 
 /// Springs `i..len` of a run (fewer than `L`), added with [`add_pair`].
 #[inline(always)]
-fn tail<R: Real, const L: usize, const ADJ: bool>(
+fn tail<R: Real, const L: usize, const ADJ: bool, const STATS: bool>(
     run: &Run<R>,
     i: usize,
     a0: usize,
@@ -108,12 +110,16 @@ fn tail<R: Real, const L: usize, const ADJ: bool>(
     if len >= L {
         let s = len - L;
         let o = block::<R, L, ADJ>(run, s, coef, i - s);
-        acc.add(&o);
+        if STATS {
+            acc.add(&o);
+        }
         add_pair(f, a0 + s, b0 + s, &o.f);
     } else {
         for i in i..len {
             let o = block::<R, 1, ADJ>(run, i, coef, 0);
-            acc.add(&o);
+            if STATS {
+                acc.add(&o);
+            }
             add_pair(f, a0 + i, b0 + i, &o.f);
         }
     }
@@ -158,7 +164,7 @@ fn add_pair<R: Real, const N: usize>(f: &mut [&mut [R]; 3], a: usize, b: usize, 
 /// block) and updates the node forces once, with no overlapping
 /// stores and loads between blocks.
 #[inline(always)]
-pub(super) fn run_carry<R: Real, const L: usize, const OFF: usize, const ADJ: bool>(
+pub(super) fn run_carry<R: Real, const L: usize, const OFF: usize, const ADJ: bool, const STATS: bool>(
     run: &Run<R>,
     a0: usize,
     coef: Coef<R>,
@@ -173,7 +179,9 @@ pub(super) fn run_carry<R: Real, const L: usize, const OFF: usize, const ADJ: bo
     let mut i = 0;
     while i + L <= len {
         let o = block::<R, L, ADJ>(run, i, coef, 0);
-        local.add(&o);
+        if STATS {
+            local.add(&o);
+        }
         // Loads of all three components before any store (4K aliasing, see
         // `add_pair`).
         let mut fa = [[R::ZERO; L]; 3];
@@ -202,7 +210,7 @@ pub(super) fn run_carry<R: Real, const L: usize, const OFF: usize, const ADJ: bo
             }
         }
     }
-    tail::<R, L, ADJ>(run, i, a0, a0 + OFF, coef, f, &mut local);
+    tail::<R, L, ADJ, STATS>(run, i, a0, a0 + OFF, coef, f, &mut local);
     *acc = local;
 }
 
@@ -217,7 +225,7 @@ pub(super) struct GatherScratch<'a, R> {
 /// blocks, evaluate as one run, scatter the forces.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
-pub(super) fn gather_group<R: KernelReal, const L: usize, const ADJ: bool>(
+pub(super) fn gather_group<R: KernelReal, const L: usize, const ADJ: bool, const STATS: bool>(
     group: &SpringGroup,
     own: &GroupRest<R>,
     p: [&[R]; 3],
@@ -268,19 +276,25 @@ pub(super) fn gather_group<R: KernelReal, const L: usize, const ADJ: bool>(
     let mut i = 0;
     while i + L <= len {
         let o = block::<R, L, ADJ>(&run, i, coef, 0);
-        local.add(&o);
+        if STATS {
+            local.add(&o);
+        }
         put(i, 0, &o.f);
         i += L;
     }
     if i < len && len >= L {
         let s = len - L;
         let o = block::<R, L, ADJ>(&run, s, coef, i - s);
-        local.add(&o);
+        if STATS {
+            local.add(&o);
+        }
         put(s, i - s, &o.f);
     } else {
         for i in i..len {
             let o = block::<R, 1, ADJ>(&run, i, coef, 0);
-            local.add(&o);
+            if STATS {
+                local.add(&o);
+            }
             for c in 0..3 {
                 out[c * cap + i] = o.f[c][0];
             }

@@ -59,9 +59,21 @@ pub struct SpringTotals {
     pub max_strain: [f64; 3],
 }
 
-/// Add every spring's force to `force` (same layout as `pos`).
+impl SpringTotals {
+    /// What an evaluation without its figures returns (a lean step's, see
+    /// `Simulation::step_lean`): NaN, never a number that looks measured.
+    pub const UNMEASURED: SpringTotals = SpringTotals {
+        elastic_energy: f64::NAN,
+        max_strain: [f64::NAN; 3],
+    };
+}
+
+/// Add every spring's force to `force` (same layout as `pos`); with
+/// `stats`, also the springs' energy and largest strains (else
+/// [`SpringTotals::UNMEASURED`]).
 ///
 /// `adjust_ratio` is `1 + allowed` of the stiffness adjustment, or ∞.
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn spring_forces<R: KernelReal>(
     topology: &Topology,
     material: &Material,
@@ -70,10 +82,11 @@ pub(crate) fn spring_forces<R: KernelReal>(
     vel: &[R],
     force: &mut [R],
     scratch: &mut KernelScratch<R>,
+    stats: bool,
 ) -> SpringTotals {
     super::simd::dispatch(
         #[inline(always)]
-        || spring_forces_impl(topology, material, adjust_ratio, pos, vel, force, scratch),
+        || spring_forces_impl(topology, material, adjust_ratio, pos, vel, force, scratch, stats),
     )
 }
 
@@ -119,6 +132,7 @@ impl<R: KernelReal> SpringKernel<R> {
             vel,
             force,
             &mut self.scratch,
+            true,
         )
     }
 }
@@ -127,6 +141,7 @@ impl<R: KernelReal> SpringKernel<R> {
 /// hardware FMA (the generic path on x86-64 CPUs older than AVX2) `mul_add`
 /// is a library call: slow, but still exactly rounded, so results stay
 /// identical.
+#[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn spring_forces_impl<R: KernelReal>(
     topology: &Topology,
@@ -136,12 +151,13 @@ fn spring_forces_impl<R: KernelReal>(
     vel: &[R],
     force: &mut [R],
     scratch: &mut KernelScratch<R>,
+    stats: bool,
 ) -> SpringTotals {
-    R::whole(topology, material, adjust_ratio, pos, vel, force, scratch)
+    R::whole(topology, material, adjust_ratio, pos, vel, force, scratch, stats)
 }
 
 #[inline(always)]
-fn all_springs<R: KernelReal, const L: usize, const ADJ: bool>(
+fn all_springs<R: KernelReal, const L: usize, const ADJ: bool, const STATS: bool>(
     topology: &Topology,
     material: &Material,
     adjust_ratio: f64,
@@ -164,7 +180,7 @@ fn all_springs<R: KernelReal, const L: usize, const ADJ: bool>(
         gather_len,
     } = scratch;
     let rest = &*rest;
-    stencil_springs::<R, L, ADJ>(
+    stencil_springs::<R, L, ADJ, STATS>(
         topology,
         rest,
         material,
@@ -184,10 +200,14 @@ fn all_springs<R: KernelReal, const L: usize, const ADJ: bool>(
                 cap: *gather_len,
             };
             let coef = coef(material, group, adjust_ratio);
-            gather_group::<R, L, ADJ>(group, own, p, v, coef, &mut f, ws, &mut acc[group.class.index()]);
+            gather_group::<R, L, ADJ, STATS>(group, own, p, v, coef, &mut f, ws, &mut acc[group.class.index()]);
         }
     }
-    totals(material, &acc)
+    if STATS {
+        totals(material, &acc)
+    } else {
+        SpringTotals::UNMEASURED
+    }
 }
 
 /// The three components of a `[x…, y…, z…]` field of `n` nodes.
@@ -213,7 +233,7 @@ fn coef<R: Real>(material: &Material, group: &SpringGroup, adjust_ratio: f64) ->
 /// `base` (every node a spring of the range touches must lie in them).
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn stencil_springs<R: KernelReal, const L: usize, const ADJ: bool>(
+fn stencil_springs<R: KernelReal, const L: usize, const ADJ: bool, const STATS: bool>(
     topology: &Topology,
     table: &RestTable<R>,
     material: &Material,
@@ -281,9 +301,9 @@ fn stencil_springs<R: KernelReal, const L: usize, const ADJ: bool>(
             };
             let (wa, wb) = (a0 - base, b0 - base);
             match offset {
-                1 => run_carry::<R, L, 1, ADJ>(&run, wa, coef, f, acc),
-                2 => run_carry::<R, L, 2, ADJ>(&run, wa, coef, f, acc),
-                _ => run_direct::<R, L, ADJ>(&run, wa, wb, coef, f, acc),
+                1 => run_carry::<R, L, 1, ADJ, STATS>(&run, wa, coef, f, acc),
+                2 => run_carry::<R, L, 2, ADJ, STATS>(&run, wa, coef, f, acc),
+                _ => run_direct::<R, L, ADJ, STATS>(&run, wa, wb, coef, f, acc),
             }
         }
     }
@@ -347,6 +367,7 @@ pub(crate) fn spring_forces_split<R: KernelReal>(
     split: usize,
     pair: &dyn Pair,
     isa: Isa,
+    stats: bool,
 ) -> SpringTotals {
     R::split(
         topology,
@@ -359,11 +380,12 @@ pub(crate) fn spring_forces_split<R: KernelReal>(
         split,
         pair,
         isa,
+        stats,
     )
 }
 
 #[allow(clippy::too_many_arguments)]
-fn split_impl<R: KernelReal, const L: usize, const ADJ: bool>(
+fn split_impl<R: KernelReal, const L: usize, const ADJ: bool, const STATS: bool>(
     topology: &Topology,
     table: &RestTable<R>,
     material: &Material,
@@ -394,7 +416,7 @@ fn split_impl<R: KernelReal, const L: usize, const ADJ: bool>(
                     isa,
                     #[inline(always)]
                     || {
-                        stencil_springs::<R, L, ADJ>(
+                        stencil_springs::<R, L, ADJ, STATS>(
                             topology,
                             table,
                             material,
@@ -414,7 +436,7 @@ fn split_impl<R: KernelReal, const L: usize, const ADJ: bool>(
                     isa,
                     #[inline(always)]
                     || {
-                        stencil_springs::<R, L, ADJ>(
+                        stencil_springs::<R, L, ADJ, STATS>(
                             topology,
                             table,
                             material,
@@ -436,7 +458,7 @@ fn split_impl<R: KernelReal, const L: usize, const ADJ: bool>(
         isa,
         #[inline(always)]
         || {
-            stencil_springs::<R, L, ADJ>(
+            stencil_springs::<R, L, ADJ, STATS>(
                 topology,
                 table,
                 material,
@@ -450,6 +472,9 @@ fn split_impl<R: KernelReal, const L: usize, const ADJ: bool>(
             )
         },
     );
+    if !STATS {
+        return SpringTotals::UNMEASURED;
+    }
     let mut acc = acc_lo;
     for (k, a) in acc.iter_mut().enumerate() {
         for part in [&acc_hi[k], &acc_cross[k]] {

@@ -112,8 +112,12 @@ impl RestView for f32 {
 /// A precision the kernel runs in. Its lane count [`Real::LANES`] is a
 /// const parameter `L` of every generic function below (`[R; R::LANES]` is
 /// not a type stable Rust accepts); these entry points fix it per type, and
-/// each instantiates the kernel twice: without the stiffness adjustment
-/// (the usual case) its compare and select drop out of the inner loop.
+/// each instantiates the kernel three times: without the stiffness
+/// adjustment (the usual case) its compare and select drop out of the
+/// inner loop, and without the figures (`stats` false: an RK4 stage, a lean
+/// step) so do the extension and strain sums, which on AVX2 also take four
+/// of the sixteen vector registers (f32 step 9 % fewer instructions,
+/// docs/results.md).
 pub trait KernelReal: RestView {
     /// Every spring, on the calling thread.
     fn whole(
@@ -124,6 +128,7 @@ pub trait KernelReal: RestView {
         vel: &[Self],
         force: &mut [Self],
         scratch: &mut KernelScratch<Self>,
+        stats: bool,
     ) -> SpringTotals;
 
     /// See [`spring_forces_split`].
@@ -139,6 +144,7 @@ pub trait KernelReal: RestView {
         split: usize,
         pair: &dyn Pair,
         isa: Isa,
+        stats: bool,
     ) -> SpringTotals;
 }
 
@@ -155,11 +161,29 @@ macro_rules! kernel_real {
                 vel: &[$t],
                 force: &mut [$t],
                 scratch: &mut KernelScratch<$t>,
+                stats: bool,
             ) -> SpringTotals {
+                // The adjustment computes L/L0 anyway: its figures are
+                // always summed (three instances, not four).
                 if adjust_ratio < f64::INFINITY {
-                    all_springs::<$t, $lanes, true>(topology, material, adjust_ratio, pos, vel, force, scratch)
+                    let t = all_springs::<$t, $lanes, true, true>(
+                        topology,
+                        material,
+                        adjust_ratio,
+                        pos,
+                        vel,
+                        force,
+                        scratch,
+                    );
+                    if stats {
+                        t
+                    } else {
+                        SpringTotals::UNMEASURED
+                    }
+                } else if stats {
+                    all_springs::<$t, $lanes, false, true>(topology, material, adjust_ratio, pos, vel, force, scratch)
                 } else {
-                    all_springs::<$t, $lanes, false>(topology, material, adjust_ratio, pos, vel, force, scratch)
+                    all_springs::<$t, $lanes, false, false>(topology, material, adjust_ratio, pos, vel, force, scratch)
                 }
             }
 
@@ -174,38 +198,67 @@ macro_rules! kernel_real {
                 split: usize,
                 pair: &dyn Pair,
                 isa: Isa,
+                stats: bool,
             ) -> SpringTotals {
+                let args = (
+                    topology,
+                    table,
+                    material,
+                    adjust_ratio,
+                    pos,
+                    vel,
+                    force,
+                    split,
+                    pair,
+                    isa,
+                );
                 if adjust_ratio < f64::INFINITY {
-                    split_impl::<$t, $lanes, true>(
-                        topology,
-                        table,
-                        material,
-                        adjust_ratio,
-                        pos,
-                        vel,
-                        force,
-                        split,
-                        pair,
-                        isa,
-                    )
+                    let t = split_args::<$t, $lanes, true, true>(args);
+                    if stats {
+                        t
+                    } else {
+                        SpringTotals::UNMEASURED
+                    }
+                } else if stats {
+                    split_args::<$t, $lanes, false, true>(args)
                 } else {
-                    split_impl::<$t, $lanes, false>(
-                        topology,
-                        table,
-                        material,
-                        adjust_ratio,
-                        pos,
-                        vel,
-                        force,
-                        split,
-                        pair,
-                        isa,
-                    )
+                    split_args::<$t, $lanes, false, false>(args)
                 }
             }
         }
     };
 }
+/// [`split_impl`]'s arguments as one tuple (one line per instance above).
+type SplitArgs<'a, R> = (
+    &'a Topology,
+    &'a RestTable<R>,
+    &'a Material,
+    f64,
+    &'a [R],
+    &'a [R],
+    &'a mut [R],
+    usize,
+    &'a dyn Pair,
+    Isa,
+);
+
+fn split_args<R: KernelReal, const L: usize, const ADJ: bool, const STATS: bool>(
+    (topology, table, material, adjust_ratio, pos, vel, force, split, pair, isa): SplitArgs<R>,
+) -> SpringTotals {
+    split_impl::<R, L, ADJ, STATS>(
+        topology,
+        table,
+        material,
+        adjust_ratio,
+        pos,
+        vel,
+        force,
+        split,
+        pair,
+        isa,
+    )
+}
+
 kernel_real!(f64, 8);
 kernel_real!(f32, 16);
 

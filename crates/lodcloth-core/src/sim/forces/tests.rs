@@ -79,7 +79,15 @@ fn dispatch_identical<R: KernelReal>() {
                 pos.iter().map(|&x| R::from_f64(x)).collect(),
                 vel.iter().map(|&x| R::from_f64(x)).collect(),
             );
-            for adjust_ratio in [f64::INFINITY, 1.05] {
+            // The forces with the figures, per adjustment, for the runs
+            // without them.
+            let mut full: Vec<(u64, Vec<u64>)> = Vec::new();
+            for (adjust_ratio, stats) in [
+                (f64::INFINITY, true),
+                (1.05, true),
+                (f64::INFINITY, false),
+                (1.05, false),
+            ] {
                 let results: Vec<(Vec<u64>, SpringTotals)> = isas
                     .iter()
                     .map(|&isa| {
@@ -98,6 +106,7 @@ fn dispatch_identical<R: KernelReal>() {
                                     &vel,
                                     &mut force,
                                     &mut scratch,
+                                    stats,
                                 )
                             },
                         );
@@ -117,6 +126,19 @@ fn dispatch_identical<R: KernelReal>() {
                         r.1.max_strain.map(f64::to_bits),
                         results[0].1.max_strain.map(f64::to_bits)
                     );
+                    // Without the figures: the same forces, and NaN for them.
+                    if !stats {
+                        assert!(r.1.elastic_energy.is_nan() && r.1.max_strain.iter().all(|m| m.is_nan()));
+                    }
+                }
+                let key = adjust_ratio.to_bits();
+                match full.iter().find(|(k, _)| *k == key) {
+                    Some((_, forces)) => assert!(
+                        *forces == results[0].0,
+                        "{} {nx}x{ny}: forces without the figures differ",
+                        R::NAME
+                    ),
+                    None => full.push((key, results[0].0.clone())),
                 }
             }
         }
@@ -163,7 +185,16 @@ fn a_split_evaluation_adds_every_spring_once() {
         for adjust_ratio in [f64::INFINITY, 1.05] {
             let mut whole = vec![0.0; pos.len()];
             let mut scratch = KernelScratch::new(&topology);
-            let t = spring_forces(&topology, &material, adjust_ratio, &pos, &vel, &mut whole, &mut scratch);
+            let t = spring_forces(
+                &topology,
+                &material,
+                adjust_ratio,
+                &pos,
+                &vel,
+                &mut whole,
+                &mut scratch,
+                true,
+            );
             // Splits at a row boundary, mid-row, and one row from each end.
             let n = topology.n_nodes;
             for split in [n / 2, n / 2 + 3, 2 * nx + 1, n - 2 * nx - 1] {
@@ -180,6 +211,7 @@ fn a_split_evaluation_adds_every_spring_once() {
                     split,
                     &Serial,
                     isa,
+                    true,
                 );
                 let mut lent = vec![0.0; pos.len()];
                 let tl = spring_forces_split(
@@ -193,8 +225,24 @@ fn a_split_evaluation_adds_every_spring_once() {
                     split,
                     &*lender,
                     isa,
+                    false,
                 );
+                // (Lent and without the figures: the same forces.)
                 assert!(serial.iter().zip(&lent).all(|(a, b)| a.to_bits() == b.to_bits()));
+                assert!(tl.elastic_energy.is_nan());
+                let tl = spring_forces_split(
+                    &topology,
+                    &scratch.rest,
+                    &material,
+                    adjust_ratio,
+                    &pos,
+                    &vel,
+                    &mut vec![0.0; pos.len()],
+                    split,
+                    &*lender,
+                    isa,
+                    true,
+                );
                 assert_eq!(ts.elastic_energy.to_bits(), tl.elastic_energy.to_bits());
                 let scale = whole.iter().fold(0.0f64, |m, f| m.max(f.abs()));
                 for (k, (a, b)) in whole.iter().zip(&serial).enumerate() {
