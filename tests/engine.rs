@@ -2,6 +2,9 @@
 //! on its stepping thread with a lent helper, in real time: the state it
 //! reaches after k steps must be the one k serial steps reach, bit for bit
 //! (a race in the hand-over, or a half run twice or not at all, changes it).
+//! The engine steps lean between ticks; its metrics must still carry the
+//! full report of the step they describe (with the tick's last step lean
+//! too, they read zeros from an older report and the test fails).
 
 use std::time::Duration;
 
@@ -21,6 +24,7 @@ fn a_split_cloth_in_the_engine_steps_exactly_as_on_one_thread() {
     let sim = scene.build_at(nx, ny).expect("builds");
     assert!(sim.split().is_some(), "the test cloth must split its step");
     let serial = sim.clone();
+    let bits = |s: &lodcloth::sim::State| -> Vec<u64> { s.pos.iter().chain(&s.vel).map(|x| x.to_bits()).collect() };
     for threads in [2, 1] {
         let engine = Engine::start(
             vec![InstanceSetup {
@@ -46,18 +50,43 @@ fn a_split_cloth_in_the_engine_steps_exactly_as_on_one_thread() {
             .send(Command::Snapshot { reply: tx })
             .expect("engine running");
         let snapshot = rx.blocking_recv().expect("a reply").expect("a snapshot");
+        let metrics = engine.handles()[0].metrics.borrow().clone().expect("metrics at 10 Hz");
         engine.stop();
         let steps = snapshot.state.step;
         assert!(steps >= 50, "{threads} thread(s): only {steps} steps in 0.6 s");
+        // The engine steps lean between ticks (no spring energy or strain):
+        // the metrics carry the report of a tick's last, full step, the
+        // one serial full steps give at that step.
         let mut reference = serial.clone();
-        for _ in 0..steps {
-            reference.step();
+        let mut at_metrics = None;
+        for k in 1..=steps.max(metrics.frame) {
+            let r = reference.step();
+            if k == metrics.frame {
+                at_metrics = Some(r);
+            }
+            if k == steps {
+                assert!(
+                    bits(&snapshot.state) == bits(reference.state()),
+                    "{threads} thread(s): the engine's state after {steps} steps differs from {steps} serial steps"
+                );
+            }
         }
-        let bits = |s: &lodcloth::sim::State| -> Vec<u64> { s.pos.iter().chain(&s.vel).map(|x| x.to_bits()).collect() };
-        assert!(
-            bits(&snapshot.state) == bits(reference.state()),
-            "{threads} thread(s): the engine's state after {steps} steps differs from {steps} serial steps"
+        let r = at_metrics.expect("metrics after a step");
+        assert_eq!(
+            (
+                metrics.kinetic_energy.to_bits(),
+                metrics.potential_energy.to_bits(),
+                metrics.max_strain.to_bits()
+            ),
+            (
+                r.kinetic_energy.to_bits(),
+                (r.elastic_energy + r.gravity_energy).to_bits(),
+                r.max_strain_overall().to_bits()
+            ),
+            "{threads} thread(s): the metrics of frame {} are not that step's full report",
+            metrics.frame
         );
+        assert!(r.elastic_energy.is_finite() && r.elastic_energy > 0.0);
         eprintln!("{threads} thread(s): {steps} steps in 0.6 s, identical to serial");
     }
 }
