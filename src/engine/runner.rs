@@ -299,15 +299,14 @@ impl Runner {
             self.diverged(report.time);
             return;
         }
-        if !full {
-            return self.after_step(report.time);
-        }
-        self.last = Some(report);
-        if report.time >= self.checkpoint.time + CHECKPOINT_INTERVAL {
-            // In place: no allocation once the buffers have their size.
-            self.checkpoint.clone_from(self.sim.state());
-            if report.time >= self.last_divergence_time + CLEAN_INTERVAL {
-                self.consecutive_divergences = 0;
+        if full {
+            self.last = Some(report);
+            if report.time >= self.checkpoint.time + CHECKPOINT_INTERVAL {
+                // In place: no allocation once the buffers have their size.
+                self.checkpoint.clone_from(self.sim.state());
+                if report.time >= self.last_divergence_time + CLEAN_INTERVAL {
+                    self.consecutive_divergences = 0;
+                }
             }
         }
         self.after_step(report.time);

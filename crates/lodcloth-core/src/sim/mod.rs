@@ -566,8 +566,7 @@ impl Simulation {
         // nothing but the pins (which write their copies) moved a node since,
         // and every node was finite before the pins (so the pinned nodes'
         // massless terms were exact zeros, as they are now).
-        let fused =
-            fused.filter(|s: &Sums| pins_finite && strain_iterations == 0 && contacts == 0 && s.finish([0.0; 3]).2);
+        let fused = fused.filter(|s: &Sums| pins_finite && strain_iterations == 0 && contacts == 0 && s.finite());
         self.invalidate();
         if xpbd {
             // No force evaluation: the report's spring figures from one pass

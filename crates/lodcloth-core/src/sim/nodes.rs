@@ -42,13 +42,18 @@ pub(super) const NO_SUMS: Sums = Sums {
 };
 
 impl Sums {
-    /// Σ m·|v|², −g·Σ m·x and whether every summed coordinate was finite.
+    /// ½ Σ m·|v|², −g·Σ m·x and whether every summed coordinate was finite.
     pub(super) fn finish(&self, g: [f64; 3]) -> (f64, f64, bool) {
         let sum = |a: &[f64; LANES]| a.iter().sum::<f64>();
         let mv2 = sum(&self.mv2);
         let mx = self.mx.each_ref().map(sum);
         let finite = mv2.is_finite() && mx.iter().all(|s| s.is_finite());
         (0.5 * mv2, -(g[0] * mx[0] + g[1] * mx[1] + g[2] * mx[2]), finite)
+    }
+
+    /// Whether every summed position and velocity was finite.
+    pub(super) fn finite(&self) -> bool {
+        self.finish([0.0; 3]).2
     }
 }
 

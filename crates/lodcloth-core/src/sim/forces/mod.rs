@@ -153,7 +153,13 @@ fn spring_forces_impl<R: KernelReal>(
     scratch: &mut KernelScratch<R>,
     stats: bool,
 ) -> SpringTotals {
-    R::whole(topology, material, adjust_ratio, pos, vel, force, scratch, stats)
+    let totals = R::whole(topology, material, adjust_ratio, pos, vel, force, scratch, stats);
+    // (With the adjustment the kernel sums them anyway.)
+    if stats {
+        totals
+    } else {
+        SpringTotals::UNMEASURED
+    }
 }
 
 #[inline(always)]
@@ -369,7 +375,7 @@ pub(crate) fn spring_forces_split<R: KernelReal>(
     isa: Isa,
     stats: bool,
 ) -> SpringTotals {
-    R::split(
+    let totals = R::split(
         topology,
         table,
         material,
@@ -381,7 +387,13 @@ pub(crate) fn spring_forces_split<R: KernelReal>(
         pair,
         isa,
         stats,
-    )
+    );
+    // (With the adjustment the kernel sums them anyway.)
+    if stats {
+        totals
+    } else {
+        SpringTotals::UNMEASURED
+    }
 }
 
 #[allow(clippy::too_many_arguments)]

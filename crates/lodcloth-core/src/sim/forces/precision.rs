@@ -164,22 +164,10 @@ macro_rules! kernel_real {
                 stats: bool,
             ) -> SpringTotals {
                 // The adjustment computes L/L0 anyway: its figures are
-                // always summed (three instances, not four).
+                // always summed (three instances, not four; the caller
+                // hides them when not asked for).
                 if adjust_ratio < f64::INFINITY {
-                    let t = all_springs::<$t, $lanes, true, true>(
-                        topology,
-                        material,
-                        adjust_ratio,
-                        pos,
-                        vel,
-                        force,
-                        scratch,
-                    );
-                    if stats {
-                        t
-                    } else {
-                        SpringTotals::UNMEASURED
-                    }
+                    all_springs::<$t, $lanes, true, true>(topology, material, adjust_ratio, pos, vel, force, scratch)
                 } else if stats {
                     all_springs::<$t, $lanes, false, true>(topology, material, adjust_ratio, pos, vel, force, scratch)
                 } else {
@@ -200,7 +188,16 @@ macro_rules! kernel_real {
                 isa: Isa,
                 stats: bool,
             ) -> SpringTotals {
-                let args = (
+                // `split_impl` dispatches each of its parts itself: a
+                // function pointer loses no inlining here.
+                let instance: SplitFn<$t> = if adjust_ratio < f64::INFINITY {
+                    split_impl::<$t, $lanes, true, true>
+                } else if stats {
+                    split_impl::<$t, $lanes, false, true>
+                } else {
+                    split_impl::<$t, $lanes, false, false>
+                };
+                instance(
                     topology,
                     table,
                     material,
@@ -211,53 +208,15 @@ macro_rules! kernel_real {
                     split,
                     pair,
                     isa,
-                );
-                if adjust_ratio < f64::INFINITY {
-                    let t = split_args::<$t, $lanes, true, true>(args);
-                    if stats {
-                        t
-                    } else {
-                        SpringTotals::UNMEASURED
-                    }
-                } else if stats {
-                    split_args::<$t, $lanes, false, true>(args)
-                } else {
-                    split_args::<$t, $lanes, false, false>(args)
-                }
+                )
             }
         }
     };
 }
-/// [`split_impl`]'s arguments as one tuple (one line per instance above).
-type SplitArgs<'a, R> = (
-    &'a Topology,
-    &'a RestTable<R>,
-    &'a Material,
-    f64,
-    &'a [R],
-    &'a [R],
-    &'a mut [R],
-    usize,
-    &'a dyn Pair,
-    Isa,
-);
 
-fn split_args<R: KernelReal, const L: usize, const ADJ: bool, const STATS: bool>(
-    (topology, table, material, adjust_ratio, pos, vel, force, split, pair, isa): SplitArgs<R>,
-) -> SpringTotals {
-    split_impl::<R, L, ADJ, STATS>(
-        topology,
-        table,
-        material,
-        adjust_ratio,
-        pos,
-        vel,
-        force,
-        split,
-        pair,
-        isa,
-    )
-}
+/// One instance of [`split_impl`].
+type SplitFn<R> =
+    fn(&Topology, &RestTable<R>, &Material, f64, &[R], &[R], &mut [R], usize, &dyn Pair, Isa) -> SpringTotals;
 
 kernel_real!(f64, 8);
 kernel_real!(f32, 16);
