@@ -55,7 +55,7 @@ use implicit::ImplicitInputs;
 use model::{colour, Mixed, Model, Workspace};
 use nodes::Sums;
 use paged::Paged;
-use par::{flat_f32_halves, fused_last, halves, halves_mut, node_split, Par};
+use par::{fused_last, halves_mut, node_split, stage_halves, stage_reads, Par};
 use validate::{check_node_shares, invalid, validate_loads, validate_params};
 use xpbd::SweepInputs;
 
@@ -140,8 +140,8 @@ pub struct Simulation {
     totals: SpringTotals,
     cached: bool,
     /// `acc` is not written yet: the cache's forces wait as f32 spring
-    /// forces in `ws.mixed` for symplectic Euler's update, which turns them
-    /// into accelerations in its own pass (one pass over the nodes fewer;
+    /// forces in `ws.mixed` for symplectic Euler's update (or RK4's first
+    /// pass), which turns them into accelerations in its own pass (one pass over the nodes fewer;
     /// see [`Simulation::ensure_cache_from`]). Anything else that reads
     /// `acc` writes it first ([`Simulation::flush`]).
     pending: bool,
@@ -466,7 +466,10 @@ impl Simulation {
         // XPBD needs no acceleration: its constraints replace the springs' forces.
         if !xpbd {
             self.ensure_cache(par);
-            if self.model.params.integrator != Integrator::SymplecticEuler {
+            if !matches!(
+                self.model.params.integrator,
+                Integrator::SymplecticEuler | Integrator::Rk4
+            ) {
                 self.flush(par);
             }
         }
@@ -652,8 +655,11 @@ impl Simulation {
     fn ensure_cache_from(&mut self, par: Par, rounded: bool, stats: bool) {
         if !self.cached {
             let s = &self.state;
-            // Symplectic Euler takes the f32 spring forces as they are.
-            let defer = self.model.params.integrator == Integrator::SymplecticEuler;
+            // Symplectic Euler and RK4 take the f32 spring forces as they are.
+            let defer = matches!(
+                self.model.params.integrator,
+                Integrator::SymplecticEuler | Integrator::Rk4
+            );
             let (totals, pending) = self.model.accelerations(
                 s.time,
                 &s.pos,
@@ -714,9 +720,16 @@ impl Simulation {
     /// Classic RK4 on y = (x, v), y' = (v, a(t, x, v)); k1 is the cached
     /// acceleration. With f32 springs each pass that makes a stage writes
     /// its f32 copies for the kernel, and the last pass those of the new
-    /// state and the report's sums (returned; see [`nodes`]).
+    /// state and the report's sums (returned; see [`nodes`]). With f32
+    /// springs and no other force, each pass that reads a stage's
+    /// acceleration makes it from the kernel's f32 forces
+    /// ([`nodes::StageForces`]): k1 waits in them since the last step's
+    /// evaluation (`pending`), k2–k4 since their own.
     #[inline(always)]
     fn rk4(&mut self, t0: f64, dt: f64, par: Par) -> Sums {
+        let from_forces = std::mem::take(&mut self.pending);
+        let model = &self.model;
+        let n = model.topology.n_nodes;
         let Workspace {
             stage_pos,
             stage_vel,
@@ -732,7 +745,8 @@ impl Simulation {
         // Plain slices of one length, bound once: indexing through `Paged`'s
         // deref inside the loops kept their bounds checks and scalar code.
         {
-            let (r0, r1) = halves([pos, vel, &self.acc[..len]], mid);
+            let k1 = (!from_forces).then(|| &self.acc[..len]);
+            let (r0, r1) = stage_reads(pos, vel, k1, mid);
             let (w0, w1) = halves_mut(
                 [
                     &mut sum_pos[..len],
@@ -742,25 +756,24 @@ impl Simulation {
                 ],
                 mid,
             );
-            let (c0, c1) = flat_f32_halves(mixed.as_deref_mut(), mid);
+            let ((c0, c1), (f0, f1)) = stage_halves(mixed.as_deref_mut(), model, mid, true, from_forces);
             par.both(
                 #[inline(always)]
-                || nodes::rk4_first(r0, w0, c0, dt),
+                || nodes::rk4_first(r0, w0, c0, f0, dt),
                 #[inline(always)]
-                || nodes::rk4_first(r1, w1, c1, dt),
+                || nodes::rk4_first(r1, w1, c1, f1, dt),
             );
         }
         let mut stage_pos = std::mem::take(stage_pos);
         let mut stage_vel = std::mem::take(stage_vel);
         let mut stage_acc = std::mem::take(stage_acc);
-        let n = self.model.topology.n_nodes;
         // k2, k3 at the midpoint, k4 at the end.
         for (weight, t_stage, next_scale) in [(2.0, 0.5 * dt, 0.5 * dt), (2.0, 0.5 * dt, dt), (1.0, dt, 0.0)] {
             // Pinned nodes are where their paths put them at the stage's time:
             // extrapolating them with the start-of-step velocity (their
             // acceleration is 0) made RK4 first order for moving pins
             // (tests/convergence.rs). Fixed pins are unchanged by this.
-            for pin in &self.model.loads.pins {
+            for pin in &model.loads.pins {
                 let (p, v) = pin.at(t0 + t_stage);
                 let k = pin.node as usize;
                 for c in 0..3 {
@@ -776,7 +789,7 @@ impl Simulation {
             }
             // The stage's f32 copies were written with it (and its pins just now).
             let rounded = self.ws.mixed.is_some();
-            self.model.accelerations(
+            let (_, from_forces) = model.accelerations(
                 t0 + t_stage,
                 &stage_pos,
                 &stage_vel,
@@ -784,11 +797,12 @@ impl Simulation {
                 &mut self.ws,
                 par,
                 rounded,
-                false,
+                true,
                 // A stage's figures are never reported.
                 false,
             );
-            let (r0, r1) = halves([&pos[..len], &vel[..len], &stage_acc[..len]], mid);
+            let acc = (!from_forces).then(|| &stage_acc[..len]);
+            let (r0, r1) = stage_reads(pos, vel, acc, mid);
             let (w0, w1) = halves_mut(
                 [
                     &mut self.ws.sum_pos[..len],
@@ -799,16 +813,13 @@ impl Simulation {
                 mid,
             );
             // The stage after k4 is never evaluated: no copies for it.
-            let (c0, c1) = if next_scale != 0.0 {
-                flat_f32_halves(self.ws.mixed.as_deref_mut(), mid)
-            } else {
-                (None, None)
-            };
+            let ((c0, c1), (f0, f1)) =
+                stage_halves(self.ws.mixed.as_deref_mut(), model, mid, next_scale != 0.0, from_forces);
             par.both(
                 #[inline(always)]
-                || nodes::rk4_stage(r0, w0, c0, weight, next_scale),
+                || nodes::rk4_stage(r0, w0, c0, f0, weight, next_scale),
                 #[inline(always)]
-                || nodes::rk4_stage(r1, w1, c1, weight, next_scale),
+                || nodes::rk4_stage(r1, w1, c1, f1, weight, next_scale),
             );
         }
         self.ws.stage_pos = stage_pos;

@@ -12,7 +12,10 @@
 //! springs and no other force it also turns the kernel's f32 forces into
 //! accelerations there ([`Forces`]), instead of a pass that wrote them to
 //! an f64 array for the update to read back (cachegrind with a Zen 3-sized
-//! L2: 8.1 k → 4.1 k misses per 64² step; docs/results.md).
+//! L2: 8.1 k → 4.1 k misses per 64² step; docs/results.md). RK4's passes
+//! do the same with each of its four evaluations ([`StageForces`]).
+
+use super::par::halves_mut;
 
 /// Lanes of the report's partial sums (a sequential sum is one long chain
 /// of dependent additions, several µs at 64×64).
@@ -267,43 +270,164 @@ fn nodes<const N: usize, const COPY: bool, const RK4: bool, const FORCES: bool>(
 /// (flat `[x…, y…, z…]` slices), written by the pass that makes the stage.
 pub(super) type Copies<'a> = Option<(&'a mut [f32], &'a mut [f32])>;
 
+/// The f32 spring forces of the stage a pass of RK4 reads, when they are
+/// all the forces on it (f32 springs, no other force): the pass makes each
+/// node's acceleration from them with [`acceleration`], on the stage's
+/// velocity, as the force-to-acceleration pass would have, and clears them
+/// for the next evaluation. One pass over the nodes fewer per evaluation:
+/// no f64 acceleration array written and read back, the stage's velocity
+/// not streamed a second time.
+pub(super) struct StageForces<'a> {
+    /// The piece's part of the flat `[x…, y…, z…]` f32 forces.
+    pub(super) f: &'a mut [f32],
+    /// Flat index of the piece's first entry.
+    pub(super) lo: usize,
+    pub(super) inv_mass: &'a [f64],
+    pub(super) free: &'a [f64],
+    pub(super) g: [f64; 3],
+    pub(super) drag: f64,
+}
+
 /// RK4's first pass: the sums start at (v, a), the midpoint stage is
-/// x + ½dt·v, v + ½dt·a, and its f32 copies are written when asked.
+/// x + ½dt·v, v + ½dt·a, and its f32 copies are written when asked. `a` is
+/// `read[2]`, or made from `forces` (`read[2]` then empty).
 #[inline(always)]
-pub(super) fn rk4_first(read: [&[f64]; 3], write: [&mut [f64]; 4], copies: Copies, dt: f64) {
-    stage_pass::<true>(read, write, copies, 1.0, 0.5 * dt);
+pub(super) fn rk4_first(
+    read: [&[f64]; 3],
+    write: [&mut [f64]; 4],
+    copies: Copies,
+    forces: Option<StageForces>,
+    dt: f64,
+) {
+    stage_pass::<true>(read, write, copies, forces, 1.0, 0.5 * dt);
 }
 
 /// One of RK4's middle passes: the stage just evaluated joins the sums with
 /// `weight`, and the next stage is x + `next`·v_stage, v + `next`·a_stage
-/// (its f32 copies written when asked).
+/// (its f32 copies written when asked). `a_stage` is `read[2]`, or made
+/// from `forces`.
 #[inline(always)]
-pub(super) fn rk4_stage(read: [&[f64]; 3], write: [&mut [f64]; 4], copies: Copies, weight: f64, next: f64) {
-    stage_pass::<false>(read, write, copies, weight, next);
+pub(super) fn rk4_stage(
+    read: [&[f64]; 3],
+    write: [&mut [f64]; 4],
+    copies: Copies,
+    forces: Option<StageForces>,
+    weight: f64,
+    next: f64,
+) {
+    stage_pass::<false>(read, write, copies, forces, weight, next);
 }
 
 #[inline(always)]
-fn stage_pass<const FIRST: bool>(read: [&[f64]; 3], write: [&mut [f64]; 4], copies: Copies, weight: f64, next: f64) {
-    // The choice outside the loop, so each loop vectorises on its own.
-    match copies {
-        Some((p32, v32)) => stage_loop::<FIRST, true>(read, write, p32, v32, weight, next),
-        None => stage_loop::<FIRST, false>(read, write, &mut [], &mut [], weight, next),
+fn stage_pass<const FIRST: bool>(
+    read: [&[f64]; 3],
+    write: [&mut [f64]; 4],
+    copies: Copies,
+    forces: Option<StageForces>,
+    weight: f64,
+    next: f64,
+) {
+    // The choices outside the loop, so each loop vectorises on its own.
+    match (copies, forces) {
+        (Some((p32, v32)), Some(f)) => stage_segments::<FIRST, true>(read, write, p32, v32, f, weight, next),
+        (Some((p32, v32)), None) => stage_loop::<FIRST, true, false>(read, write, p32, v32, no_forces(), weight, next),
+        (None, Some(f)) => stage_segments::<FIRST, false>(read, write, &mut [], &mut [], f, weight, next),
+        (None, None) => stage_loop::<FIRST, false, false>(read, write, &mut [], &mut [], no_forces(), weight, next),
+    }
+}
+
+/// What [`stage_loop`] makes a component's accelerations from: that
+/// component's f32 forces, the nodes' inverse masses and free flags, its
+/// gravity and the drag.
+struct Accel<'a> {
+    f: &'a mut [f32],
+    inv_mass: &'a [f64],
+    free: &'a [f64],
+    g: f64,
+    drag: f64,
+}
+
+/// No forces: the acceleration is read.
+#[inline(always)]
+fn no_forces() -> Accel<'static> {
+    Accel {
+        f: &mut [],
+        inv_mass: &[],
+        free: &[],
+        g: 0.0,
+        drag: 0.0,
+    }
+}
+
+/// [`stage_loop`] from the f32 forces (`read[2]` unread), one component at a time: a piece of
+/// the flat fields may begin and end inside any component (a split step
+/// cuts them in the middle), and a node's mass and gravity are per
+/// component.
+#[inline(always)]
+fn stage_segments<const FIRST: bool, const COPY: bool>(
+    read: [&[f64]; 3],
+    write: [&mut [f64]; 4],
+    p32: &mut [f32],
+    v32: &mut [f32],
+    forces: StageForces,
+    weight: f64,
+    next: f64,
+) {
+    let StageForces {
+        f,
+        lo,
+        inv_mass,
+        free,
+        g,
+        drag,
+    } = forces;
+    let n = inv_mass.len();
+    let [mut pos, mut vel, _] = read;
+    let len = pos.len();
+    let (mut write, mut p32, mut v32, mut f) = (write, p32, v32, &mut f[..len]);
+    let mut at = lo;
+    while at < lo + len {
+        let c = at / n;
+        let end = ((c + 1) * n).min(lo + len);
+        let take = end - at;
+        let (k0, k1) = (at - c * n, end - c * n);
+        let r = [&pos[..take], &vel[..take], &[][..]];
+        (pos, vel) = (&pos[take..], &vel[take..]);
+        let (w, rest) = halves_mut(write, take);
+        write = rest;
+        let (pc, pr) = std::mem::take(&mut p32).split_at_mut(if COPY { take } else { 0 });
+        let (vc, vr) = std::mem::take(&mut v32).split_at_mut(if COPY { take } else { 0 });
+        (p32, v32) = (pr, vr);
+        let (fc, fr) = std::mem::take(&mut f).split_at_mut(take);
+        f = fr;
+        let accel = Accel {
+            f: fc,
+            inv_mass: &inv_mass[k0..k1],
+            free: &free[k0..k1],
+            g: g[c],
+            drag,
+        };
+        stage_loop::<FIRST, COPY, true>(r, w, pc, vc, accel, weight, next);
+        at = end;
     }
 }
 
 /// [`stage_pass`]'s loop: in the first pass the stage is the state itself
-/// (`stage_acc` is its acceleration) and the sums are set, not added to.
+/// and the sums are set, not added to. The stage's acceleration is
+/// `stage_acc`, or (`FORCES`) made from `accel` on the stage's velocity.
 #[inline(always)]
-fn stage_loop<const FIRST: bool, const COPY: bool>(
+fn stage_loop<const FIRST: bool, const COPY: bool, const FORCES: bool>(
     [pos, vel, stage_acc]: [&[f64]; 3],
     [sum_pos, sum_vel, stage_pos, stage_vel]: [&mut [f64]; 4],
     p32: &mut [f32],
     v32: &mut [f32],
+    accel: Accel,
     weight: f64,
     next: f64,
 ) {
     let len = pos.len();
-    let (vel, stage_acc) = (&vel[..len], &stage_acc[..len]);
+    let vel = &vel[..len];
+    let stage_acc = if FORCES { stage_acc } else { &stage_acc[..len] };
     let (sum_pos, sum_vel) = (&mut sum_pos[..len], &mut sum_vel[..len]);
     let (stage_pos, stage_vel) = (&mut stage_pos[..len], &mut stage_vel[..len]);
     let (p32, v32) = if COPY {
@@ -311,17 +435,38 @@ fn stage_loop<const FIRST: bool, const COPY: bool>(
     } else {
         (p32, v32)
     };
+    let Accel {
+        f,
+        inv_mass,
+        free,
+        g,
+        drag,
+    } = accel;
+    let (f, inv_mass, free) = if FORCES {
+        (&mut f[..len], &inv_mass[..len], &free[..len])
+    } else {
+        (f, inv_mass, free)
+    };
     for i in 0..len {
-        let sv = if FIRST {
-            sum_pos[i] = vel[i];
-            sum_vel[i] = stage_acc[i];
-            vel[i]
+        // The velocity the stage was evaluated at.
+        let sv = if FIRST { vel[i] } else { stage_vel[i] };
+        let a = if FORCES {
+            // The force-to-acceleration pass's own expression (the f64
+            // forces are all zero: + 0.0).
+            let fk = 0.0 + f64::from(f[i]);
+            f[i] = 0.0;
+            acceleration(fk, inv_mass[i], free[i], g, drag, sv)
         } else {
-            sum_pos[i] += weight * stage_vel[i];
-            sum_vel[i] += weight * stage_acc[i];
-            stage_vel[i]
+            stage_acc[i]
         };
-        let (p, v) = (pos[i] + next * sv, vel[i] + next * stage_acc[i]);
+        if FIRST {
+            sum_pos[i] = vel[i];
+            sum_vel[i] = a;
+        } else {
+            sum_pos[i] += weight * sv;
+            sum_vel[i] += weight * a;
+        }
+        let (p, v) = (pos[i] + next * sv, vel[i] + next * a);
         stage_pos[i] = p;
         stage_vel[i] = v;
         if COPY {

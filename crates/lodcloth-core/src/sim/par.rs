@@ -216,17 +216,67 @@ pub(super) fn f32_halves<'a>(
     }
 }
 
-/// The f32 copies of a stage cut at flat index `mid`, like the flat passes.
+/// What a stage pass reads, cut at `mid`: the state's positions and
+/// velocities, and the stage's accelerations (empty when they wait in the
+/// f32 spring forces, `acc` None).
 #[inline(always)]
-pub(super) fn flat_f32_halves(mixed: Option<&mut Mixed>, mid: usize) -> (nodes::Copies<'_>, nodes::Copies<'_>) {
-    match mixed {
-        Some(m) => {
-            let (p0, p1) = m.pos.split_at_mut(mid);
-            let (v0, v1) = m.vel.split_at_mut(mid);
-            (Some((p0, v0)), Some((p1, v1)))
-        }
-        None => (None, None),
-    }
+pub(super) fn stage_reads<'a>(
+    pos: &'a [f64],
+    vel: &'a [f64],
+    acc: Option<&'a [f64]>,
+    mid: usize,
+) -> ([&'a [f64]; 3], [&'a [f64]; 3]) {
+    let ([p0, v0], [p1, v1]) = halves([pos, vel], mid);
+    let (a0, a1) = acc.map_or((&[][..], &[][..]), |a| a.split_at(mid));
+    ([p0, v0, a0], [p1, v1, a1])
+}
+
+/// Both halves of a stage pass's f32 fields.
+type StageHalves<'a> = (
+    (nodes::Copies<'a>, nodes::Copies<'a>),
+    (Option<nodes::StageForces<'a>>, Option<nodes::StageForces<'a>>),
+);
+
+/// A stage pass's f32 fields cut at flat index `mid`, like the flat
+/// passes: the copies of the stage it makes (`copies`: that stage will be
+/// evaluated) and, with `forces` (the acceleration it reads waits in the
+/// kernel's f32 spring forces, see `Simulation::pending`), those forces
+/// and what turns them into accelerations.
+#[inline(always)]
+pub(super) fn stage_halves<'a>(
+    mixed: Option<&'a mut Mixed>,
+    model: &'a Model,
+    mid: usize,
+    copies: bool,
+    forces: bool,
+) -> StageHalves<'a> {
+    let Some(Mixed { pos, vel, force, .. }) = mixed else {
+        debug_assert!(!forces, "f32 spring forces without f32 springs");
+        return ((None, None), (None, None));
+    };
+    let copies = if copies {
+        let (p0, p1) = pos.split_at_mut(mid);
+        let (v0, v1) = vel.split_at_mut(mid);
+        (Some((p0, v0)), Some((p1, v1)))
+    } else {
+        (None, None)
+    };
+    let forces = if forces {
+        let n = model.topology.n_nodes;
+        let (f0, f1) = force[..3 * n].split_at_mut(mid);
+        let half = |f, lo| nodes::StageForces {
+            f,
+            lo,
+            inv_mass: &model.inv_mass[..n],
+            free: &model.free[..n],
+            g: model.params.gravity,
+            drag: model.params.drag,
+        };
+        (Some(half(f0, 0)), Some(half(f1, mid)))
+    } else {
+        (None, None)
+    };
+    (copies, forces)
 }
 
 /// `f` itself: lets a closure bound to a name carry `#[inline(always)]`
