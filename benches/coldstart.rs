@@ -10,11 +10,15 @@
 //! every configured level is prepared (or after `--minutes`).
 //!
 //! Prints the machine, a line per 10 s and a summary (overruns and lag
-//! resets during preparation, the lowest one-second state rate of each
+//! resets during preparation, each second with an overrun beside the
+//! host's steal time and how late a 1 ms sleep of the bench's own probe
+//! thread woke (a stall the probe shares is the machine's), the lowest one-second state rate of each
 //! instance against its configured rate, the switch's answer time, the
 //! time to prepare everything); writes `out/coldstart-<class>/coldstart.csv`,
-//! `coldstart_rates.svg` (state rates and preparation over time) and
-//! `coldstart_rtf.svg` (each instance's real-time factor).
+//! `coldstart_rates.svg` (state rates and preparation over time),
+//! `coldstart_rtf.svg` (each instance's real-time factor) and
+//! `coldstart_stalls.svg` (the probe's lateness, steal time and overruns
+//! per second).
 //!
 //! `cargo bench --bench coldstart -- [--minutes 15] [--switch-after 5]
 //! [--switch paper-3=40x40] [--at-once] [--background idle|nice] [--log FILE]
@@ -71,6 +75,15 @@ fn per_instance(m: &BTreeMap<String, f64>, family: &str, instance: &str) -> f64 
 /// One second of the run.
 struct Sample {
     t: f64,
+    /// The host's steal time over this second, summed over cores (ms):
+    /// time the hypervisor ran something else while this VM's cores wanted
+    /// to run.
+    steal_ms: f64,
+    /// The longest a 1 ms sleep of the bench's own probe thread overslept
+    /// in this second (ms). The probe is another process than the daemon:
+    /// a stall it shares with every instance is the machine's, not a lock
+    /// or a scheduling class inside the daemon.
+    probe_late_ms: f64,
     /// Per instance: cumulative overruns, lag resets, states received in
     /// this second, real-time factor, levels prepared.
     overruns: Vec<f64>,
@@ -110,6 +123,33 @@ fn cpu_model() -> String {
                 .map(|v| v.trim_start_matches([' ', '\t', ':']).to_string())
         })
         .unwrap_or_else(|| "unknown CPU".into())
+}
+
+/// Steal time of all cores so far, in ms (`/proc/stat`'s 8th field of
+/// the `cpu` line, in USER_HZ = 100 ticks a second); 0 where unreadable.
+fn steal_ms() -> f64 {
+    let stat = std::fs::read_to_string("/proc/stat").unwrap_or_default();
+    stat.lines()
+        .find(|l| l.starts_with("cpu "))
+        .and_then(|l| l.split_whitespace().nth(8))
+        .and_then(|v| v.parse::<f64>().ok())
+        .map_or(0.0, |ticks| ticks * 10.0)
+}
+
+/// A thread sleeping 1 ms at a time and keeping, in µs, how much longer
+/// than asked its longest sleep of the current second took (read and reset
+/// by the sampler with `swap`).
+fn stall_probe() -> Arc<std::sync::atomic::AtomicU64> {
+    let worst = Arc::new(std::sync::atomic::AtomicU64::new(0));
+    let keep = worst.clone();
+    std::thread::spawn(move || loop {
+        let asked = Duration::from_millis(1);
+        let t0 = Instant::now();
+        std::thread::sleep(asked);
+        let late = t0.elapsed().saturating_sub(asked).as_micros() as u64;
+        keep.fetch_max(late, std::sync::atomic::Ordering::Relaxed);
+    });
+    worst
 }
 
 /// Threads busy-waiting `busy` ms of every `period` ms (`"1.0/2,0.8/2"`)
@@ -211,6 +251,8 @@ async fn main() {
     // with this config, a Zen 5's 0.36 and 0.14).
     let load = arg("--load").map(|spec| emulated_load(&spec));
     let started = Instant::now();
+    let probe = stall_probe();
+    let mut steal_before = steal_ms();
     println!(
         "cold start of {CONFIG} ({} instances, {total_levels} levels, background {background}) on {} ({} cores), bench of lodcloth {}, serving {}",
         names.len(),
@@ -276,8 +318,11 @@ async fn main() {
             .map(|n| (now_counts.get(n).copied().unwrap_or(0) - last_counts.get(n).copied().unwrap_or(0)) as f64)
             .collect();
         last_counts = now_counts;
+        let steal_now = steal_ms();
         let s = Sample {
             t,
+            steal_ms: steal_now - steal_before,
+            probe_late_ms: probe.swap(0, std::sync::atomic::Ordering::Relaxed) as f64 / 1e3,
             overruns: names
                 .iter()
                 .map(|n| per_instance(&m, "lodcloth_overruns_total", n))
@@ -312,6 +357,7 @@ async fn main() {
                 s.prepared
             );
         }
+        steal_before = steal_now;
         if all_prepared_at.is_none() && s.prepared as usize >= total_levels {
             all_prepared_at = Some(t);
         }
@@ -387,6 +433,32 @@ async fn main() {
             rates[i]
         );
     }
+    // Each second in which some instance counted an overrun, beside what
+    // the machine did in it: a stall every instance shares with the probe
+    // (another process) or with steal time is the host's.
+    let stalls: Vec<(&Sample, f64)> = samples
+        .windows(2)
+        .map(|w| {
+            (
+                &w[1],
+                w[1].overruns.iter().sum::<f64>() - w[0].overruns.iter().sum::<f64>(),
+            )
+        })
+        .filter(|(_, more)| *more > 0.0)
+        .collect();
+    let worst_probe = samples.iter().map(|s| s.probe_late_ms).fold(0.0, f64::max);
+    let steal: f64 = samples.iter().map(|s| s.steal_ms).sum();
+    println!(
+        "machine: steal {steal:.0} ms over the run, the probe's longest oversleep {worst_probe:.1} ms; {} seconds with overruns{}",
+        stalls.len(),
+        if stalls.is_empty() { "" } else { ":" }
+    );
+    for (s, more) in &stalls {
+        println!(
+            "  at {:.0} s: {more:.0} overruns, steal {:.0} ms, probe late {:.1} ms",
+            s.t, s.steal_ms, s.probe_late_ms
+        );
+    }
     match all_prepared_at {
         Some(t) => println!("every level prepared {t:.0} s after start"),
         None => println!(
@@ -405,7 +477,12 @@ async fn main() {
     let out_dir = format!("out/coldstart-{background}");
     let out = std::path::Path::new(&out_dir);
     std::fs::create_dir_all(out).expect("out/coldstart");
-    let mut header = vec!["t_s".to_string(), "levels_prepared".to_string()];
+    let mut header = vec![
+        "t_s".to_string(),
+        "levels_prepared".to_string(),
+        "steal_ms".to_string(),
+        "probe_late_ms".to_string(),
+    ];
     for n in &names {
         header.extend([
             format!("{n}_overruns"),
@@ -417,7 +494,12 @@ async fn main() {
     let header: Vec<&str> = header.iter().map(String::as_str).collect();
     let mut csv = CsvTable::create(&out.join("coldstart.csv"), &header).expect("csv");
     for s in &samples {
-        let mut row = vec![format!("{:.2}", s.t), format!("{:.0}", s.prepared)];
+        let mut row = vec![
+            format!("{:.2}", s.t),
+            format!("{:.0}", s.prepared),
+            format!("{:.0}", s.steal_ms),
+            format!("{:.2}", s.probe_late_ms),
+        ];
         for i in 0..names.len() {
             row.extend([
                 format!("{:.0}", s.overruns[i]),
@@ -482,5 +564,45 @@ async fn main() {
         false,
     )
     .expect("chart");
-    println!("wrote {out_dir}/coldstart.csv, coldstart_rates.svg and coldstart_rtf.svg");
+    // The machine beside the daemon: how late the probe woke, and the
+    // overruns of all instances, second by second.
+    let stall_series = [
+        Series {
+            name: "probe: longest oversleep of a 1 ms sleep (ms)",
+            points: samples.iter().map(|s| (s.t, s.probe_late_ms)).collect(),
+            markers: false,
+            color: PALETTE[0],
+        },
+        Series {
+            name: "overruns of all instances in the second",
+            points: samples
+                .windows(2)
+                .map(|w| {
+                    (
+                        w[1].t,
+                        w[1].overruns.iter().sum::<f64>() - w[0].overruns.iter().sum::<f64>(),
+                    )
+                })
+                .collect(),
+            markers: true,
+            color: PALETTE[1],
+        },
+        Series {
+            name: "steal time (ms, all cores)",
+            points: samples.iter().map(|s| (s.t, s.steal_ms)).collect(),
+            markers: false,
+            color: PALETTE[2],
+        },
+    ];
+    line_chart_svg(
+        &out.join("coldstart_stalls.svg"),
+        &format!("Cold start, background {background}: the machine's stalls beside the daemon's overruns"),
+        "seconds since start",
+        "ms / count",
+        &stall_series,
+        false,
+        false,
+    )
+    .expect("chart");
+    println!("wrote {out_dir}/coldstart.csv, coldstart_rates.svg, coldstart_rtf.svg and coldstart_stalls.svg");
 }
