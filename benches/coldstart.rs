@@ -436,7 +436,7 @@ async fn main() {
     // Each second in which some instance counted an overrun, beside what
     // the machine did in it: a stall every instance shares with the probe
     // (another process) or with steal time is the host's.
-    let stalls: Vec<(&Sample, f64)> = samples
+    let per_second: Vec<(&Sample, f64)> = samples
         .windows(2)
         .map(|w| {
             (
@@ -444,8 +444,8 @@ async fn main() {
                 w[1].overruns.iter().sum::<f64>() - w[0].overruns.iter().sum::<f64>(),
             )
         })
-        .filter(|(_, more)| *more > 0.0)
         .collect();
+    let stalls: Vec<&(&Sample, f64)> = per_second.iter().filter(|(_, more)| *more > 0.0).collect();
     let worst_probe = samples.iter().map(|s| s.probe_late_ms).fold(0.0, f64::max);
     let steal: f64 = samples.iter().map(|s| s.steal_ms).sum();
     println!(
@@ -575,15 +575,7 @@ async fn main() {
         },
         Series {
             name: "overruns of all instances in the second",
-            points: samples
-                .windows(2)
-                .map(|w| {
-                    (
-                        w[1].t,
-                        w[1].overruns.iter().sum::<f64>() - w[0].overruns.iter().sum::<f64>(),
-                    )
-                })
-                .collect(),
+            points: per_second.iter().map(|(s, more)| (s.t, *more)).collect(),
             markers: true,
             color: PALETTE[1],
         },
