@@ -12,8 +12,9 @@
 //! Prints the machine, a line per 10 s and a summary (overruns and lag
 //! resets during preparation, each second with an overrun beside the
 //! host's steal time and how late a 1 ms sleep of the bench's own probe
-//! thread woke (a stall the probe shares is the machine's), the lowest one-second state rate of each
-//! instance against its configured rate, the switch's answer time, the
+//! thread woke (a stall the probe shares is the machine's), the lowest
+//! one-second state rate of each instance against its configured rate,
+//! the switch's answer time, the
 //! time to prepare everything); writes `out/coldstart-<class>/coldstart.csv`,
 //! `coldstart_rates.svg` (state rates and preparation over time),
 //! `coldstart_rtf.svg` (each instance's real-time factor) and

@@ -141,8 +141,9 @@ pub struct Simulation {
     cached: bool,
     /// `acc` is not written yet: the cache's forces wait as f32 spring
     /// forces in `ws.mixed` for symplectic Euler's update (or RK4's first
-    /// pass), which turns them into accelerations in its own pass (one pass over the nodes fewer;
-    /// see [`Simulation::ensure_cache_from`]). Anything else that reads
+    /// pass), which turns them into accelerations in its own pass (one pass
+    /// over the nodes fewer; see [`Simulation::ensure_cache_from`]).
+    /// Anything else that reads
     /// `acc` writes it first ([`Simulation::flush`]).
     pending: bool,
     modal: ModalEstimate,

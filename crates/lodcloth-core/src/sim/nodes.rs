@@ -359,10 +359,11 @@ fn no_forces() -> Accel<'static> {
     }
 }
 
-/// [`stage_loop`] from the f32 forces (`read[2]` unread), one component at a time: a piece of
-/// the flat fields may begin and end inside any component (a split step
-/// cuts them in the middle), and a node's mass and gravity are per
-/// component.
+/// [`stage_loop`] from the f32 forces (`read[2]` unread), one component
+/// at a time: a piece of the flat fields may begin and end inside any
+/// component (a split step cuts them in the middle), and a node's gravity
+/// is per component. (Symplectic Euler's [`Forces`] are cut by node
+/// instead, as its fused pass is; RK4's stage passes stay flat.)
 #[inline(always)]
 fn stage_segments<const FIRST: bool, const COPY: bool>(
     read: [&[f64]; 3],
