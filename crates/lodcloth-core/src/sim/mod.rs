@@ -769,7 +769,11 @@ impl Simulation {
         let mut stage_vel = std::mem::take(stage_vel);
         let mut stage_acc = std::mem::take(stage_acc);
         // k2, k3 at the midpoint, k4 at the end.
-        for (weight, t_stage, next_scale) in [(2.0, 0.5 * dt, 0.5 * dt), (2.0, 0.5 * dt, dt), (1.0, dt, 0.0)] {
+        for (weight, t_stage, next_scale) in [
+            (2.0, 0.5 * dt, Some(0.5 * dt)),
+            (2.0, 0.5 * dt, Some(dt)),
+            (1.0, dt, None),
+        ] {
             // Pinned nodes are where their paths put them at the stage's time:
             // extrapolating them with the start-of-step velocity (their
             // acceleration is 0) made RK4 first order for moving pins
@@ -814,8 +818,13 @@ impl Simulation {
                 mid,
             );
             // The stage after k4 is never evaluated: no copies for it.
-            let ((c0, c1), (f0, f1)) =
-                stage_halves(self.ws.mixed.as_deref_mut(), model, mid, next_scale != 0.0, from_forces);
+            let ((c0, c1), (f0, f1)) = stage_halves(
+                self.ws.mixed.as_deref_mut(),
+                model,
+                mid,
+                next_scale.is_some(),
+                from_forces,
+            );
             par.both(
                 #[inline(always)]
                 || nodes::rk4_stage(r0, w0, c0, f0, weight, next_scale),
