@@ -88,6 +88,10 @@ struct Sample {
     /// Per instance: cumulative overruns, lag resets, states received in
     /// this second, real-time factor, levels prepared.
     overruns: Vec<f64>,
+    /// Cumulative passes whose stepping thread woke over 10 ms late
+    /// (`lodcloth_stalls_total`: the daemon's own view of the machine's
+    /// stalls, beside the probe's).
+    stalls: Vec<f64>,
     lag_resets: Vec<f64>,
     states: Vec<f64>,
     rtf: Vec<f64>,
@@ -328,6 +332,10 @@ async fn main() {
                 .iter()
                 .map(|n| per_instance(&m, "lodcloth_overruns_total", n))
                 .collect(),
+            stalls: names
+                .iter()
+                .map(|n| per_instance(&m, "lodcloth_stalls_total", n))
+                .collect(),
             lag_resets: names
                 .iter()
                 .map(|n| per_instance(&m, "lodcloth_lag_resets_total", n))
@@ -416,8 +424,8 @@ async fn main() {
     // Summary.
     let first = &samples[0];
     let last = samples.last().expect("a sample");
-    println!("\n| instance | overruns | lag resets | states/s configured | lowest 1-s rate (from 2 s) | mean rate | lowest RTF |");
-    println!("|---|---|---|---|---|---|---|");
+    println!("\n| instance | overruns | stalls | lag resets | states/s configured | lowest 1-s rate (from 2 s) | mean rate | lowest RTF |");
+    println!("|---|---|---|---|---|---|---|---|");
     for (i, n) in names.iter().enumerate() {
         let steady: Vec<&Sample> = samples.iter().filter(|s| s.t >= 2.0).collect();
         let lowest = steady.iter().map(|s| s.states[i]).fold(f64::INFINITY, f64::min);
@@ -428,8 +436,9 @@ async fn main() {
             .filter(|r| *r > 0.0)
             .fold(f64::INFINITY, f64::min);
         println!(
-            "| {n} | {:.0} | {:.0} | {:.0} | {lowest:.0} | {mean:.1} | {rtf:.3} |",
+            "| {n} | {:.0} | {:.0} | {:.0} | {:.0} | {lowest:.0} | {mean:.1} | {rtf:.3} |",
             last.overruns[i] - first.overruns[i].min(0.0),
+            last.stalls[i],
             last.lag_resets[i],
             rates[i]
         );
@@ -448,9 +457,18 @@ async fn main() {
         .collect();
     let stalls: Vec<&(&Sample, f64)> = per_second.iter().filter(|(_, more)| *more > 0.0).collect();
     let worst_probe = samples.iter().map(|s| s.probe_late_ms).fold(0.0, f64::max);
+    // The daemon's stalls per second: the most any instance counted (the
+    // instances of one thread count the same stall each).
+    let daemon_stalls = |w: &[Sample]| {
+        (0..names.len())
+            .map(|i| w[1].stalls[i] - w[0].stalls[i])
+            .fold(0.0, f64::max)
+    };
+    let stall_seconds = samples.windows(2).filter(|w| daemon_stalls(w) > 0.0).count();
     let steal: f64 = samples.iter().map(|s| s.steal_ms).sum();
     println!(
-        "machine: steal {steal:.0} ms over the run, the probe's longest oversleep {worst_probe:.1} ms; {} seconds with overruns{}",
+        "machine: steal {steal:.0} ms over the run, the probe's longest oversleep {worst_probe:.1} ms, \
+         {stall_seconds} seconds with a stall of a stepping thread; {} seconds with overruns{}",
         stalls.len(),
         if stalls.is_empty() { "" } else { ":" }
     );
@@ -487,6 +505,7 @@ async fn main() {
     for n in &names {
         header.extend([
             format!("{n}_overruns"),
+            format!("{n}_stalls"),
             format!("{n}_lag_resets"),
             format!("{n}_states"),
             format!("{n}_rtf"),
@@ -504,6 +523,7 @@ async fn main() {
         for i in 0..names.len() {
             row.extend([
                 format!("{:.0}", s.overruns[i]),
+                format!("{:.0}", s.stalls[i]),
                 format!("{:.0}", s.lag_resets[i]),
                 format!("{:.0}", s.states[i]),
                 format!("{:.4}", s.rtf[i]),

@@ -80,7 +80,7 @@ fn trial(n: usize, integrator: Integrator, precision: SpringPrecision, count: us
         setups,
         EngineSettings {
             threads: 2,
-            max_substeps: 64,
+            max_catch_up: 0.1,
             max_lag: 0.25,
             // The frame count read below is refreshed with the metrics: at
             // 100 Hz it is at most 10 ms stale, 0.3 % of a trial.

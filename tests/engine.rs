@@ -216,7 +216,7 @@ fn instances_are_spread_by_their_measured_step_cost() {
 fn settings(threads: usize) -> EngineSettings {
     EngineSettings {
         threads,
-        max_substeps: 64,
+        max_catch_up: 0.1,
         max_lag: 0.25,
         metrics_hz: 10.0,
         replay_class: || {},

@@ -80,7 +80,7 @@ multicast_scouting = false
 
 [engine]
 threads = 2
-max_substeps = 64
+max_catch_up = 0.1
 max_lag = 0.25
 metrics_hz = 10.0
 publish_hz = 60.0
@@ -854,7 +854,8 @@ fn check_config_error(err: &ConfigError, origin: &str, text: &str) -> Result<(),
 /// What validation promises about an accepted config.
 fn check_config_valid(c: &ServiceConfig) -> Result<(), TestCaseError> {
     let e = &c.engine;
-    prop_assert!(e.threads >= 1 && e.max_substeps >= 1, "{e:?}");
+    prop_assert!(e.threads >= 1, "{e:?}");
+    prop_assert!(e.max_catch_up > 0.0 && e.max_catch_up <= e.max_lag, "{e:?}");
     prop_assert!(e.max_lag.is_finite() && e.max_lag > 0.0, "{e:?}");
     prop_assert!(e.metrics_hz > 0.0 && e.metrics_hz <= 1000.0, "{e:?}");
     let s = &c.estimation;

@@ -687,6 +687,7 @@ mode = "satellite"
 listen = ["carrier-pigeon"]
 [engine]
 max_substeps = 0
+max_catch_up = 0.5
 [estimation]
 reference_steps = 1000
 estimate_stride = 2000
@@ -708,7 +709,8 @@ spring_precision = "f16"
         "prefix:",
         "zenoh.mode: 'satellite'",
         "zenoh.listen[0]: 'carrier-pigeon'",
-        "engine.max_substeps",
+        "engine.max_substeps: replaced by engine.max_catch_up",
+        "engine.max_catch_up: 0.5 s is more than engine.max_lag (0.25 s)",
         "estimation.estimate_stride: 2000 is longer than estimation.reference_steps (1000)",
         "estimation.switch_budget: must be in [0, 3600] seconds, got -1",
         "instances[0].name: must be 1–64 letters, digits, '-' or '_' and not one of [\"instances\", \"alive\"], got 'instances'",

@@ -47,6 +47,10 @@ pub struct MetricsFrame {
     pub step_cost_us: f64,
     pub real_time_factor: f64,
     pub overruns: u64,
+    /// Passes of the instance's thread that woke more than
+    /// [`super::STALL`] later than asked (cumulative): time the machine did
+    /// not run it, which no pacing inside the daemon can give back.
+    pub stalls: u64,
     pub lag_resets: u64,
     pub divergences: u64,
     /// Divergences answered by rolling back to the last checkpoint.

@@ -3,9 +3,11 @@
 //! Instances are spread over a fixed set of OS threads (one per core by
 //! default; never tokio workers). Each thread runs its instances at their
 //! fixed dt, paced to the wall clock: simulated time tracks real time; an
-//! instance that runs late catches up with at most `max_substeps` steps per
-//! pass (counting an overrun when that is not enough) and, beyond `max_lag`
-//! behind, drops the backlog (a lag reset). dt is never stretched.
+//! instance that runs late catches up at most `max_catch_up` seconds of
+//! simulated time per pass (counting an overrun when that is not enough)
+//! and, beyond `max_lag` behind, drops the backlog (a lag reset). dt is
+//! never stretched. A thread that wakes far later than it asked to (the
+//! machine or the OS did not run it) counts a stall for its instances.
 //!
 //! A cloth large enough to split its step (`sim::SPLIT_MIN_NODES`) borrows
 //! a second core for it: stepping threads come in pairs, each serving the
@@ -117,9 +119,12 @@ impl InstanceHandle {
 pub struct EngineSettings {
     /// Stepping threads (at most one per instance is used).
     pub threads: usize,
-    /// Steps an instance may take in one pass to catch up with the wall
-    /// clock; a pass that needs more counts an overrun.
-    pub max_substeps: u32,
+    /// Simulated seconds an instance may catch up in one pass of its
+    /// thread; a pass that is further behind counts an overrun. In time,
+    /// not steps: a bound in steps made an instance with a small dt (a
+    /// 64-step pass is 18 ms of the hanging scene, 102 ms of the sphere's)
+    /// overrun at every stall of the machine longer than that.
+    pub max_catch_up: f64,
     /// Seconds an instance may fall behind the wall clock before its
     /// backlog is dropped (a lag reset).
     pub max_lag: f64,
@@ -323,6 +328,12 @@ struct HandleParts {
 /// Longest a stepping thread sleeps before looking at its commands again.
 const MAX_IDLE: Duration = Duration::from_millis(5);
 
+/// A stepping thread that wakes this much later than it asked to was not
+/// run (the machine, the hypervisor or the OS kept it off both cores): a
+/// stall, counted for each of its instances. Waking costs tens of µs, and
+/// a partner's half it ran meanwhile at most a few ms.
+pub const STALL: Duration = Duration::from_millis(10);
+
 fn worker(
     mut runners: Vec<Runner>,
     stop: Arc<AtomicBool>,
@@ -339,6 +350,7 @@ fn worker(
             r.publish(Instant::now());
             wake = wake.min(r.next_due()).min(r.next_publish).min(r.next_metrics);
         }
+        let asked = wake.max(Instant::now());
         match &serves {
             // Idle until `wake`: lend this core to the partner's halves
             // (its join unparks this thread).
@@ -348,6 +360,11 @@ fn worker(
                 if wake > now {
                     std::thread::park_timeout(wake - now);
                 }
+            }
+        }
+        if Instant::now().saturating_duration_since(asked) > STALL {
+            for r in &mut runners {
+                r.stalls += 1;
             }
         }
     }

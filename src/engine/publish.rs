@@ -84,6 +84,7 @@ impl Runner {
                 },
                 real_time_factor: if wall > 0.0 { self.window_sim / wall } else { 0.0 },
                 overruns: self.overruns,
+                stalls: self.stalls,
                 lag_resets: self.lag_resets,
                 divergences: self.divergences,
                 rollbacks: self.rollbacks,

@@ -60,6 +60,8 @@ pub(super) struct Runner {
     pub(super) frames: u64,
     pub(super) episode: u64,
     pub(super) overruns: u64,
+    /// Passes of its thread that woke more than [`super::STALL`] late.
+    pub(super) stalls: u64,
     pub(super) lag_resets: u64,
     pub(super) divergences: u64,
     // Divergence recovery: a finite state at most CHECKPOINT_INTERVAL of
@@ -158,6 +160,7 @@ impl Runner {
             frames: 0,
             episode: 0,
             overruns: 0,
+            stalls: 0,
             lag_resets: 0,
             divergences: 0,
             checkpoint,
@@ -259,7 +262,7 @@ impl Runner {
             self.reanchor(now);
             due = 1;
         }
-        let n = due.min(u64::from(self.settings.max_substeps));
+        let n = due.min(catch_up_steps(self.settings.max_catch_up, dt));
         if due > n {
             self.overruns += 1;
         }
@@ -335,5 +338,83 @@ impl Runner {
         if self.looping && t >= self.duration && !self.touched() {
             self.restart();
         }
+    }
+}
+
+/// Steps a pass may take to catch up `max_catch_up` simulated seconds at
+/// `dt` (at least one: an instance always advances).
+fn catch_up_steps(max_catch_up: f64, dt: f64) -> u64 {
+    ((max_catch_up / dt) as u64).max(1)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::Scene;
+    use crate::sim::Serial;
+
+    /// A runner of the hanging scene at 8×8 with dt = 0.25 ms (64 steps are
+    /// 16 ms: the old bound in steps), catching up at most 0.1 s a pass.
+    fn runner() -> Runner {
+        let mut scene = Scene::load(std::path::Path::new("config/scenes/hanging.toml")).expect("scene");
+        scene.params.dt = 0.25e-3;
+        let sim = scene.build_at(8, 8).expect("builds");
+        assert!(sim.dt_limit() > sim.params().dt, "dt within the stability limit");
+        let (_tx, rx) = std::sync::mpsc::channel();
+        let settings = EngineSettings {
+            threads: 1,
+            max_catch_up: 0.1,
+            max_lag: 0.25,
+            metrics_hz: 10.0,
+            replay_class: || {},
+        };
+        let setup = InstanceSetup {
+            name: "hanging".into(),
+            sim,
+            cloud: None,
+            level: Level::new(8, 8),
+            method: Method::Same,
+            publish_hz: 60.0,
+            duration: 1e9,
+            looping: false,
+            shadow: false,
+            hold: false,
+            touch: None,
+            input_idle: 10.0,
+        };
+        Runner::new(setup, rx, settings).0
+    }
+
+    /// Steps due `ms` milliseconds after the origin at dt = 0.25 ms.
+    fn due(ms: u64) -> u64 {
+        ms * 4
+    }
+
+    /// A stall of the machine (the thread's pass comes 40 ms late, 160
+    /// steps) is caught up in one pass without an overrun, whatever the
+    /// instance's dt; a pass 150 ms further behind than that is an overrun,
+    /// takes 0.1 s of it and carries the rest to the next pass (no step is
+    /// lost), and a backlog past `max_lag` is dropped. With the bound of 64
+    /// steps a pass the first pass overran.
+    #[test]
+    fn a_pass_catches_up_a_stall_in_simulated_time() {
+        let mut r = runner();
+        let t0 = r.origin;
+        let at = |ms: u64| t0 + Duration::from_millis(ms);
+        r.advance(at(40), &Serial);
+        assert_eq!((r.steps_since_origin, r.overruns), (due(40), 0), "a 40 ms stall");
+        r.advance(at(190), &Serial);
+        assert_eq!(r.overruns, 1, "150 ms behind is more than 0.1 s");
+        assert_eq!(r.steps_since_origin, due(40) + due(100), "0.1 s caught up");
+        r.advance(at(190), &Serial);
+        assert_eq!(
+            (r.steps_since_origin, r.overruns),
+            (due(190), 1),
+            "the rest in the next pass"
+        );
+        assert_eq!(r.lag_resets, 0);
+        r.advance(at(500), &Serial);
+        assert_eq!((r.lag_resets, r.steps_since_origin), (1, 1), "310 ms behind: dropped");
+        assert_eq!(r.sim.state().step, due(190) + 1, "every step taken was kept");
     }
 }

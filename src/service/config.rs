@@ -180,11 +180,14 @@ pub struct RawEngine {
     /// Stepping threads; 0 (default) = one per core.
     #[serde(default)]
     pub threads: usize,
-    /// Most physics steps one instance may take in one pass of its thread
-    /// when catching up after running late (default 64). A pass that needs
-    /// more counts as an overrun.
-    #[serde(default = "default_max_substeps")]
-    pub max_substeps: u32,
+    /// Simulated seconds one instance may catch up in one pass of its
+    /// thread after running late (default 0.1, at most `max_lag`). A pass
+    /// further behind counts as an overrun.
+    #[serde(default = "default_max_catch_up")]
+    pub max_catch_up: f64,
+    /// Replaced by `max_catch_up` (2026-12-03): named in the error.
+    #[serde(default)]
+    pub max_substeps: Option<serde::de::IgnoredAny>,
     /// An instance that falls this far behind real time (s) drops the
     /// backlog and continues from now (default 0.25), counted as a lag reset.
     #[serde(default = "default_max_lag")]
@@ -206,7 +209,8 @@ impl Default for RawEngine {
     fn default() -> Self {
         RawEngine {
             threads: 0,
-            max_substeps: default_max_substeps(),
+            max_catch_up: default_max_catch_up(),
+            max_substeps: None,
             max_lag: default_max_lag(),
             metrics_hz: default_metrics_hz(),
             publish_hz: default_publish_hz(),
@@ -219,8 +223,12 @@ fn default_background() -> String {
     "idle".into()
 }
 
-fn default_max_substeps() -> u32 {
-    64
+/// 0.1 s: every instance rides out a stall of the machine that long in one
+/// pass whatever its dt (the sphere's 64 steps were 102 ms, the hanging
+/// scene's 18 ms), and an instance that holds real time at a share c of
+/// its core catches it up in c·0.1 s of the thread's time.
+fn default_max_catch_up() -> f64 {
+    0.1
 }
 fn default_max_lag() -> f64 {
     0.25
@@ -561,7 +569,7 @@ impl ServiceConfig {
             zenoh: ZenohSettings(raw.zenoh),
             engine: EngineSettings {
                 threads,
-                max_substeps: e.max_substeps,
+                max_catch_up: e.max_catch_up,
                 max_lag: e.max_lag,
                 metrics_hz: e.metrics_hz,
                 replay_class: super::client_priority,
@@ -650,8 +658,21 @@ fn check_prefix(p: &mut Problems, prefix: &str) {
 
 /// `[engine]`: pacing and rates.
 fn check_engine(p: &mut Problems, e: &RawEngine) {
-    p.at_least("engine.max_substeps", e.max_substeps, 1);
+    if e.max_substeps.is_some() {
+        p.push(
+            "engine.max_substeps: replaced by engine.max_catch_up, the simulated seconds a pass may catch up \
+             (default 0.1; 64 steps were 0.018-0.1 s depending on the instance's dt)"
+                .into(),
+        );
+    }
     p.positive("engine.max_lag", e.max_lag);
+    p.positive("engine.max_catch_up", e.max_catch_up);
+    if e.max_catch_up > e.max_lag {
+        p.push(format!(
+            "engine.max_catch_up: {} s is more than engine.max_lag ({} s): a backlog that long is dropped first",
+            e.max_catch_up, e.max_lag
+        ));
+    }
     p.in_open_closed("engine.metrics_hz", e.metrics_hz, 0.0, 1000.0, "messages per second");
     p.in_open_closed("engine.publish_hz", e.publish_hz, 0.0, 1000.0, "messages per second");
     if parse_background(&e.background).is_none() {

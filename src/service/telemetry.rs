@@ -403,9 +403,16 @@ impl Collector for DaemonCollector {
         family(
             &mut enc,
             "lodcloth_overruns",
-            "Passes that could not catch up with real time within max_substeps",
+            "Passes that could not catch up with real time within max_catch_up",
             None,
             &counter(&|m| m.overruns),
+        )?;
+        family(
+            &mut enc,
+            "lodcloth_stalls",
+            "Passes of the instance's stepping thread that woke over 10 ms later than asked (the machine did not run it)",
+            None,
+            &counter(&|m| m.stalls),
         )?;
         family(
             &mut enc,
@@ -558,6 +565,7 @@ mod tests {
             step_cost_us: 40.0,
             real_time_factor: 1.0,
             overruns: 0,
+            stalls: 0,
             lag_resets: 0,
             divergences: 0,
             rollbacks: 0,
