@@ -215,22 +215,26 @@ fn nodes<const N: usize, const COPY: bool, const RK4: bool, const FORCES: bool>(
         x: [[0.0; N]; 3],
         v: [[0.0; N]; 3],
     };
+    // Every load of the block before any of its stores: the components of
+    // a field lie n·8 bytes apart (32 KiB on a 64×64 cloth, a multiple of
+    // 4 KiB on every power-of-two grid), so a load of y right behind a
+    // store of x at the same page offset would wait on a false dependency
+    // (4K aliasing), as the spring kernel's loads would (`forces::block`).
     for c in 0..3 {
         let mut x = arr::<N>(piece.x[c], k);
         let mut v = arr::<N>(piece.v[c], k);
-        let a = match piece.forces.as_mut() {
+        let a = match piece.forces.as_ref() {
             Some(forces) if FORCES => {
                 // The force-to-acceleration pass's own expression (the f64
                 // forces are all zero: + 0.0), on the velocity before the
                 // update.
-                let fc = &mut forces.f[c][k..k + N];
+                let fc = &forces.f[c][k..k + N];
                 let inv_mass = arr::<N>(forces.inv_mass, k);
                 let mut a = [0.0; N];
                 for j in 0..N {
                     let fk = 0.0 + f64::from(fc[j]);
                     a[j] = acceleration(fk, inv_mass[j], block.free[j], g[c], forces.drag, v[j]);
                 }
-                fc.fill(0.0);
                 a
             }
             _ => arr::<N>(piece.a[c], k),
@@ -247,8 +251,13 @@ fn nodes<const N: usize, const COPY: bool, const RK4: bool, const FORCES: bool>(
                 x[j] += dt * v[j];
             }
         }
-        piece.x[c][k..k + N].copy_from_slice(&x);
-        piece.v[c][k..k + N].copy_from_slice(&v);
+        block.x[c] = x;
+        block.v[c] = v;
+    }
+    for c in 0..3 {
+        let (x, v) = (&block.x[c], &block.v[c]);
+        piece.x[c][k..k + N].copy_from_slice(x);
+        piece.v[c][k..k + N].copy_from_slice(v);
         if COPY {
             // Rounded to nearest, ties to even: the same on every instruction
             // set, and what the kernel's own rounding gives.
@@ -260,8 +269,9 @@ fn nodes<const N: usize, const COPY: bool, const RK4: bool, const FORCES: bool>(
             piece.x32[c][k..k + N].copy_from_slice(&x32);
             piece.v32[c][k..k + N].copy_from_slice(&v32);
         }
-        block.x[c] = x;
-        block.v[c] = v;
+        if let Some(forces) = piece.forces.as_mut().filter(|_| FORCES) {
+            forces.f[c][k..k + N].fill(0.0);
+        }
     }
     add_to_sums(&block, sums);
 }
