@@ -332,8 +332,9 @@ pub(super) fn rk4_stage(
 /// stage (its x and v were written with a zero step and overwritten by
 /// the next step's first pass), and when the next evaluation takes the f32
 /// copies alone (`forces`: f32 springs and no other force, so the same for
-/// the next stage of this step) no f64 stage position. 3–4 % of an f32 RK4
-/// step on an AVX-512 Zen 4 (docs/results.md).
+/// the next stage of this step) no f64 stage position. About 4 % of an f32 RK4
+/// step on an AVX-512 Zen 4, 1 % (noise) on its AVX2 path; a fifth fewer
+/// misses of a Zen 3-sized L2 under cachegrind (docs/results.md).
 #[inline(always)]
 fn stage_pass<const FIRST: bool>(
     read: [&[f64]; 3],
