@@ -510,12 +510,12 @@ fn a_mesh_scenes_pinned_region_clamps_its_stencils_at_every_level() {
         ),
     );
     let cloth = scene.mesh.as_ref().expect("a mesh scene");
-    assert_eq!(cloth.locked.iter().filter(|&&l| l).count(), clamp.len());
+    assert_eq!(cloth.pinned.iter().filter(|&&l| l).count(), clamp.len());
     let plate = |m: &TriMesh, pinned: &[bool]| mesh::plate_topology(m, pinned).expect("flat").bending;
     let reference = scene.build().expect("builds");
     // (Bending's Debug is thousands of numbers: compare, then say which.)
     assert!(
-        reference.topology().bending == plate(&cloth.reference, &cloth.locked),
+        reference.topology().bending == plate(&cloth.reference, &cloth.pinned),
         "the reference's stencils are not its pinned plate's"
     );
     assert!(
@@ -524,8 +524,12 @@ fn a_mesh_scenes_pinned_region_clamps_its_stencils_at_every_level() {
     );
     let level = scene.cloth_level(Level::Vertices(120)).expect("a level");
     let simplified = level.mesh.as_ref().expect("a mesh level");
-    let pinned: Vec<bool> = simplified.source.iter().map(|&k| cloth.locked[k as usize]).collect();
-    assert!(pinned.iter().filter(|&&p| p).count() == clamp.len(), "pins are locked");
+    let pinned: Vec<bool> = simplified.source.iter().map(|&k| cloth.pinned[k as usize]).collect();
+    let kept = |k: usize| simplified.source.binary_search(&(k as u32)).is_ok();
+    assert!(
+        (0..cloth.locked.len()).all(|k| !cloth.locked[k] || kept(k)),
+        "the clamp's outline is kept"
+    );
     assert!(
         level.topology.bending == plate(&simplified.mesh, &pinned),
         "the level's stencils are not its pinned plate's"

@@ -177,6 +177,32 @@ fn bad_edge_name_is_refused_naming_its_pin() {
     assert!(msg.contains("middle"), "{msg}");
 }
 
+/// An ellipse of the material square pins the nodes inside it: on a 5×5
+/// grid (u, v steps of ¼) a disc of radius ¼ about the middle holds the
+/// middle node and its four neighbours at exactly ¼, no diagonal (√2/4).
+/// A radius that is not positive, or a centre that is not finite, is
+/// refused naming the field.
+#[test]
+fn an_ellipse_pins_the_nodes_inside_it_and_a_bad_one_is_refused_naming_its_field() {
+    let clamp = "ellipse = { center = [0.5, 0.5], radii = [0.25, 0.25] }";
+    let text = VALID
+        .replace("nx = 12", "nx = 5")
+        .replace("ny = 6", "ny = 5")
+        .replace("edge = \"top\"", clamp);
+    let sim = Scene::from_toml(&text, "<test>")
+        .expect("valid")
+        .build()
+        .expect("builds");
+    let mut held: Vec<u32> = sim.loads().pins.iter().map(|p| p.node).collect();
+    held.sort_unstable();
+    // Node (i, j) is j·5 + i.
+    assert_eq!(held, vec![7, 11, 12, 13, 17]);
+    let msg = invalid_message(&text.replace("radii = [0.25, 0.25]", "radii = [0.0, 0.25]"));
+    assert!(msg.contains("pins[0].nodes.ellipse.radii[0]"), "{msg}");
+    let msg = invalid_message(&text.replace("center = [0.5, 0.5]", "center = [0.5, nan]"));
+    assert!(msg.contains("pins[0].nodes.ellipse.center[1]"), "{msg}");
+}
+
 #[test]
 fn several_problems_at_once_are_all_reported_with_their_paths() {
     let text = VALID

@@ -5,8 +5,8 @@
 //! - Collapses only move a vertex onto a neighbour, so every level vertex
 //!   *is* a reference vertex at its rest position ([`Simplified::source`]):
 //!   material coordinates, vertex groups and pins carry over exactly.
-//! - Pinned vertices are locked (never collapsed), so a pin holds the same
-//!   material points at every level.
+//! - Locked vertices are never collapsed: a scene locks its pins' outlines
+//!   (`scene::mesh`), so a pin holds the same material points at every level.
 //! - Border vertices collapse only along the border (meshoptimizer's vertex
 //!   classification), so the outline keeps its shape; its corners (where
 //!   the border turns) are kept by the quadric's border planes.
@@ -61,8 +61,9 @@ pub struct Simplified {
 /// cached estimate or instance snapshot of the old level is taken for the
 /// new one (1: meshoptimizer regularised, border priority, pins locked;
 /// 2: rim slivers dropped; 3: narrow bending stencils, which bend the same
-/// level differently).
-pub const CHAIN_VERSION: u32 = 3;
+/// level differently; 4: only the pins' outlines locked, so a level may
+/// collapse the inside of a pinned patch).
+pub const CHAIN_VERSION: u32 = 4;
 
 /// An ear (module docs) whose triangle is under this share of the level's
 /// mean triangle area is a sliver and is removed.
@@ -95,7 +96,8 @@ pub fn simplify(mesh: &TriMesh, vertices: usize, locked: &[bool], origin: &str) 
     let pinned = locked.iter().filter(|&&l| l).count();
     if vertices < pinned.max(3) {
         return Err(fail(format!(
-            "cannot simplify to {vertices} vertices: {pinned} vertices are pinned and are kept at every level"
+            "cannot simplify to {vertices} vertices: {pinned} vertices are locked (pinned, on a pin's outline) \
+             and are kept at every level"
         )));
     }
     let positions: Vec<[f32; 3]> = mesh.positions.iter().map(|p| p.map(|x| x as f32)).collect();
@@ -153,7 +155,7 @@ pub fn simplify(mesh: &TriMesh, vertices: usize, locked: &[bool], origin: &str) 
     if (count as f64 - vertices as f64).abs() > VERTEX_TOLERANCE * vertices as f64 {
         return Err(fail(format!(
             "cannot simplify to {vertices} vertices: the closest level has {count} \
-             ({pinned} pinned vertices are kept, and the border only collapses along itself)"
+             ({pinned} locked vertices of the pins' outlines are kept, and the border only collapses along itself)"
         )));
     }
     Ok(compact(mesh, &out, error as f64))

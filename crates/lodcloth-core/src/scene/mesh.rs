@@ -1,8 +1,12 @@
 //! Mesh cloths in scenes (issue 23): `[cloth] mesh = "file.obj"`.
 //!
 //! The file's vertices are the reference; a level is the mesh simplified to
-//! a vertex count ([`crate::mesh::simplify`]) with every pinned vertex
-//! locked, so a pin holds the same material points at every level. The
+//! a vertex count ([`crate::mesh::simplify`]) with the outline of every pin
+//! locked, so a pin holds the same material points at every level. A pinned
+//! vertex whose neighbours are all held by the same pin, off the border, is
+//! inside a patch that pin holds rigidly: a level may collapse it (onto
+//! another of that pin's vertices), and a clamp over a third of a cloth (a
+//! Cusick tester's) does not keep a third of every level's vertices. The
 //! material is the scene's membrane made into each level's springs
 //! ([`crate::mesh::mesh_material`]): the same fabric at every level, as a
 //! grid's `[material]` is. Pins, forces and wind mean the same part of the
@@ -30,7 +34,11 @@ pub struct MeshCloth {
     /// Its bending rigidity D (N·m) and damping (N·m·s) when the scene
     /// gives one: every level bends with stencils instead of bend springs.
     pub bending: Option<SpringCoeffs>,
-    /// Reference vertices no level may collapse: every pinned vertex.
+    /// Reference vertices some pin holds.
+    pub pinned: Vec<bool>,
+    /// Reference vertices no level may collapse: every pinned vertex on
+    /// the border or next to a vertex the same pin does not hold (module
+    /// docs).
     pub locked: Vec<bool>,
     /// The reference mesh's rest area (m²).
     pub area: f64,
@@ -53,7 +61,7 @@ pub struct ClothLevel {
 impl Scene {
     /// Make this scene a mesh cloth of `reference` (validated), with the
     /// membrane `membrane`: the reference's springs become the scene's
-    /// material, and every pinned vertex is locked for simplification.
+    /// material, and the pins' outlines are locked for simplification.
     pub(super) fn attach_mesh(
         &mut self,
         reference: TriMesh,
@@ -67,13 +75,13 @@ impl Scene {
             mesh: reference.clone(),
             error: 0.0,
         };
-        let mut locked = vec![false; reference.vertices()];
-        for (sel, _, _) in &self.pins {
-            for k in super::selector::select_mesh(sel, &identity) {
-                locked[k as usize] = true;
-            }
-        }
-        let topology = topology_of(&reference, bending, &locked);
+        let pins: Vec<Vec<u32>> = self
+            .pins
+            .iter()
+            .map(|(sel, _, _)| super::selector::select_mesh(sel, &identity))
+            .collect();
+        let (pinned, locked) = pin_outlines(&reference, &pins);
+        let topology = topology_of(&reference, bending, &pinned);
         self.params.material = mesh::mesh_material(&membrane, &topology, bending);
         self.nx = reference.vertices();
         self.ny = 1;
@@ -83,6 +91,7 @@ impl Scene {
             reference,
             membrane,
             bending,
+            pinned,
             locked,
             hash,
         }));
@@ -121,7 +130,7 @@ impl Scene {
                 let simplified = mesh::simplify(&m.reference, n, &m.locked, &m.file.display().to_string())
                     .map_err(|e| invalid(format!("level {level}: {e}")))?;
                 let simplified = Arc::new(simplified);
-                let pinned: Vec<bool> = simplified.source.iter().map(|&k| m.locked[k as usize]).collect();
+                let pinned: Vec<bool> = simplified.source.iter().map(|&k| m.pinned[k as usize]).collect();
                 let topology = Topology {
                     mesh: Some(simplified.clone()),
                     ..level_topology(&simplified.mesh, m.bending, &pinned)
@@ -180,6 +189,35 @@ impl Scene {
 /// A mesh's topology: bend springs, or bending stencils when the scene
 /// gives a bending rigidity (its flat rest shape was validated, and a
 /// simplified level of a flat mesh is flat).
+/// Which of `mesh`'s vertices the pins (each pin's vertices) hold, and
+/// which of those a level must keep: on the border, held by more than one
+/// pin, or joined by an edge to a vertex not held by the same one pin.
+pub(crate) fn pin_outlines(mesh: &TriMesh, pins: &[Vec<u32>]) -> (Vec<bool>, Vec<bool>) {
+    const NONE: usize = usize::MAX;
+    const MANY: usize = usize::MAX - 1;
+    let n = mesh.vertices();
+    let mut pin_of = vec![NONE; n];
+    for (p, verts) in pins.iter().enumerate() {
+        for &k in verts {
+            let slot = &mut pin_of[k as usize];
+            *slot = if *slot == NONE || *slot == p { p } else { MANY };
+        }
+    }
+    let pinned: Vec<bool> = pin_of.iter().map(|&p| p != NONE).collect();
+    let border = mesh.border();
+    let mut locked: Vec<bool> = (0..n).map(|k| pinned[k] && (border[k] || pin_of[k] == MANY)).collect();
+    for t in &mesh.triangles {
+        for (a, b) in [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])] {
+            let (a, b) = (a as usize, b as usize);
+            if pin_of[a] != pin_of[b] {
+                locked[a] |= pinned[a];
+                locked[b] |= pinned[b];
+            }
+        }
+    }
+    (pinned, locked)
+}
+
 fn topology_of(mesh: &TriMesh, bending: Option<SpringCoeffs>, pinned: &[bool]) -> Topology {
     level_topology(mesh, bending, pinned).expect("a validated flat mesh has stencils")
 }

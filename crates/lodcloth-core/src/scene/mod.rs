@@ -49,9 +49,9 @@ mod validate;
 pub use error::SceneError;
 pub use mesh::{ClothLevel, MeshCloth};
 pub use raw::{
-    MassConvention, RawAdjustment, RawCloth, RawCoeffs, RawCollider, RawForce, RawLimit, RawMaterial, RawModuli,
-    RawOrientation, RawPin, RawPinPath, RawProfile, RawRegion, RawScene, RawSelector, RawShape, RawSimulation,
-    RawSprings, RawStrain, RawWind,
+    MassConvention, RawAdjustment, RawCloth, RawCoeffs, RawCollider, RawEllipse, RawForce, RawLimit, RawMaterial,
+    RawModuli, RawOrientation, RawPin, RawPinPath, RawProfile, RawRegion, RawScene, RawSelector, RawShape,
+    RawSimulation, RawSprings, RawStrain, RawWind,
 };
 pub use selector::{patch_weights, select as select_nodes, select_mesh, Edge, Selector};
 

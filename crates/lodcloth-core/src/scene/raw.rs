@@ -260,6 +260,9 @@ pub struct RawSelector {
     /// (an error at a level where none is); a force acts on the patch itself
     /// (nodes share it by their interpolation functions), at every level.
     pub region: Option<RawRegion>,
+    /// An ellipse in material coordinates (a disc on a square material): a
+    /// pin holds the nodes inside it (a Cusick tester's clamp).
+    pub ellipse: Option<RawEllipse>,
     /// [i, j] indices at the scene's resolution, mapped to the nearest node at others.
     pub nodes: Option<Vec<[usize; 2]>>,
     /// Every node.
@@ -281,6 +284,19 @@ pub struct RawRegion {
     pub u: [f64; 2],
     /// [v0, v1]: finite, v0 ≤ v1 (dimensionless, 0 = top, 1 = bottom).
     pub v: [f64; 2],
+}
+
+/// An ellipse in material coordinates, its boundary included (with 1e-9
+/// slack): the nodes with ((u − u0)/ru)² + ((v − v0)/rv)² ≤ 1. Material
+/// coordinates span the cloth's extent per axis, so on a square cloth (a
+/// disc specimen's, whose extent is its diameter) ru = rv is a disc.
+#[derive(Debug, Clone, Copy, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RawEllipse {
+    /// [u0, v0]: finite.
+    pub center: [f64; 2],
+    /// [ru, rv]: finite and > 0 (dimensionless, shares of the extent).
+    pub radii: [f64; 2],
 }
 
 /// A dimensionless time profile s(t) that scales a force or the wind, chosen

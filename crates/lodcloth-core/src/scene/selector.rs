@@ -27,6 +27,16 @@ pub enum Selector {
         /// [v0, v1] along the height (dimensionless, 0 = top, 1 = bottom).
         v: [f64; 2],
     },
+    /// Nodes inside the ellipse ((u − u0)/ru)² + ((v − v0)/rv)² ≤ 1 in
+    /// material coordinates (1e-9 slack); may select no node at a coarse
+    /// resolution. On a mesh cloth a pin on it keeps only its outline's
+    /// vertices at every level (`scene::mesh`): the inside is held anyway.
+    Ellipse {
+        /// [u0, v0].
+        center: [f64; 2],
+        /// [ru, rv], each > 0.
+        radii: [f64; 2],
+    },
     /// Material coordinates of nodes picked at the reference resolution.
     Points(Vec<(f64, f64)>),
     /// A mesh cloth's reference vertices (from `vertices` or a `group`):
@@ -80,6 +90,7 @@ pub fn select(selector: &Selector, shape: &GridShape) -> Vec<u32> {
                             let eps = 1e-9;
                             uu >= u[0] - eps && uu <= u[1] + eps && vv >= v[0] - eps && vv <= v[1] + eps
                         }
+                        Selector::Ellipse { center, radii } => in_ellipse(shape.uv(i, j), *center, *radii),
                         Selector::Points(_) => unreachable!(),
                         // A mesh's vertices (validation keeps them off grids).
                         Selector::Vertices(_) => false,
@@ -92,6 +103,14 @@ pub fn select(selector: &Selector, shape: &GridShape) -> Vec<u32> {
         }
     }
     out
+}
+
+/// Whether material point `uv` lies in the ellipse (boundary included,
+/// with 1e-9 slack on the normalised radius²).
+fn in_ellipse(uv: (f64, f64), center: [f64; 2], radii: [f64; 2]) -> bool {
+    let du = (uv.0 - center[0]) / radii[0];
+    let dv = (uv.1 - center[1]) / radii[1];
+    du * du + dv * dv <= 1.0 + 1e-9
 }
 
 /// Vertices `selector` picks on a mesh level (sorted, unique), by the
@@ -135,6 +154,12 @@ pub fn select_mesh(selector: &Selector, level: &Simplified) -> Vec<u32> {
                 })
                 .collect()
         }
+        Selector::Ellipse { center, radii } => (0..n)
+            .filter(|&k| {
+                let [uu, vv] = mesh.uv[k as usize];
+                in_ellipse((uu, vv), *center, *radii)
+            })
+            .collect(),
         Selector::Points(points) => points
             .iter()
             .filter_map(|&(pu, pv)| {

@@ -722,6 +722,7 @@ impl Problems {
             r.edge.is_some(),
             r.corner.is_some(),
             r.region.is_some(),
+            r.ellipse.is_some(),
             r.nodes.is_some(),
             r.all.is_some(),
             r.vertices.is_some(),
@@ -729,7 +730,7 @@ impl Problems {
         ];
         if given.iter().filter(|g| **g).count() != 1 {
             self.push(format!(
-                "{path}: give exactly one of edge, corner, region, nodes, all, vertices, group"
+                "{path}: give exactly one of edge, corner, region, ellipse, nodes, all, vertices, group"
             ));
             return Selector::All;
         }
@@ -787,6 +788,16 @@ impl Problems {
             self.interval(&format!("{path}.region.u"), reg.u);
             self.interval(&format!("{path}.region.v"), reg.v);
             return Selector::Region { u: reg.u, v: reg.v };
+        }
+        if let Some(e) = &r.ellipse {
+            for c in 0..2 {
+                self.finite(&format!("{path}.ellipse.center[{c}]"), e.center[c]);
+                self.positive(&format!("{path}.ellipse.radii[{c}]"), e.radii[c]);
+            }
+            return Selector::Ellipse {
+                center: e.center,
+                radii: e.radii,
+            };
         }
         if let Some(nodes) = &r.nodes {
             if nodes.is_empty() {
