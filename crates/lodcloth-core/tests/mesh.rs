@@ -576,6 +576,7 @@ fn a_clamped_disc_keeps_its_clamps_outline_and_collapses_the_inside_at_every_lev
             .collect();
         assert_eq!(held, within, "the level at {n} holds its vertices within 9 cm");
         let free = simplified.source.len() - held.len();
+        eprintln!("{n}: {} held ({rim} on the outline), {free} free", held.len());
         assert!(
             held.len() < clamped && free > n - clamped,
             "{n}: {} held ({rim} on the outline), {free} free",
