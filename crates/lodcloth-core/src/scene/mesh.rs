@@ -186,13 +186,10 @@ impl Scene {
     }
 }
 
-/// A mesh's topology: bend springs, or bending stencils when the scene
-/// gives a bending rigidity (its flat rest shape was validated, and a
-/// simplified level of a flat mesh is flat).
 /// Which of `mesh`'s vertices the pins (each pin's vertices) hold, and
 /// which of those a level must keep: on the border, held by more than one
 /// pin, or joined by an edge to a vertex not held by the same one pin.
-pub(crate) fn pin_outlines(mesh: &TriMesh, pins: &[Vec<u32>]) -> (Vec<bool>, Vec<bool>) {
+fn pin_outlines(mesh: &TriMesh, pins: &[Vec<u32>]) -> (Vec<bool>, Vec<bool>) {
     const NONE: usize = usize::MAX;
     const MANY: usize = usize::MAX - 1;
     let n = mesh.vertices();
@@ -218,6 +215,9 @@ pub(crate) fn pin_outlines(mesh: &TriMesh, pins: &[Vec<u32>]) -> (Vec<bool>, Vec
     (pinned, locked)
 }
 
+/// A mesh's topology: bend springs, or bending stencils when the scene
+/// gives a bending rigidity (its flat rest shape was validated, and a
+/// simplified level of a flat mesh is flat).
 fn topology_of(mesh: &TriMesh, bending: Option<SpringCoeffs>, pinned: &[bool]) -> Topology {
     level_topology(mesh, bending, pinned).expect("a validated flat mesh has stencils")
 }
