@@ -4,7 +4,7 @@
 //! # Layout
 //! - `mod.rs` — [`TriMesh`] (positions, material coordinates, triangles,
 //!   vertex groups) and its validation ([`TriMesh::validated`]).
-//! - `io.rs` — reading OBJ, PLY and glTF/GLB files ([`load`]).
+//! - `io/` — reading OBJ (`obj.rs`), PLY (`ply.rs`) and glTF/GLB (`gltf_file.rs`) files ([`load`]).
 //! - `springs.rs` — the mesh as a [`Topology`](crate::sim::Topology):
 //!   springs on and across edges, lumped areas; the material of a membrane
 //!   on such a mesh ([`mesh_material`]).
