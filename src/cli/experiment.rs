@@ -1,9 +1,8 @@
 //! `lodcloth experiment …`: the level-of-detail studies, with their files
 //! (CSV, markdown, SVG charts and error maps).
 
-use std::fmt::Write as _;
 use std::fs;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -11,18 +10,18 @@ use anyhow::{bail, Context, Result};
 use clap::Subcommand;
 use tracing::info;
 
+mod generalise;
 mod readings;
+mod table1;
 mod touched;
 
 use lodcloth::cache::CoefficientCache;
 use lodcloth::estimate::{FitOptions, Method, Reading, RecordSpec, Reference};
-use lodcloth::experiments::generalise::{suite, SuiteOptions, SuiteRow, TWIN_PERTURBATION};
-use lodcloth::experiments::lod::{
-    lod_plan, pareto, switch_test, table1_scene, Horizon, Table1Options, Table1Row, Variant, TABLE1_VARIANTS,
-};
-use lodcloth::output::{error_map_svg, line_chart_svg, ClothPanel, CsvTable, Series, PALETTE};
+use lodcloth::experiments::generalise::TWIN_PERTURBATION;
+use lodcloth::experiments::lod::{lod_plan, pareto, switch_test, Horizon};
+use lodcloth::output::{line_chart_svg, CsvTable, Series, PALETTE};
 use lodcloth::plan::{default_problem, record_reference, Estimator, GridLevel};
-use lodcloth::scene::{MassConvention, Scene};
+use lodcloth::scene::Scene;
 use lodcloth::sim::Integrator;
 
 const PAPER_SCENES: [&str; 3] = [
@@ -346,7 +345,7 @@ pub fn run(experiment: Experiment) -> Result<()> {
             } else {
                 longs(&[60, 56, 52, 48, 44, 40, 32, 24, 16])
             };
-            table1(&common, &levels)
+            table1::table1(&common, &levels)
         }
         Experiment::Pareto {
             mut common,
@@ -408,7 +407,7 @@ pub fn run(experiment: Experiment) -> Result<()> {
         } => {
             common.apply_quick();
             let level = level.unwrap_or(GridLevel::Long(if common.quick { 16 } else { 40 }));
-            generalise_cmd(&common, level, &parse_methods(&methods)?, floor_perturbation)
+            generalise::generalise_cmd(&common, level, &parse_methods(&methods)?, floor_perturbation)
         }
         Experiment::Readings {
             mut common,
@@ -508,76 +507,6 @@ fn reference_for(scene: &Scene, spec: RecordSpec) -> Result<(Arc<Reference>, f64
     Ok((reference, cost))
 }
 
-fn table1(common: &Common, levels: &[GridLevel]) -> Result<()> {
-    let out = common.out("out/table1")?;
-    let spec = common.spec()?;
-    let scenes = common.scenes()?;
-    let frames = (spec.frames / spec.metric_stride) as usize;
-    let map_level = if levels.contains(&GridLevel::Long(48)) {
-        GridLevel::Long(48)
-    } else {
-        levels[levels.len() / 2]
-    };
-    let options = Table1Options {
-        levels: levels.to_vec(),
-        spec,
-        variants: TABLE1_VARIANTS
-            .iter()
-            .map(|&v| Variant {
-                reading: common.reading,
-                ..v
-            })
-            .collect(),
-        fit: common.fit(frames)?,
-        dt_margin: 0.75,
-        map_level,
-        short_window: SHORT_WINDOW,
-    };
-    let started = Instant::now();
-    let estimator = common.estimator()?;
-    let mut rows: Vec<Table1Row> = Vec::new();
-    let mut ref_costs = Vec::new();
-    for scene in &scenes {
-        let (reference, cost) = reference_for(scene, spec)?;
-        ref_costs.push((scene.name.clone(), cost));
-        let scene_rows = table1_scene(scene, &reference, &options, &estimator, &mut log_line)?;
-        write_error_maps(&out, scene, &reference, &scene_rows, map_level)?;
-        rows.extend(scene_rows);
-        write_table1(&out, &rows, &ref_costs, levels, &scenes, common)?;
-    }
-    info!(
-        "table1 done in {:.0} s: {}",
-        started.elapsed().as_secs_f64(),
-        out.join("table1.md").display()
-    );
-    Ok(())
-}
-
-fn write_table1(
-    out: &Path,
-    rows: &[Table1Row],
-    ref_costs: &[(String, f64)],
-    levels: &[GridLevel],
-    scenes: &[Scene],
-    common: &Common,
-) -> Result<()> {
-    fs::write(out.join("table1.csv"), table1_csv(rows)).context("writing table1.csv")?;
-    let labels: Vec<String> = TABLE1_VARIANTS
-        .iter()
-        .map(|&v| {
-            Variant {
-                reading: common.reading,
-                ..v
-            }
-            .label()
-        })
-        .collect();
-    let mut md = table1_by_level(rows, &labels, levels, scenes, common);
-    md.push_str(&table1_by_scene(rows, ref_costs));
-    fs::write(out.join("table1.md"), md).context("writing table1.md")?;
-    table1_chart(out, rows, &labels, levels)
-}
-
 /// The CSV columns of a model's coefficients, and their cells.
 const COEFFICIENT_HEADER: [&str; 10] = [
     "k_structural_u",
@@ -608,299 +537,6 @@ fn header_around<'a>(before: &[&'a str], after: &[&'a str]) -> Vec<&'a str> {
 /// `before`, a model's coefficient cells, `after`: one CSV row.
 fn row_around(before: Vec<String>, material: &lodcloth::sim::Material, after: Vec<String>) -> Vec<String> {
     [before, coefficient_cells(material), after].concat()
-}
-
-/// Every row of Table 1, one line each.
-fn table1_csv(rows: &[Table1Row]) -> String {
-    let mut csv = CsvTable::in_memory(&header_around(
-        &["scene", "level", "nodes", "reduction", "variant", "method", "mass"],
-        &[
-            "dt",
-            "dt_over_limit",
-            "mean",
-            "held_out_mean",
-            "short_held_out_mean",
-            "p95",
-            "max",
-            "first_quarter",
-            "last_quarter",
-            "worst_time",
-            "worst_frame_mean",
-            "estimate_s",
-            "cost_s_per_s",
-            "diverged",
-            "notes",
-        ],
-    ));
-    for r in rows {
-        let before = vec![
-            r.scene.clone(),
-            format!("{}x{}", r.nx, r.ny),
-            r.nodes.to_string(),
-            format!("{:.4}", r.reduction),
-            r.variant.label(),
-            r.variant.method.to_string(),
-            r.variant.mass.name().to_string(),
-        ];
-        let after = vec![
-            format!("{:e}", r.dt),
-            format!("{:.3}", r.dt_ratio),
-            format!("{:.6}", r.all.mean),
-            format!("{:.6}", r.held_out_mean),
-            format!("{:.6}", r.short_held_out_mean),
-            format!("{:.6}", r.all.p95),
-            format!("{:.6}", r.all.max),
-            format!("{:.6}", r.all.first_quarter),
-            format!("{:.6}", r.all.last_quarter),
-            format!("{:.4}", r.all.worst_time),
-            format!("{:.6}", r.all.worst_frame_mean),
-            format!("{:.2}", r.estimate_seconds),
-            format!("{:.4}", r.cost),
-            r.all.diverged.to_string(),
-            r.notes.clone(),
-        ];
-        csv.row(&row_around(before, &r.material, after))
-            .expect("a row per header column");
-    }
-    csv.into_text()
-}
-
-/// The paper's same / BCD / GKD at `level`, or a dash where its table has
-/// no row.
-fn paper_cell(level: GridLevel) -> String {
-    PAPER_TABLE1
-        .iter()
-        .find(|p| Some(p.0) == level.square())
-        .map_or("—".to_string(), |p| format!("{} / {} / {}", p.1, p.2, p.3))
-}
-
-/// The mean over scenes of `f` for one level and variant.
-fn mean_of(rows: &[Table1Row], level: GridLevel, label: &str, f: impl Fn(&Table1Row) -> f64) -> f64 {
-    let v: Vec<f64> = rows
-        .iter()
-        .filter(|r| r.level == level && r.variant.label() == label)
-        .map(f)
-        .collect();
-    v.iter().sum::<f64>() / v.len().max(1) as f64
-}
-
-/// Table 1 as the paper prints it: per level, each variant's mean over the
-/// scenes (all frames, then held-out), beside the paper's numbers.
-fn table1_by_level(
-    rows: &[Table1Row],
-    labels: &[String],
-    levels: &[GridLevel],
-    scenes: &[Scene],
-    common: &Common,
-) -> String {
-    let scenes_done: Vec<&str> = scenes
-        .iter()
-        .map(|s| s.name.as_str())
-        .filter(|n| rows.iter().any(|r| r.scene == *n))
-        .collect();
-    let mut md = String::new();
-    let _ = writeln!(
-        md,
-        "Mean displacement error (% of O_max, Sung eq. 9) averaged over {} — reference {}, {} frames, metric every {} frames.\n\nCommand: `lodcloth experiment table1{}`\n",
-        scenes_done.join(", "),
-        scenes.first().map_or(String::new(), |s| format!("{}×{}", s.nx, s.ny)),
-        common.frames,
-        common.metric_stride,
-        if common.quick { " --quick" } else { "" }
-    );
-    let short_title = format!(
-        "Held-out frames, short horizon (the level restarted from the reference's mapped state every {SHORT_WINDOW} s)"
-    );
-    for (title, which) in [
-        ("All frames (fit's training half included)", 0),
-        ("Held-out frames (second half of the run: fit never saw them)", 1),
-        (short_title.as_str(), 2),
-    ] {
-        let _ = writeln!(md, "### {title}\n");
-        let _ = writeln!(
-            md,
-            "| coarse | reduction | {} | paper same / BCD / GKD |",
-            labels.join(" | ")
-        );
-        let _ = writeln!(md, "|---|---|{}---|", "---|".repeat(labels.len()));
-        for &level in levels {
-            if !rows.iter().any(|r| r.level == level) {
-                continue;
-            }
-            let first = rows.iter().find(|r| r.level == level);
-            let reduction = first.map_or(0.0, |r| r.reduction);
-            // The grid itself when every scene resolves the level alike.
-            let name = match first {
-                Some(f)
-                    if rows
-                        .iter()
-                        .filter(|r| r.level == level)
-                        .all(|r| (r.nx, r.ny) == (f.nx, f.ny)) =>
-                {
-                    format!("{}×{}", f.nx, f.ny)
-                }
-                _ => format!("{level} (aspect kept)"),
-            };
-            let cells: Vec<String> = labels
-                .iter()
-                .map(|l| {
-                    let v = mean_of(rows, level, l, |r| match which {
-                        0 => r.all.mean,
-                        1 => r.held_out_mean,
-                        _ => r.short_held_out_mean,
-                    });
-                    format!("{:.2}", 100.0 * v)
-                })
-                .collect();
-            let paper = paper_cell(level);
-            let _ = writeln!(
-                md,
-                "| {name} | {:.0}% | {} | {paper} |",
-                100.0 * reduction,
-                cells.join(" | ")
-            );
-        }
-        let _ = writeln!(md);
-    }
-    md
-}
-
-/// Per scene and level: fit against the paper's GKD, its tail, drift and
-/// cost; then each reference's cost.
-fn table1_by_scene(rows: &[Table1Row], ref_costs: &[(String, f64)]) -> String {
-    let mut md = String::new();
-    let _ = writeln!(md, "### Per scene (all frames / held-out), fit and the paper's GKD\n");
-    let _ = writeln!(md, "| scene | coarse | gkd/per-node | fit/lumped | fit p95 | fit last/first quarter | estimation s (fit) | cost s/s (fit) |");
-    let _ = writeln!(md, "|---|---|---|---|---|---|---|---|");
-    for r in rows.iter().filter(|r| r.variant.method == Method::Fit) {
-        let gkd = rows.iter().find(|g| {
-            g.scene == r.scene
-                && g.level == r.level
-                && g.variant.method == Method::Gkd
-                && g.variant.mass == MassConvention::PerNode
-        });
-        let _ = writeln!(
-            md,
-            "| {} | {}×{} | {} | {:.2} / {:.2} | {:.2} | {:.2} | {:.0} | {:.3} |",
-            r.scene,
-            r.nx,
-            r.ny,
-            gkd.map_or("—".into(), |g| format!(
-                "{:.2} / {:.2}",
-                100.0 * g.all.mean,
-                100.0 * g.held_out_mean
-            )),
-            100.0 * r.all.mean,
-            100.0 * r.held_out_mean,
-            100.0 * r.all.p95,
-            r.all.last_quarter / r.all.first_quarter.max(f64::MIN_POSITIVE),
-            r.estimate_seconds,
-            r.cost
-        );
-    }
-    let _ = writeln!(md, "\nReference cost (wall s per simulated s):");
-    for (name, c) in ref_costs {
-        let _ = writeln!(md, "- {name}: {c:.3}");
-    }
-    md
-}
-
-/// Held-out mean error against node reduction, one line per variant.
-fn table1_chart(out: &Path, rows: &[Table1Row], labels: &[String], levels: &[GridLevel]) -> Result<()> {
-    let series: Vec<Series<'_>> = labels
-        .iter()
-        .enumerate()
-        .map(|(i, l)| Series {
-            name: l,
-            points: levels
-                .iter()
-                .filter(|&&lv| rows.iter().any(|r| r.level == lv))
-                .map(|&lv| {
-                    let red = rows.iter().find(|r| r.level == lv).map_or(0.0, |r| r.reduction);
-                    (100.0 * red, 100.0 * mean_of(rows, lv, l, |r| r.held_out_mean))
-                })
-                .collect(),
-            markers: false,
-            color: PALETTE[i % PALETTE.len()],
-        })
-        .collect();
-    if series.iter().any(|s| !s.points.is_empty()) {
-        line_chart_svg(
-            &out.join("error_vs_reduction.svg"),
-            "Held-out mean error vs node reduction (mean over scenes)",
-            "node reduction (%)",
-            "mean error (% of O_max)",
-            &series,
-            false,
-            true,
-        )?;
-    }
-    Ok(())
-}
-
-fn write_error_maps(
-    out: &Path,
-    scene: &Scene,
-    reference: &Reference,
-    rows: &[Table1Row],
-    level: GridLevel,
-) -> Result<()> {
-    let (nx, ny) = level.resolve(scene.width, scene.height);
-    let chosen = [
-        (Method::SameSpring, MassConvention::PerNode),
-        (Method::Bcd, MassConvention::PerNode),
-        (Method::Gkd, MassConvention::PerNode),
-        (Method::Fit, MassConvention::Lumped),
-    ];
-    let maps: Vec<&Table1Row> = rows
-        .iter()
-        .filter(|r| r.level == level && chosen.contains(&(r.variant.method, r.variant.mass)) && !r.all.diverged)
-        .collect();
-    let scale = maps
-        .iter()
-        .flat_map(|r| r.all.worst_frame_nodes.iter().copied())
-        .fold(0.0, f64::max)
-        .max(1e-6);
-    for r in maps {
-        let frame = reference
-            .frame_times
-            .iter()
-            .position(|&t| (t - r.all.worst_time).abs() < 1e-9)
-            .unwrap_or(0);
-        let ref_pos: Vec<f64> = reference.frames[frame].iter().map(|&x| f64::from(x)).collect();
-        let coarse = lodcloth::sim::Topology::grid(scene.shape(nx, ny), scene.orientation);
-        let panels = [
-            ClothPanel {
-                title: format!("reference {}×{}", scene.nx, scene.ny),
-                topology: &reference.topology,
-                pos: &ref_pos,
-                values: None,
-            },
-            ClothPanel {
-                title: format!(
-                    "{} {nx}×{ny}: mean {:.2}%",
-                    r.variant.label(),
-                    100.0 * r.all.worst_frame_mean
-                ),
-                topology: &coarse,
-                pos: &r.all.worst_positions,
-                values: Some(&r.all.worst_frame_nodes),
-            },
-        ];
-        let path = out.join(format!(
-            "errormap_{}_{level}_{}.svg",
-            scene.name,
-            r.variant.label().replace('/', "_")
-        ));
-        error_map_svg(
-            &path,
-            &format!("{} — worst frame t = {:.3} s", scene.name, r.all.worst_time),
-            &panels,
-            scale,
-            420,
-        )?;
-    }
-    Ok(())
 }
 
 fn pareto_cmd(
@@ -1117,195 +753,5 @@ fn switch_cmd(common: &Common, level: GridLevel, method: Method, at: f64, window
         ])?;
     }
     csv.finish()?;
-    Ok(())
-}
-
-fn generalise_cmd(common: &Common, level: GridLevel, methods: &[Method], floor_perturbation: f64) -> Result<()> {
-    let out = common.out("out/generalise")?;
-    let spec = common.spec()?;
-    let defaults: Vec<&str> = PAPER_SCENES.iter().chain(&SUITE_SCENES).copied().collect();
-    let mut pairs = Vec::new();
-    for scene in common.scenes_or(&defaults)? {
-        let (reference, _) = reference_for(&scene, spec)?;
-        pairs.push((scene, reference));
-    }
-    let frames = pairs.first().context("no scene")?.1.frames.len();
-    let options = SuiteOptions {
-        level,
-        methods: methods.to_vec(),
-        fit: common.fit(frames)?,
-        train_fraction: common.train_fraction,
-        short_window: SHORT_WINDOW,
-        floor_perturbation,
-    };
-    let rows = suite(&pairs, &options, &common.estimator()?, &mut log_line)?;
-    fs::write(out.join("generalise.csv"), suite_csv(&rows)).context("writing generalise.csv")?;
-    let md = suite_md(&rows, methods, level, common, floor_perturbation);
-    fs::write(out.join("generalise.md"), &md).context("writing generalise.md")?;
-    suite_chart(&out, &rows, methods)?;
-    println!("{md}");
-    Ok(())
-}
-
-fn suite_csv(rows: &[SuiteRow]) -> String {
-    let mut csv = CsvTable::in_memory(&header_around(
-        &["scene", "level", "reduction", "method"],
-        &[
-            "estimate_s",
-            "mean",
-            "p95",
-            "last_quarter",
-            "short_mean",
-            "short_p95",
-            "transferred_mean",
-            "transferred_p95",
-            "transferred_last_quarter",
-            "transferred_short_mean",
-            "transferred_short_p95",
-            "floor_mean",
-            "floor_p95",
-            "floor_last_quarter",
-            "floor_min",
-            "floor_max",
-        ],
-    ));
-    let f6 = |v: f64| format!("{v:.6}");
-    for r in rows {
-        let t = r.transferred;
-        let opt =
-            |f: fn(&lodcloth::experiments::generalise::HeldOut) -> f64| t.as_ref().map_or(String::new(), |h| f6(f(h)));
-        let before = vec![
-            r.scene.clone(),
-            r.level.to_string(),
-            format!("{:.4}", r.reduction),
-            r.method.to_string(),
-        ];
-        let after = vec![
-            format!("{:.1}", r.estimate_seconds),
-            f6(r.own.mean),
-            f6(r.own.p95),
-            f6(r.own.last_quarter),
-            f6(r.own.short_mean),
-            f6(r.own.short_p95),
-            opt(|h| h.mean),
-            opt(|h| h.p95),
-            opt(|h| h.last_quarter),
-            opt(|h| h.short_mean),
-            opt(|h| h.short_p95),
-            f6(r.floor.mean),
-            f6(r.floor.p95),
-            f6(r.floor.last_quarter),
-            f6(r.floor.min),
-            f6(r.floor.max),
-        ];
-        csv.row(&row_around(before, &r.material, after))
-            .expect("a row per header column");
-    }
-    csv.into_text()
-}
-
-/// Per scene, each method's held-out mean / p95 / last quarter, long and
-/// short horizon, own and transferred; then the means over the scenes.
-fn suite_md(rows: &[SuiteRow], methods: &[Method], level: GridLevel, common: &Common, eps: f64) -> String {
-    let pct = |x: f64| format!("{:.2}", 100.0 * x);
-    let mut md = format!(
-        "Held-out error (% of O_max) at level {level} (N along each cloth's longer side), trained on the first {:.0} % of each run. \
-         Long horizon: one run from rest (Sung eq. 9); short: restarted from the reference every {SHORT_WINDOW} s. \
-         'Other scenes': the median of the other scenes' K and C corrections (estimate / reference) applied to this scene's reference coefficients. \
-         Chaos floor: three twins of the reference itself (every K × (1 ± {eps:e}), every C × (1 + {eps:e})), long horizon, their mean and range; a long-horizon error near it is chaos, not the level.\n\n\
-         Command: `lodcloth experiment generalise{}`\n\n",
-        100.0 * common.train_fraction,
-        if common.quick { " --quick" } else { "" }
-    );
-    let _ = writeln!(
-        md,
-        "| scene | level | method | mean | p95 | last quarter | short-horizon mean | short p95 | other scenes: mean | other scenes: short mean | chaos floor: mean (range) |"
-    );
-    let _ = writeln!(md, "|---|---|---|---|---|---|---|---|---|---|---|");
-    for r in rows {
-        let _ = writeln!(
-            md,
-            "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} ({}–{}) |",
-            r.scene,
-            r.level,
-            r.method,
-            pct(r.own.mean),
-            pct(r.own.p95),
-            pct(r.own.last_quarter),
-            pct(r.own.short_mean),
-            pct(r.own.short_p95),
-            r.transferred.map_or("—".into(), |t| pct(t.mean)),
-            r.transferred.map_or("—".into(), |t| pct(t.short_mean)),
-            pct(r.floor.mean),
-            pct(r.floor.min),
-            pct(r.floor.max),
-        );
-    }
-    let _ = writeln!(
-        md,
-        "\n| method | mean over scenes | worst scene | short-horizon mean | other scenes / own (long) | other scenes / own (short) |\n|---|---|---|---|---|---|"
-    );
-    for &m in methods {
-        let mine: Vec<&SuiteRow> = rows.iter().filter(|r| r.method == m).collect();
-        let n = mine.len().max(1) as f64;
-        let mean = mine.iter().map(|r| r.own.mean).sum::<f64>() / n;
-        let worst = mine.iter().map(|r| r.own.mean).fold(0.0, f64::max);
-        let short = mine.iter().map(|r| r.own.short_mean).sum::<f64>() / n;
-        let ratio = |f: fn(&lodcloth::experiments::generalise::HeldOut) -> f64| {
-            let v: Vec<f64> = mine
-                .iter()
-                .filter_map(|r| r.transferred.map(|t| f(&t) / f(&r.own)))
-                .collect();
-            if v.is_empty() {
-                "—".to_string()
-            } else {
-                format!(
-                    "{:.2}× (worst {:.2}×)",
-                    v.iter().sum::<f64>() / v.len() as f64,
-                    v.iter().copied().fold(0.0, f64::max)
-                )
-            }
-        };
-        let _ = writeln!(
-            md,
-            "| {m} | {} | {} | {} | {} | {} |",
-            pct(mean),
-            pct(worst),
-            pct(short),
-            ratio(|h| h.mean),
-            ratio(|h| h.short_mean)
-        );
-    }
-    md
-}
-
-/// Short-horizon against long-horizon held-out error, one point per scene
-/// and method.
-fn suite_chart(out: &Path, rows: &[SuiteRow], methods: &[Method]) -> Result<()> {
-    let names: Vec<String> = methods.iter().map(|m| m.name().to_string()).collect();
-    let series: Vec<Series<'_>> = methods
-        .iter()
-        .enumerate()
-        .map(|(i, &m)| Series {
-            name: &names[i],
-            points: rows
-                .iter()
-                .filter(|r| r.method == m)
-                .map(|r| (100.0 * r.own.mean, 100.0 * r.own.short_mean))
-                .collect(),
-            markers: true,
-            color: PALETTE[i % PALETTE.len()],
-        })
-        .collect();
-    line_chart_svg(
-        &out.join("short_vs_long.svg"),
-        "Held-out error per scene: short horizon vs long horizon",
-        "long horizon: mean error (% of O_max)",
-        "short horizon: mean error (% of O_max)",
-        &series,
-        true,
-        true,
-    )?;
-    info!("wrote {}", out.join("short_vs_long.svg").display());
     Ok(())
 }

@@ -16,7 +16,8 @@ use lodcloth::output::{line_chart_svg, Series, PALETTE};
 use lodcloth::plan::GridLevel;
 use lodcloth::scene::MassConvention;
 
-use super::{log_line, mean_of, paper_cell, reference_for, table1_csv, Common, PAPER_TABLE1, SHORT_WINDOW};
+use super::table1::{mean_of, paper_cell, table1_csv};
+use super::{log_line, reference_for, Common, PAPER_TABLE1, SHORT_WINDOW};
 
 /// How one reading follows the paper's Table 1 over the levels measured.
 #[derive(Debug, Clone)]

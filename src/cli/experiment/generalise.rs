@@ -1,0 +1,210 @@
+//! `experiment generalise`: every estimator over the suite, held-out time and scenes, both horizons.
+
+use std::fmt::Write as _;
+use std::fs;
+use std::path::Path;
+
+use anyhow::{Context, Result};
+use tracing::info;
+
+use lodcloth::estimate::Method;
+use lodcloth::experiments::generalise::{suite, SuiteOptions, SuiteRow};
+use lodcloth::output::{line_chart_svg, CsvTable, Series, PALETTE};
+use lodcloth::plan::GridLevel;
+
+use super::{header_around, log_line, reference_for, row_around, Common, PAPER_SCENES, SHORT_WINDOW, SUITE_SCENES};
+
+pub(super) fn generalise_cmd(
+    common: &Common,
+    level: GridLevel,
+    methods: &[Method],
+    floor_perturbation: f64,
+) -> Result<()> {
+    let out = common.out("out/generalise")?;
+    let spec = common.spec()?;
+    let defaults: Vec<&str> = PAPER_SCENES.iter().chain(&SUITE_SCENES).copied().collect();
+    let mut pairs = Vec::new();
+    for scene in common.scenes_or(&defaults)? {
+        let (reference, _) = reference_for(&scene, spec)?;
+        pairs.push((scene, reference));
+    }
+    let frames = pairs.first().context("no scene")?.1.frames.len();
+    let options = SuiteOptions {
+        level,
+        methods: methods.to_vec(),
+        fit: common.fit(frames)?,
+        train_fraction: common.train_fraction,
+        short_window: SHORT_WINDOW,
+        floor_perturbation,
+    };
+    let rows = suite(&pairs, &options, &common.estimator()?, &mut log_line)?;
+    fs::write(out.join("generalise.csv"), suite_csv(&rows)).context("writing generalise.csv")?;
+    let md = suite_md(&rows, methods, level, common, floor_perturbation);
+    fs::write(out.join("generalise.md"), &md).context("writing generalise.md")?;
+    suite_chart(&out, &rows, methods)?;
+    println!("{md}");
+    Ok(())
+}
+
+pub(super) fn suite_csv(rows: &[SuiteRow]) -> String {
+    let mut csv = CsvTable::in_memory(&header_around(
+        &["scene", "level", "reduction", "method"],
+        &[
+            "estimate_s",
+            "mean",
+            "p95",
+            "last_quarter",
+            "short_mean",
+            "short_p95",
+            "transferred_mean",
+            "transferred_p95",
+            "transferred_last_quarter",
+            "transferred_short_mean",
+            "transferred_short_p95",
+            "floor_mean",
+            "floor_p95",
+            "floor_last_quarter",
+            "floor_min",
+            "floor_max",
+        ],
+    ));
+    let f6 = |v: f64| format!("{v:.6}");
+    for r in rows {
+        let t = r.transferred;
+        let opt =
+            |f: fn(&lodcloth::experiments::generalise::HeldOut) -> f64| t.as_ref().map_or(String::new(), |h| f6(f(h)));
+        let before = vec![
+            r.scene.clone(),
+            r.level.to_string(),
+            format!("{:.4}", r.reduction),
+            r.method.to_string(),
+        ];
+        let after = vec![
+            format!("{:.1}", r.estimate_seconds),
+            f6(r.own.mean),
+            f6(r.own.p95),
+            f6(r.own.last_quarter),
+            f6(r.own.short_mean),
+            f6(r.own.short_p95),
+            opt(|h| h.mean),
+            opt(|h| h.p95),
+            opt(|h| h.last_quarter),
+            opt(|h| h.short_mean),
+            opt(|h| h.short_p95),
+            f6(r.floor.mean),
+            f6(r.floor.p95),
+            f6(r.floor.last_quarter),
+            f6(r.floor.min),
+            f6(r.floor.max),
+        ];
+        csv.row(&row_around(before, &r.material, after))
+            .expect("a row per header column");
+    }
+    csv.into_text()
+}
+
+/// Per scene, each method's held-out mean / p95 / last quarter, long and
+/// short horizon, own and transferred; then the means over the scenes.
+pub(super) fn suite_md(rows: &[SuiteRow], methods: &[Method], level: GridLevel, common: &Common, eps: f64) -> String {
+    let pct = |x: f64| format!("{:.2}", 100.0 * x);
+    let mut md = format!(
+        "Held-out error (% of O_max) at level {level} (N along each cloth's longer side), trained on the first {:.0} % of each run. \
+         Long horizon: one run from rest (Sung eq. 9); short: restarted from the reference every {SHORT_WINDOW} s. \
+         'Other scenes': the median of the other scenes' K and C corrections (estimate / reference) applied to this scene's reference coefficients. \
+         Chaos floor: three twins of the reference itself (every K × (1 ± {eps:e}), every C × (1 + {eps:e})), long horizon, their mean and range; a long-horizon error near it is chaos, not the level.\n\n\
+         Command: `lodcloth experiment generalise{}`\n\n",
+        100.0 * common.train_fraction,
+        if common.quick { " --quick" } else { "" }
+    );
+    let _ = writeln!(
+        md,
+        "| scene | level | method | mean | p95 | last quarter | short-horizon mean | short p95 | other scenes: mean | other scenes: short mean | chaos floor: mean (range) |"
+    );
+    let _ = writeln!(md, "|---|---|---|---|---|---|---|---|---|---|---|");
+    for r in rows {
+        let _ = writeln!(
+            md,
+            "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} ({}–{}) |",
+            r.scene,
+            r.level,
+            r.method,
+            pct(r.own.mean),
+            pct(r.own.p95),
+            pct(r.own.last_quarter),
+            pct(r.own.short_mean),
+            pct(r.own.short_p95),
+            r.transferred.map_or("—".into(), |t| pct(t.mean)),
+            r.transferred.map_or("—".into(), |t| pct(t.short_mean)),
+            pct(r.floor.mean),
+            pct(r.floor.min),
+            pct(r.floor.max),
+        );
+    }
+    let _ = writeln!(
+        md,
+        "\n| method | mean over scenes | worst scene | short-horizon mean | other scenes / own (long) | other scenes / own (short) |\n|---|---|---|---|---|---|"
+    );
+    for &m in methods {
+        let mine: Vec<&SuiteRow> = rows.iter().filter(|r| r.method == m).collect();
+        let n = mine.len().max(1) as f64;
+        let mean = mine.iter().map(|r| r.own.mean).sum::<f64>() / n;
+        let worst = mine.iter().map(|r| r.own.mean).fold(0.0, f64::max);
+        let short = mine.iter().map(|r| r.own.short_mean).sum::<f64>() / n;
+        let ratio = |f: fn(&lodcloth::experiments::generalise::HeldOut) -> f64| {
+            let v: Vec<f64> = mine
+                .iter()
+                .filter_map(|r| r.transferred.map(|t| f(&t) / f(&r.own)))
+                .collect();
+            if v.is_empty() {
+                "—".to_string()
+            } else {
+                format!(
+                    "{:.2}× (worst {:.2}×)",
+                    v.iter().sum::<f64>() / v.len() as f64,
+                    v.iter().copied().fold(0.0, f64::max)
+                )
+            }
+        };
+        let _ = writeln!(
+            md,
+            "| {m} | {} | {} | {} | {} | {} |",
+            pct(mean),
+            pct(worst),
+            pct(short),
+            ratio(|h| h.mean),
+            ratio(|h| h.short_mean)
+        );
+    }
+    md
+}
+
+/// Short-horizon against long-horizon held-out error, one point per scene
+/// and method.
+pub(super) fn suite_chart(out: &Path, rows: &[SuiteRow], methods: &[Method]) -> Result<()> {
+    let names: Vec<String> = methods.iter().map(|m| m.name().to_string()).collect();
+    let series: Vec<Series<'_>> = methods
+        .iter()
+        .enumerate()
+        .map(|(i, &m)| Series {
+            name: &names[i],
+            points: rows
+                .iter()
+                .filter(|r| r.method == m)
+                .map(|r| (100.0 * r.own.mean, 100.0 * r.own.short_mean))
+                .collect(),
+            markers: true,
+            color: PALETTE[i % PALETTE.len()],
+        })
+        .collect();
+    line_chart_svg(
+        &out.join("short_vs_long.svg"),
+        "Held-out error per scene: short horizon vs long horizon",
+        "long horizon: mean error (% of O_max)",
+        "short horizon: mean error (% of O_max)",
+        &series,
+        true,
+        true,
+    )?;
+    info!("wrote {}", out.join("short_vs_long.svg").display());
+    Ok(())
+}
