@@ -20,7 +20,6 @@ use std::time::{Duration, Instant};
 use prost::Message;
 
 use lodcloth::engine::{Engine, EngineSettings, InstanceSetup, StateFrame};
-use lodcloth::estimate::Method;
 use lodcloth::plan::Level;
 use lodcloth::proto::state_message;
 use lodcloth::proto::{v1, WireLevel};
@@ -62,18 +61,8 @@ fn instance(n: usize, integrator: Integrator, precision: SpringPrecision) -> Sim
 fn trial(n: usize, integrator: Integrator, precision: SpringPrecision, count: usize, seconds: f64) -> (f64, u64, f64) {
     let setups = (0..count)
         .map(|i| InstanceSetup {
-            name: format!("i{i}"),
-            sim: instance(n, integrator, precision),
-            cloud: None,
-            level: Level::new(n, n),
-            method: Method::Same,
             publish_hz: 60.0,
-            duration: 1e9,
-            looping: false,
-            shadow: false,
-            hold: false,
-            touch: None,
-            input_idle: 10.0,
+            ..InstanceSetup::new(format!("i{i}"), instance(n, integrator, precision), Level::new(n, n))
         })
         .collect();
     let engine = Engine::start(

@@ -9,7 +9,6 @@
 use std::time::Duration;
 
 use lodcloth::engine::{Command, Engine, EngineSettings, InstanceSetup};
-use lodcloth::estimate::Method;
 use lodcloth::plan::Level;
 use lodcloth::scene::Scene;
 use lodcloth::sim::{Integrator, StabilityCheck};
@@ -27,20 +26,7 @@ fn a_split_cloth_in_the_engine_steps_exactly_as_on_one_thread() {
     let bits = |s: &lodcloth::sim::State| -> Vec<u64> { s.pos.iter().chain(&s.vel).map(|x| x.to_bits()).collect() };
     for threads in [2, 1] {
         let engine = Engine::start(
-            vec![InstanceSetup {
-                name: "flag".into(),
-                sim: sim.clone(),
-                cloud: None,
-                level: Level::new(nx, ny),
-                method: Method::Same,
-                publish_hz: 30.0,
-                duration: 1e9,
-                looping: false,
-                shadow: false,
-                hold: false,
-                touch: None,
-                input_idle: 10.0,
-            }],
+            vec![InstanceSetup::new("flag", sim.clone(), Level::new(nx, ny))],
             settings(threads),
         )
         .expect("engine");
@@ -100,20 +86,7 @@ fn an_engine_dropped_without_stop_stops_its_threads() {
     let scene = Scene::load(std::path::Path::new("config/scenes/paper-1-top-edge.toml")).expect("scene");
     let sim = scene.build_at(16, 16).expect("builds");
     let engine = Engine::start(
-        vec![InstanceSetup {
-            name: "dropped".into(),
-            sim,
-            cloud: None,
-            level: Level::new(16, 16),
-            method: Method::Same,
-            publish_hz: 30.0,
-            duration: 1e9,
-            looping: false,
-            shadow: false,
-            hold: false,
-            touch: None,
-            input_idle: 10.0,
-        }],
+        vec![InstanceSetup::new("dropped", sim, Level::new(16, 16))],
         settings(2),
     )
     .expect("engine");
@@ -183,19 +156,9 @@ fn instances_are_spread_by_their_measured_step_cost() {
     let nodes = skirt.topology().n_nodes as f64;
     assert!(4096.0 / 7.5e-5 > nodes * 4.5 / skirt.params().dt);
     let setup = |name: &str, sim: lodcloth::sim::Simulation, level: Level| InstanceSetup {
-        name: name.into(),
-        sim,
-        cloud: None,
-        level,
-        method: Method::Same,
-        publish_hz: 30.0,
-        duration: 1e9,
-        looping: false,
-        shadow: false,
         // Nothing steps: only the placement is looked at.
         hold: true,
-        touch: None,
-        input_idle: 10.0,
+        ..InstanceSetup::new(name, sim, level)
     };
     let engine = Engine::start(
         vec![

@@ -79,6 +79,31 @@ pub struct InstanceSetup {
     pub input_idle: f64,
 }
 
+impl InstanceSetup {
+    /// `sim` stepping at `level` with the scene's coefficients (`same`),
+    /// for as long as the process runs: no reference beside it (no shadow,
+    /// no looping), no input, 30 states a second, released after 10 s
+    /// without input (the config's `[input] idle`). What differs from
+    /// this is set with struct update syntax:
+    /// `InstanceSetup { publish_hz: 60.0, ..InstanceSetup::new(…) }`.
+    pub fn new(name: impl Into<String>, sim: Simulation, level: Level) -> InstanceSetup {
+        InstanceSetup {
+            name: name.into(),
+            sim,
+            cloud: None,
+            level,
+            method: Method::Same,
+            publish_hz: 30.0,
+            duration: f64::INFINITY,
+            looping: false,
+            shadow: false,
+            hold: false,
+            touch: None,
+            input_idle: 10.0,
+        }
+    }
+}
+
 /// The service's side of one running instance.
 #[derive(Clone)]
 pub struct InstanceHandle {

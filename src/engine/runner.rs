@@ -369,18 +369,8 @@ mod tests {
             replay_class: || {},
         };
         let setup = InstanceSetup {
-            name: "hanging".into(),
-            sim,
-            cloud: None,
-            level: Level::new(8, 8),
-            method: Method::Same,
             publish_hz: 60.0,
-            duration: 1e9,
-            looping: false,
-            shadow: false,
-            hold: false,
-            touch: None,
-            input_idle: 10.0,
+            ..InstanceSetup::new("hanging", sim, Level::new(8, 8))
         };
         Runner::new(setup, rx, settings).0
     }
