@@ -151,13 +151,17 @@ fn a_grabbed_cloth_without_gravity_comes_to_rest_with_its_patch_on_the_target() 
             &mut sim,
         )
         .expect("a soft grab is stable");
-    for _ in 0..80_000 {
+    // 12 s: the last motion, a slow swing damped by drag alone, loses its
+    // kinetic energy with a time constant of about 12 s (2.9e-8 J at 8 s,
+    // 1.1e-8 J at 20 s; measured 2026-12-03), and at 8 s the fastest node
+    // was at 1e-3 m/s either side by rounding alone.
+    for _ in 0..120_000 {
         assert!(sim.step().finite);
     }
     let grab = &sim.grabs()[0];
     let (x, v) = grab.patch(&sim.state().pos, &sim.state().vel);
     let off = (0..3).map(|c| (x[c] - target[c]).powi(2)).sum::<f64>().sqrt();
-    assert!(off < 1e-4, "after 8 s the patch is {off} m from its target ({x:?})");
+    assert!(off < 1e-4, "after 12 s the patch is {off} m from its target ({x:?})");
     let speed = sim.state().vel.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
     assert!(
         speed < 1e-3 && v.iter().all(|x| x.abs() < 1e-3),

@@ -383,10 +383,11 @@ fn block<R: Real, const N: usize, const ADJ: bool>(
         // A coincident pair (L < MIN_LENGTH) has |d| < MIN_LENGTH too, so
         // scaling by 1/MIN_LENGTH keeps |d|/L < 1: bounded, direction-free.
         let safe2 = if len2 > min2 { len2 } else { min2 };
-        let inv = safe2.inv_sqrt();
-        // L = L²·(1/L). Below MIN_LENGTH this is L²/MIN_LENGTH < L, a
-        // difference under 1e-12 m that no force notices.
-        let len = len2 * inv;
+        // A square root and a division, both exactly rounded (the same bits
+        // on every instruction set). Below MIN_LENGTH, L reads MIN_LENGTH:
+        // a difference under 1e-12 m that no force notices.
+        let len = safe2.sqrt();
+        let inv = R::ONE / len;
         let dvd = (ubz[j] - uaz[j]).mul_add(dz, (uby[j] - uay[j]).mul_add(dy, (ubx[j] - uax[j]) * dx));
         let ext = len - l0[j];
         let ratio = len * il0[j];

@@ -8,13 +8,16 @@
 //! at a time with fixed-size arrays, so the compiler emits vector code and the
 //! per-lane reductions (elastic energy, largest strain) have a fixed summation
 //! order: results are bit-identical whichever instruction set runs them
-//! ([`Real::inv_sqrt`] and `mul_add` are exactly rounded everywhere; see the
+//! (`sqrt`, division and `mul_add` are exactly rounded everywhere; see the
 //! `dispatch_paths_are_bit_identical` test).
 //!
 //! Performance notes (64×64 grid, ~24k springs, one AVX-512 core):
-//! - No `sqrt` or division: 1/L comes from [`Real::inv_sqrt`] (multiplies
-//!   and FMAs only); 8-wide f64 `vsqrtpd` + `vdivpd` were the kernel's
-//!   bottleneck.
+//! - L and 1/L come from one `sqrt` and one division. Until 2026-12-03 1/L
+//!   was a Newton iteration of multiplies and FMAs (8-wide f64 `vsqrtpd` +
+//!   `vdivpd` had bounded an earlier, slower kernel); on a Zen 4 the
+//!   iteration's dozen instructions cost 12–15 % more per spring than the
+//!   divider, which runs beside the FMA pipes (docs/results.md, "A square
+//!   root and a division").
 //! - The ends of a run that do not fill a block of `L` are one more
 //!   block overlapping the previous one, with the already-counted lanes
 //!   masked out, not a scalar loop (a 64-node row has 63 or 62 springs).
