@@ -47,6 +47,9 @@ pub trait Real:
     /// `self · a + b` with one rounding.
     fn mul_add(self, a: Self, b: Self) -> Self;
     /// √self, exactly rounded (IEEE: the same bits on every instruction set).
+    /// The kernel divides by it rather than use an approximate reciprocal
+    /// square root (`vrsqrt14ps` and kin), whose bits are not specified and
+    /// differ between instruction sets and vendors.
     fn sqrt(self) -> Self;
     /// The nearest value of this precision.
     fn from_f64(x: f64) -> Self;
