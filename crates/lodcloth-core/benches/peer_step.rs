@@ -11,6 +11,10 @@
 //! `cloth_peers.py --lodcloth PATH`. `--path avx2` times the AVX2+FMA path
 //! on a CPU with AVX-512 (what AVX2-only CPUs run).
 //!
+//! `--size N` times an N×N cloth instead of 64×64 (how the step's cost
+//! per node grows once its fields leave the caches); the peers run 64×64
+//! only.
+//!
 //! `--only KEY` times one entry (`symplectic_euler`, `symplectic_euler_f32`,
 //! `rk4`, `rk4_f32`), e.g. under a profiler.
 //!
@@ -21,7 +25,7 @@
 //! `--report full` times `Simulation::step`, with every figure of the
 //! report (what the figures before that date were).
 //!
-//! `cargo bench -p lodcloth-core --bench peer_step -- [--steps 1000] [--repeats 7] [--json PATH] [--path avx2] [--only KEY] [--report lean|full]`
+//! `cargo bench -p lodcloth-core --bench peer_step -- [--steps 1000] [--repeats 7] [--json PATH] [--path avx2] [--only KEY] [--report lean|full] [--size N]`
 
 use std::time::Instant;
 
@@ -48,6 +52,11 @@ fn main() {
     }
     let repeats: usize = arg("--repeats").map_or(7, |s| s.parse().expect("--repeats: a count"));
     let only = arg("--only");
+    let size: usize = arg("--size").map_or(64, |s| s.parse().expect("--size: nodes a side"));
+    assert!(
+        size == 64 || arg("--json").is_none(),
+        "--json writes the figures the peers' 64×64 are compared with: leave out --size {size}"
+    );
     let full = match arg("--report").as_deref() {
         None | Some("lean") => false,
         Some("full") => true,
@@ -71,8 +80,8 @@ fn main() {
         scene.params.integrator = integrator;
         scene.params.strain_limit = None;
         scene.params.stiffness_adjustment = None;
-        scene.params.dt = 0.5 * scene.build_at(64, 64).expect("builds").dt_limit();
-        let mut sim = scene.build_at(64, 64).expect("builds");
+        scene.params.dt = 0.5 * scene.build_at(size, size).expect("builds").dt_limit();
+        let mut sim = scene.build_at(size, size).expect("builds");
         sim.set_spring_precision(precision);
         let start = sim.clone();
         for _ in 0..50 {
@@ -95,11 +104,12 @@ fn main() {
             SpringPrecision::F32 => "f32 springs",
         };
         println!(
-            "  lodcloth {:<17} {springs:<11} ({}, {} report): {median:9.1} us/step (min {min:.1}), {} springs",
+            "  lodcloth {:<17} {springs:<11} ({}, {} report): {median:9.1} us/step (min {min:.1}), {size}×{size}, {} springs, {:.2} ns/spring",
             integrator.name(),
             active_isa_name(),
             if full { "full" } else { "lean" },
-            sim.topology().spring_count()
+            sim.topology().spring_count(),
+            median * 1e3 / sim.topology().spring_count() as f64
         );
         entries.push(format!(
             "\"{key}\": {{\"us_per_step\": {median}, \"us_min\": {min}, \"isa\": \"{}\", \"report\": \"{}\"}}",

@@ -155,6 +155,9 @@ pub struct Simulation {
     epoch: (f64, u64),
     /// Where a step splits its work in two (see [`Simulation::step_on`]).
     split: Option<usize>,
+    /// The state's page offsets the buffers were last placed around, and
+    /// the colours they got (see [`Simulation::place_buffers`]).
+    placed: Option<([usize; 2], [usize; 12])>,
 }
 
 impl Simulation {
@@ -217,8 +220,10 @@ impl Simulation {
                 damping_rate: modal.damping_rate,
             });
         }
-        let inv_mass = (0..n).map(|k| if pinned[k] { 0.0 } else { 1.0 / masses[k] }).collect();
-        let free = (0..n).map(|k| if pinned[k] { 0.0 } else { 1.0 }).collect();
+        // Placed at the first step, with the other buffers (`place_buffers`).
+        let inv_mass = Paged::from_fn(n, |k| if pinned[k] { 0.0 } else { 1.0 / masses[k] });
+        let free = Paged::from_fn(n, |k| if pinned[k] { 0.0 } else { 1.0 });
+        let masses = Paged::from_fn(n, |k| masses[k]);
         let ws = Workspace::new(&topology, &params, &loads);
         let mut sim = Simulation {
             model: Model {
@@ -241,6 +246,7 @@ impl Simulation {
             last: None,
             epoch: (0.0, 0),
             split: None,
+            placed: None,
         };
         sim.split = node_split(&sim.model.topology);
         sim.epoch = sim.epoch_of(&sim.state);
@@ -432,6 +438,7 @@ impl Simulation {
     }
 
     fn step_with(&mut self, pair: &dyn Pair, stats: bool) -> StepReport {
+        self.place_buffers();
         let par = Par {
             pair,
             split: self.split,

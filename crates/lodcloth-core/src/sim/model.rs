@@ -57,7 +57,8 @@ impl Mixed {
     /// Each buffer a third of a page from the others: at 64×64 every f32
     /// component array is 16 KiB, so the nine streams of the kernel would
     /// otherwise share one L1 set (see [`paged`]); measured 45 µs a 64²
-    /// symplectic step with plain allocations against 36 placed.
+    /// symplectic step with plain allocations against 36 placed. The first
+    /// step moves them away from the state too (`Simulation::place_buffers`).
     pub(super) fn new(topology: &Topology) -> Mixed {
         let n3 = 3 * topology.n_nodes;
         Mixed {
@@ -123,11 +124,11 @@ impl Workspace {
 #[derive(Debug, Clone)]
 pub(super) struct Model {
     pub(super) topology: Arc<Topology>,
-    pub(super) masses: Vec<f64>,
+    pub(super) masses: Paged,
     /// 1/m for free nodes, 0 for pinned ones.
-    pub(super) inv_mass: Vec<f64>,
+    pub(super) inv_mass: Paged,
     /// 1 for free nodes, 0 for pinned ones.
-    pub(super) free: Vec<f64>,
+    pub(super) free: Paged,
     pub(super) params: SimParams,
     pub(super) loads: Loads,
     /// Live grabs (see [`Simulation::set_grabs`]).
