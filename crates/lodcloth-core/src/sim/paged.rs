@@ -75,7 +75,7 @@ pub(crate) fn spread<const N: usize>(avoid: &[usize]) -> [usize; N] {
     for &a in avoid {
         let a = a % PAGE;
         taken[a / LINE] = true;
-        if a % LINE != 0 {
+        if !a.is_multiple_of(LINE) {
             taken[(a / LINE + 1) % LINES] = true;
         }
     }
@@ -368,7 +368,7 @@ mod tests {
                     for (i, &c) in lines.iter().enumerate() {
                         for &a in &state {
                             // Not on a line the state's 64-byte blocks touch.
-                            assert!(c / LINE != a / LINE && c / LINE != (a + LINE - 1) / LINE % LINES);
+                            assert!(c / LINE != a / LINE && c / LINE != a.div_ceil(LINE) % LINES);
                         }
                         assert!(!lines[..i].contains(&c), "two buffers on one line: {lines:?}");
                     }
