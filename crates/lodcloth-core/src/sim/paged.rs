@@ -20,13 +20,12 @@
 //! advance could not do that: on a Zen 4, with the state's positions,
 //! velocities and the node masses in the same two sets as the f32
 //! velocities, the 64×64 f32 step's node pass took 4.8 ns a node against
-//! 2.7 at 60×60 (`peer_step --size`, 2026-12-04).
+//! 2.0 at 60×60 (`perf record` of `peer_step --size`, 2026-12-04).
 //! [`Paged::window_away_from`] places a window for each evaluation instead
 //! (the force buffer, whose evaluations read the state or a stage).
 
 use std::ops::{Deref, DerefMut};
 
-use super::model::Workspace;
 use super::Simulation;
 
 /// Bytes in the period of L1 set indexing.
@@ -190,13 +189,14 @@ impl Simulation {
     /// Put every buffer the node passes and the kernel stream through
     /// beside the state on its own cache sets, away from the state's
     /// positions and velocities (and from the force window placed away from
-    /// them): see the module's documentation. The state is the caller's allocation, so its
-    /// page offsets are known only now; a buffer moves only when the state
-    /// came from a new allocation (the first step, a clone). Most
-    /// streamed first: the kernel's f32 copies and forces, then the node
-    /// constants, the cached acceleration and RK4's stages.
+    /// them): see the module's documentation. The state is the caller's
+    /// allocation, so its page offsets are known only now; a buffer moves
+    /// only when the state came from a new allocation (the first step, a
+    /// clone) or the buffer is new (the f32 copies). Most streamed first:
+    /// the kernel's f32 copies and forces, then the node constants, the
+    /// cached acceleration and RK4's stages.
     pub(super) fn place_buffers(&mut self) {
-        let key = [self.state.pos.as_ptr(), self.state.vel.as_ptr()].map(|p| p as usize % 4096);
+        let key = [self.state.pos.as_ptr(), self.state.vel.as_ptr()].map(colour_of);
         let colours = match self.placed {
             Some((k, colours)) if k == key => colours,
             _ => {
@@ -208,31 +208,22 @@ impl Simulation {
         };
         // Each a no-op when the buffer is already there (a buffer made
         // since, like the f32 copies, moves now).
-        let Workspace {
-            stage_pos,
-            stage_vel,
-            sum_pos,
-            sum_vel,
-            stage_acc,
-            mixed,
-            ..
-        } = &mut self.ws;
-        if let Some(m) = mixed.as_deref_mut() {
+        if let Some(m) = self.ws.mixed.as_deref_mut() {
             m.pos.recolour(colours[0]);
             m.vel.recolour(colours[1]);
             m.force.recolour(colours[2]);
         }
-        let m = &mut self.model;
+        let (m, ws) = (&mut self.model, &mut self.ws);
         for (buffer, colour) in [
             &mut m.masses,
             &mut m.inv_mass,
             &mut m.free,
             &mut self.acc,
-            stage_pos,
-            stage_vel,
-            sum_pos,
-            sum_vel,
-            stage_acc,
+            &mut ws.stage_pos,
+            &mut ws.stage_vel,
+            &mut ws.sum_pos,
+            &mut ws.sum_vel,
+            &mut ws.stage_acc,
         ]
         .into_iter()
         .zip(&colours[3..])
