@@ -69,20 +69,42 @@ pub(super) struct Block<const N: usize> {
     pub(super) v: [[f64; N]; 3],
 }
 
-/// Nodes of `block` into lanes `0..N` of the partial sums. Both the fused
-/// pass and [`super::Simulation`]'s separate report pass sum through here,
-/// with the same lane structure: the same bits either way.
+/// Nodes of `block` into lanes `0..N` of the partial sums, component by
+/// component through [`sum_component`], as the fused pass sums them: the
+/// same bits either way.
 #[inline(always)]
 pub(super) fn add_to_sums<const N: usize>(block: &Block<N>, sums: &mut Sums) {
-    let [x, y, z] = &block.x;
-    let [u, v, w] = &block.v;
+    let mut m = [0.0; N];
     for j in 0..N {
-        let m = block.mass[j] * block.free[j];
-        let v2 = w[j].mul_add(w[j], v[j].mul_add(v[j], u[j] * u[j]));
-        sums.mv2[j] = m.mul_add(v2, sums.mv2[j]);
-        sums.mx[0][j] = m.mul_add(x[j], sums.mx[0][j]);
-        sums.mx[1][j] = m.mul_add(y[j], sums.mx[1][j]);
-        sums.mx[2][j] = m.mul_add(z[j], sums.mx[2][j]);
+        m[j] = block.mass[j] * block.free[j];
+    }
+    let mut t = [0.0; N];
+    for c in 0..3 {
+        sum_component(c, &m, &block.x[c], &block.v[c], &mut t, sums);
+    }
+}
+
+/// Component `c` of `N` nodes into lanes `0..N` of the partial sums, `m`
+/// their masses (0 for a pinned node): m·x into that component's sum, and
+/// |v|² built up in `t` (set at x, added to at y; at z, m·|v|² joins its
+/// sum). Each lane adds its nodes in the same order whether a pass goes
+/// node by node or component by component, so the fused pass and the
+/// report's own pass ([`add_to_sums`]) give the same bits.
+#[inline(always)]
+pub(super) fn sum_component<const N: usize>(
+    c: usize,
+    m: &[f64; N],
+    x: &[f64; N],
+    v: &[f64; N],
+    t: &mut [f64; N],
+    sums: &mut Sums,
+) {
+    for j in 0..N {
+        sums.mx[c][j] = m[j].mul_add(x[j], sums.mx[c][j]);
+        t[j] = if c == 0 { v[j] * v[j] } else { v[j].mul_add(v[j], t[j]) };
+        if c == 2 {
+            sums.mv2[j] = m[j].mul_add(t[j], sums.mv2[j]);
+        }
     }
 }
 
@@ -178,6 +200,22 @@ fn update<const RK4: bool>(piece: Piece, dt: f64, g: [f64; 3]) -> Sums {
     sums
 }
 
+/// Nodes per chunk of the fused pass (a multiple of [`LANES`]): it goes
+/// over a chunk once per component.
+///
+/// Node by node, a block of nodes held its three components' x and v, its
+/// masses and the report's 32 partial sums at once: more than an AVX2
+/// core's 16 vector registers, so the pass spilled (322 instructions a
+/// block of 8 nodes on the AVX2 path, 50 of them to and from the stack;
+/// `perf annotate`, 2026-12-04). A component at a time holds a third of
+/// it. A chunk is short enough that its |v|² (built up over the
+/// components, [`sum_component`]) stays in L1, and long enough that the
+/// next component's loads come long after this one's stores: the
+/// components of a field are n·8 bytes apart (a multiple of 4 KiB on every
+/// power-of-two grid), and a load right behind a store at the same page
+/// offset waits on a false dependency (4K aliasing).
+const CHUNK: usize = 8 * LANES;
+
 #[inline(always)]
 fn blocks<const COPY: bool, const RK4: bool, const FORCES: bool>(
     mut piece: Piece,
@@ -185,95 +223,159 @@ fn blocks<const COPY: bool, const RK4: bool, const FORCES: bool>(
     g: [f64; 3],
     sums: &mut Sums,
 ) {
-    let n = piece.mass.len();
-    let mut k = 0;
-    while k + LANES <= n {
-        nodes::<LANES, COPY, RK4, FORCES>(&mut piece, k, dt, g, sums);
-        k += LANES;
+    /// Nodes `k..k + t.len()`, component by component.
+    #[inline(always)]
+    fn chunk<const COPY: bool, const RK4: bool, const FORCES: bool>(
+        piece: &mut Piece,
+        k: usize,
+        t: &mut [f64],
+        dt: f64,
+        g: [f64; 3],
+        sums: &mut Sums,
+    ) {
+        component::<0, COPY, RK4, FORCES>(piece, k, t, dt, g[0], sums);
+        component::<1, COPY, RK4, FORCES>(piece, k, t, dt, g[1], sums);
+        component::<2, COPY, RK4, FORCES>(piece, k, t, dt, g[2], sums);
     }
-    for k in k..n {
-        nodes::<1, COPY, RK4, FORCES>(&mut piece, k, dt, g, sums);
+    let n = piece.mass.len();
+    let mut t = [0.0; CHUNK];
+    let mut k = 0;
+    // Whole chunks, then the rest: with the rest's nodes one at a time
+    // (lane 0) inside the loop, the compiler vectorised lane 0's sums apart
+    // from the others' and the whole pass split into odd pieces (1 + 4 + 2
+    // + 1 lanes on AVX2, 35 % slower than this).
+    while k + CHUNK <= n {
+        chunk::<COPY, RK4, FORCES>(&mut piece, k, &mut t, dt, g, sums);
+        k += CHUNK;
+    }
+    if k < n {
+        chunk::<COPY, RK4, FORCES>(&mut piece, k, &mut t[..n - k], dt, g, sums);
     }
 }
 
-/// Nodes `k..k+N` of [`update`].
+/// One component `C` of one field, cut to a chunk of nodes.
+struct Lane<'a> {
+    x: &'a mut [f64],
+    v: &'a mut [f64],
+    a: &'a [f64],
+    b: &'a [f64],
+    x32: &'a mut [f32],
+    v32: &'a mut [f32],
+    f: &'a mut [f32],
+    inv_mass: &'a [f64],
+    mass: &'a [f64],
+    free: &'a [f64],
+}
+
+/// Component `C` of the chunk of nodes `k..k + t.len()` of [`update`]: in
+/// blocks of [`LANES`], then one node at a time (lane 0), as the report's
+/// pass sums them.
 #[inline(always)]
-fn nodes<const N: usize, const COPY: bool, const RK4: bool, const FORCES: bool>(
+fn component<const C: usize, const COPY: bool, const RK4: bool, const FORCES: bool>(
     piece: &mut Piece,
     k: usize,
+    t: &mut [f64],
     dt: f64,
-    g: [f64; 3],
+    g: f64,
+    sums: &mut Sums,
+) {
+    let len = t.len();
+    let r = k..k + len;
+    // Every slice cut to the chunk here, once, so the loop below indexes
+    // within lengths it knows.
+    let (f, inv_mass, drag) = match piece.forces.as_mut() {
+        Some(forces) if FORCES => (&mut forces.f[C][r.clone()], &forces.inv_mass[r.clone()], forces.drag),
+        _ => (&mut [][..], &[][..], 0.0),
+    };
+    let mut lane = Lane {
+        x: &mut piece.x[C][r.clone()],
+        v: &mut piece.v[C][r.clone()],
+        a: if FORCES { &[] } else { &piece.a[C][r.clone()] },
+        b: if RK4 { &piece.b[C][r.clone()] } else { &[] },
+        x32: if COPY { &mut piece.x32[C][r.clone()] } else { &mut [] },
+        v32: if COPY { &mut piece.v32[C][r.clone()] } else { &mut [] },
+        f,
+        inv_mass,
+        mass: &piece.mass[r.clone()],
+        free: &piece.free[r],
+    };
+    let full = len - len % LANES;
+    let mut i = 0;
+    while i < full {
+        let t = <&mut [f64; LANES]>::try_from(&mut t[i..i + LANES]).expect("LANES");
+        nodes::<LANES, C, COPY, RK4, FORCES>(&mut lane, i, t, dt, g, drag, sums);
+        i += LANES;
+    }
+    for i in full..len {
+        let t = <&mut [f64; 1]>::try_from(&mut t[i..=i]).expect("1");
+        nodes::<1, C, COPY, RK4, FORCES>(&mut lane, i, t, dt, g, drag, sums);
+    }
+}
+
+/// Component `C` of nodes `i..i+N` of a [`Lane`].
+#[inline(always)]
+fn nodes<const N: usize, const C: usize, const COPY: bool, const RK4: bool, const FORCES: bool>(
+    lane: &mut Lane,
+    i: usize,
+    t: &mut [f64; N],
+    dt: f64,
+    g: f64,
+    drag: f64,
     sums: &mut Sums,
 ) {
     #[inline(always)]
-    fn arr<const N: usize>(s: &[f64], k: usize) -> [f64; N] {
-        *<&[f64; N]>::try_from(&s[k..k + N]).expect("N")
+    fn arr<const N: usize>(s: &[f64], i: usize) -> [f64; N] {
+        *<&[f64; N]>::try_from(&s[i..i + N]).expect("N")
     }
-    let mut block = Block::<N> {
-        mass: arr(piece.mass, k),
-        free: arr(piece.free, k),
-        x: [[0.0; N]; 3],
-        v: [[0.0; N]; 3],
+    let (mass, free) = (arr::<N>(lane.mass, i), arr::<N>(lane.free, i));
+    let mut x = arr::<N>(lane.x, i);
+    let mut v = arr::<N>(lane.v, i);
+    let a = if FORCES {
+        // The force-to-acceleration pass's own expression (the f64 forces
+        // are all zero: + 0.0), on the velocity before the update.
+        let f = &lane.f[i..i + N];
+        let inv_mass = arr::<N>(lane.inv_mass, i);
+        let mut a = [0.0; N];
+        for j in 0..N {
+            a[j] = acceleration(0.0 + f64::from(f[j]), inv_mass[j], free[j], g, drag, v[j]);
+        }
+        a
+    } else {
+        arr::<N>(lane.a, i)
     };
-    // Every load of the block before any of its stores: the components of
-    // a field lie n·8 bytes apart (32 KiB on a 64×64 cloth, a multiple of
-    // 4 KiB on every power-of-two grid), so a load of y right behind a
-    // store of x at the same page offset would wait on a false dependency
-    // (4K aliasing), as the spring kernel's loads would (`forces::block`).
-    for c in 0..3 {
-        let mut x = arr::<N>(piece.x[c], k);
-        let mut v = arr::<N>(piece.v[c], k);
-        let a = match piece.forces.as_ref() {
-            Some(forces) if FORCES => {
-                // The force-to-acceleration pass's own expression (the f64
-                // forces are all zero: + 0.0), on the velocity before the
-                // update.
-                let fc = &forces.f[c][k..k + N];
-                let inv_mass = arr::<N>(forces.inv_mass, k);
-                let mut a = [0.0; N];
-                for j in 0..N {
-                    let fk = 0.0 + f64::from(fc[j]);
-                    a[j] = acceleration(fk, inv_mass[j], block.free[j], g[c], forces.drag, v[j]);
-                }
-                a
-            }
-            _ => arr::<N>(piece.a[c], k),
-        };
-        if RK4 {
-            let b = arr::<N>(piece.b[c], k);
-            for j in 0..N {
-                x[j] += dt * b[j];
-                v[j] += dt * a[j];
-            }
-        } else {
-            for j in 0..N {
-                v[j] += dt * a[j];
-                x[j] += dt * v[j];
-            }
+    if RK4 {
+        let b = arr::<N>(lane.b, i);
+        for j in 0..N {
+            x[j] += dt * b[j];
+            v[j] += dt * a[j];
         }
-        block.x[c] = x;
-        block.v[c] = v;
-    }
-    for c in 0..3 {
-        let (x, v) = (&block.x[c], &block.v[c]);
-        piece.x[c][k..k + N].copy_from_slice(x);
-        piece.v[c][k..k + N].copy_from_slice(v);
-        if COPY {
-            // Rounded to nearest, ties to even: the same on every instruction
-            // set, and what the kernel's own rounding gives.
-            let (mut x32, mut v32) = ([0.0f32; N], [0.0f32; N]);
-            for j in 0..N {
-                x32[j] = x[j] as f32;
-                v32[j] = v[j] as f32;
-            }
-            piece.x32[c][k..k + N].copy_from_slice(&x32);
-            piece.v32[c][k..k + N].copy_from_slice(&v32);
-        }
-        if let Some(forces) = piece.forces.as_mut().filter(|_| FORCES) {
-            forces.f[c][k..k + N].fill(0.0);
+    } else {
+        for j in 0..N {
+            v[j] += dt * a[j];
+            x[j] += dt * v[j];
         }
     }
-    add_to_sums(&block, sums);
+    lane.x[i..i + N].copy_from_slice(&x);
+    lane.v[i..i + N].copy_from_slice(&v);
+    if COPY {
+        // Rounded to nearest, ties to even: the same on every instruction
+        // set, and what the kernel's own rounding gives.
+        let (mut x32, mut v32) = ([0.0f32; N], [0.0f32; N]);
+        for j in 0..N {
+            x32[j] = x[j] as f32;
+            v32[j] = v[j] as f32;
+        }
+        lane.x32[i..i + N].copy_from_slice(&x32);
+        lane.v32[i..i + N].copy_from_slice(&v32);
+    }
+    if FORCES {
+        lane.f[i..i + N].fill(0.0);
+    }
+    let mut m = [0.0; N];
+    for j in 0..N {
+        m[j] = mass[j] * free[j];
+    }
+    sum_component(C, &m, &x, &v, t, sums);
 }
 
 /// f32 copies of a stage's positions and velocities for the spring kernel
@@ -502,6 +604,72 @@ fn stage_loop<const FIRST: bool, const COPY: bool, const FORCES: bool, const NEX
             if COPY {
                 p32[i] = p as f32;
                 v32[i] = v as f32;
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::scene::Scene;
+    use crate::sim::par::Par;
+    use crate::sim::Serial;
+    use crate::sim::{force_path, simd, Integrator, SpringPrecision, StabilityCheck, VectorPath};
+
+    /// The fused pass sums the report (kinetic and gravity energy,
+    /// finiteness) to the bit as the report's own pass does over the state
+    /// the step left, on every vector path: symplectic Euler and RK4 (the
+    /// integrators whose last pass is fused), both spring precisions, with
+    /// the f32 forces made into accelerations in the pass (the hanging
+    /// sheet, no strain limit: nothing but springs, gravity and drag) and
+    /// read from an array (the windy flag); a cloth whose nodes end in a
+    /// part of a chunk and a part of a block (33×21 = 693 = 10·64 + 6·8 +
+    /// 5) and one split in halves (128×64).
+    #[test]
+    fn the_fused_pass_sums_the_report_as_the_report_pass_does() {
+        let scenes = [
+            (include_str!("../../../../config/scenes/hanging.toml"), "hanging"),
+            (include_str!("../../../../config/scenes/flag-2to1-wind.toml"), "flag"),
+        ];
+        for (text, name) in scenes {
+            for integrator in [Integrator::SymplecticEuler, Integrator::Rk4] {
+                for (nx, ny) in [(33, 21), (128, 64)] {
+                    let mut scene = Scene::from_toml(text, name).expect("shipped scene");
+                    scene.params.integrator = integrator;
+                    scene.params.strain_limit = None;
+                    scene.stability = StabilityCheck::Force;
+                    for precision in SpringPrecision::ALL {
+                        for path in [VectorPath::Best, VectorPath::Avx2, VectorPath::Baseline] {
+                            let before = force_path(path);
+                            let mut sim = scene.build_at(nx, ny).expect("builds");
+                            assert_eq!(sim.split().is_some(), nx * ny >= 8192);
+                            sim.set_spring_precision(precision);
+                            let what = format!("{name} {nx}x{ny} {integrator} {precision:?} {path:?}");
+                            for step in 0..12 {
+                                let fused = if step % 2 == 0 { sim.step() } else { sim.step_lean() };
+                                assert!(fused.finite, "{what} step {step}: diverged");
+                                let par = Par {
+                                    pair: &Serial,
+                                    split: sim.split(),
+                                    isa: simd::current(),
+                                };
+                                let solver = (fused.solver_iterations, fused.solver_residual);
+                                let measured = simd::run(par.isa, || sim.measure(solver, 0, par, step % 2 == 0));
+                                assert_eq!(
+                                    (fused.kinetic_energy.to_bits(), fused.gravity_energy.to_bits()),
+                                    (measured.kinetic_energy.to_bits(), measured.gravity_energy.to_bits()),
+                                    "{what} step {step}: {} {} against {} {}",
+                                    fused.kinetic_energy,
+                                    fused.gravity_energy,
+                                    measured.kinetic_energy,
+                                    measured.gravity_energy
+                                );
+                                assert!(fused.kinetic_energy > 0.0 || step == 0, "{what}: at rest");
+                            }
+                            force_path(before);
+                        }
+                    }
+                }
             }
         }
     }
