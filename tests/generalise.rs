@@ -114,6 +114,17 @@ fn the_suite_scores_each_scene_at_its_aspect_and_carries_corrections_as_ratios()
             // `same` corrects nothing, so the other scene's correction is
             // the identity and the score is the scene's own, exactly.
             assert_eq!(t, r.own, "{}: same carried over", r.scene);
+            assert!(r.notes.is_empty(), "{}: same noted {:?}", r.scene, r.notes);
+        } else {
+            // The fit says where it started and where it stopped (and,
+            // when its guard kept the start, why), so a row that scores as
+            // `same` can be told from a fit that found `same`.
+            assert!(
+                r.notes.starts_with("start ") && r.notes.contains("iterations"),
+                "{} fit: notes {:?}",
+                r.scene,
+                r.notes
+            );
         }
         assert!(
             r.floor.mean.is_finite() && r.floor.mean < r.own.mean,

@@ -107,6 +107,10 @@ pub struct SuiteRow {
     pub material: Material,
     /// Wall seconds of that estimate (0 when cached).
     pub estimate_seconds: f64,
+    /// One line on the estimate (`plan::notes`): for `fit` and `shape`
+    /// where it started and whether its guard kept the start (and why);
+    /// "cached (…)" when it was read from the cache.
+    pub notes: String,
     /// Its score on this scene's held-out frames.
     pub own: HeldOut,
     /// The other scenes' corrections applied to this scene's reference
@@ -172,7 +176,7 @@ pub fn suite(
             let est = estimator.estimate(p, method, &fit)?;
             let own = held_out(p, est.material, train_end, options.short_window)?;
             log(format!(
-                "{} {} {:<4} held-out mean {:.2}%  p95 {:.2}%  last quarter {:.2}%  short horizon {:.2}%  est {:.0} s",
+                "{} {} {:<4} held-out mean {:.2}%  p95 {:.2}%  last quarter {:.2}%  short horizon {:.2}%  est {:.0} s{}",
                 p.scene.name,
                 p.level,
                 method,
@@ -180,7 +184,12 @@ pub fn suite(
                 100.0 * own.p95,
                 100.0 * own.last_quarter,
                 100.0 * own.short_mean,
-                est.seconds
+                est.seconds,
+                if est.notes.is_empty() {
+                    String::new()
+                } else {
+                    format!("  ({})", est.notes)
+                }
             ));
             rows.push(SuiteRow {
                 scene: p.scene.name.clone(),
@@ -189,6 +198,7 @@ pub fn suite(
                 method,
                 material: est.material,
                 estimate_seconds: est.seconds,
+                notes: est.notes,
                 own,
                 transferred: None,
                 floor,

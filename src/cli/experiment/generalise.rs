@@ -66,6 +66,7 @@ pub(super) fn suite_csv(rows: &[SuiteRow]) -> String {
             "floor_last_quarter",
             "floor_min",
             "floor_max",
+            "notes",
         ],
     ));
     let f6 = |v: f64| format!("{v:.6}");
@@ -96,6 +97,7 @@ pub(super) fn suite_csv(rows: &[SuiteRow]) -> String {
             f6(r.floor.last_quarter),
             f6(r.floor.min),
             f6(r.floor.max),
+            r.notes.clone(),
         ];
         csv.row(&row_around(before, &r.material, after))
             .expect("a row per header column");
@@ -139,6 +141,15 @@ pub(super) fn suite_md(rows: &[SuiteRow], methods: &[Method], level: GridLevel, 
             pct(r.floor.min),
             pct(r.floor.max),
         );
+    }
+    // What each estimate says of itself: a fit whose guard kept its start
+    // scores as that start, which the table alone does not show.
+    let noted: Vec<&SuiteRow> = rows.iter().filter(|r| !r.notes.is_empty()).collect();
+    if !noted.is_empty() {
+        let _ = writeln!(md, "\nEstimates:\n");
+        for r in noted {
+            let _ = writeln!(md, "- {} {} {}: {}", r.scene, r.level, r.method, r.notes);
+        }
     }
     let _ = writeln!(
         md,
