@@ -243,7 +243,8 @@ fn blocks<const COPY: bool, const RK4: bool, const FORCES: bool>(
     // Whole chunks, then the rest: with the rest's nodes one at a time
     // (lane 0) inside the loop, the compiler vectorised lane 0's sums apart
     // from the others' and the whole pass split into odd pieces (1 + 4 + 2
-    // + 1 lanes on AVX2, 35 % slower than this).
+    // + 1 lanes on AVX2): the 64² step was slower than node by node
+    // (docs/results.md, "The node pass by component").
     while k + CHUNK <= n {
         chunk::<COPY, RK4, FORCES>(&mut piece, k, &mut t, dt, g, sums);
         k += CHUNK;
@@ -253,7 +254,7 @@ fn blocks<const COPY: bool, const RK4: bool, const FORCES: bool>(
     }
 }
 
-/// One component `C` of one field, cut to a chunk of nodes.
+/// One component of every field the pass streams, cut to a chunk of nodes.
 struct Lane<'a> {
     x: &'a mut [f64],
     v: &'a mut [f64],
