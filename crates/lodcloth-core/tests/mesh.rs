@@ -555,6 +555,14 @@ fn a_clamped_disc_keeps_its_clamps_outline_and_collapses_the_inside_at_every_lev
         .collect();
     let rim = outline.iter().filter(|&&o| o).count();
     assert_eq!(rim, 72, "the ring disc's 12th ring");
+    // The ring just inside the outline (7.5 mm in): what the first pass
+    // keeps of the clamp's inside (simplify's module docs, "Held regions").
+    let next = disc
+        .positions
+        .iter()
+        .filter(|&&p| (radius(p) - (0.09 - 0.0075)).abs() < 1e-9)
+        .count();
+    assert_eq!(next, 66, "the ring disc's 11th ring");
     for n in [disc.vertices() * 3 / 5, disc.vertices() * 2 / 5] {
         let level = scene.cloth_level(Level::Vertices(n)).expect("a level");
         let simplified = level.mesh.as_ref().expect("a mesh level");
@@ -573,9 +581,13 @@ fn a_clamped_disc_keeps_its_clamps_outline_and_collapses_the_inside_at_every_lev
         assert_eq!(held, within, "the level at {n} holds its vertices within 9 cm");
         let free = simplified.source.len() - held.len();
         eprintln!("{n}: {} held ({rim} on the outline), {free} free", held.len());
+        // A level spends its vertices where the cloth moves: the clamp
+        // keeps at most its outline and the ring inside it (before the
+        // inside was collapsed first, the 60 % level held 290 and the 40 %
+        // level 213, thinned about as evenly as the rest).
         assert!(
-            held.len() < clamped && free > n - clamped,
-            "{n}: {} held ({rim} on the outline), {free} free",
+            held.len() <= rim + next,
+            "{n}: {} held ({rim} on the outline, {next} in the ring inside it), {free} free",
             held.len()
         );
     }

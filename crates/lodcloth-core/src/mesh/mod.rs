@@ -31,7 +31,7 @@ pub use bending::{bending_stencils, bending_stencils_by, delaunay_flips, Stencil
 pub use io::load;
 pub use locate::{locate, SurfaceIndex};
 pub use patch::{material_point, patch_weights};
-pub use simplify::{simplify, Simplified, CHAIN_VERSION, VERTEX_TOLERANCE};
+pub use simplify::{simplify, simplify_held, Simplified, CHAIN_VERSION, VERTEX_TOLERANCE};
 pub use springs::{mesh_material, mesh_topology, plate_topology};
 
 /// A triangle mesh as a cloth: one vertex per material point (vertices that

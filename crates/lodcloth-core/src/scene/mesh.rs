@@ -127,8 +127,9 @@ impl Scene {
                 })
             }
             (Some(m), Level::Vertices(n)) => {
-                let simplified = mesh::simplify(&m.reference, n, &m.locked, &m.file.display().to_string())
-                    .map_err(|e| invalid(format!("level {level}: {e}")))?;
+                let simplified =
+                    mesh::simplify_held(&m.reference, n, &m.locked, &m.pinned, &m.file.display().to_string())
+                        .map_err(|e| invalid(format!("level {level}: {e}")))?;
                 let simplified = Arc::new(simplified);
                 let pinned: Vec<bool> = simplified.source.iter().map(|&k| m.pinned[k as usize]).collect();
                 let topology = Topology {
