@@ -12,7 +12,7 @@
 //! cargo run --release --example drape_scan -- spectrum SCENE --levels 100%,60%,40% [--modes 24] [--stencils triangle|quartic|mixed|mixed-exact] [--drape]
 //! cargo run --release --example drape_scan -- membrane SCENE --levels 100%,60%,40% [--rings 2,3,4]
 //! cargo run --release --example drape_scan -- write SCENE --levels 1800v [--relax 20 --flip] [--shuffle 0.05 [--seed 1]] [--top-radius 0.08 [--top-vertices 40]] --out LEVEL.obj
-//! cargo run --release --example drape_scan -- chart --csv FILE[,FILE …] [--names A,B …] [--unscaled] --out CHART.svg
+//! cargo run --release --example drape_scan -- chart --csv FILE[,FILE …] [--names A,B …] [--unscaled] [--legend upper-right] --out CHART.svg
 //! ```
 //!
 //! `restart` steps the scene's reference for its duration and prints, at
@@ -190,9 +190,32 @@ enum Command {
         /// stretch ×1).
         #[arg(long)]
         unscaled: bool,
+        /// Where the legend goes: upper-left, upper-right, lower-left or
+        /// lower-right (clear of the points).
+        #[arg(long, default_value = "lower-right", value_parser = parse_corner)]
+        legend: Corner,
         #[arg(long)]
         out: PathBuf,
     },
+}
+
+/// A corner of a chart.
+#[derive(Clone, Copy)]
+enum Corner {
+    UpperLeft,
+    UpperRight,
+    LowerLeft,
+    LowerRight,
+}
+
+fn parse_corner(s: &str) -> Result<Corner, String> {
+    Ok(match s {
+        "upper-left" => Corner::UpperLeft,
+        "upper-right" => Corner::UpperRight,
+        "lower-left" => Corner::LowerLeft,
+        "lower-right" => Corner::LowerRight,
+        _ => return Err(format!("{s:?}: upper-left, upper-right, lower-left or lower-right")),
+    })
 }
 
 #[derive(clap::Args)]
@@ -1516,7 +1539,7 @@ fn shuffled(mesh: &mut TriMesh, share: f64, seed: u64) -> (usize, usize) {
 /// The runs from rest in the `--csv` files: DC at each run's end against
 /// its vertex count (the mean over its twins), one series per file, bend
 /// and stretch scale.
-fn chart(paths: &[PathBuf], names: &[String], unscaled: bool, out: &Path) {
+fn chart(paths: &[PathBuf], names: &[String], unscaled: bool, legend: Corner, out: &Path) {
     assert!(
         names.is_empty() || names.len() == paths.len(),
         "--names: one per --csv file ({} files, {} names)",
@@ -1621,7 +1644,12 @@ fn chart(paths: &[PathBuf], names: &[String], unscaled: bool, out: &Path) {
         ("vertices", "drape coefficient"),
         &drawn,
         (true, false),
-        SeriesLabelPosition::LowerRight,
+        match legend {
+            Corner::UpperLeft => SeriesLabelPosition::UpperLeft,
+            Corner::UpperRight => SeriesLabelPosition::UpperRight,
+            Corner::LowerLeft => SeriesLabelPosition::LowerLeft,
+            Corner::LowerRight => SeriesLabelPosition::LowerRight,
+        },
     )
     .unwrap_or_else(|e| panic!("{}: {e}", out.display()));
 }
@@ -1668,7 +1696,8 @@ fn main() {
             csv,
             names,
             unscaled,
+            legend,
             out,
-        } => chart(&csv, &names, unscaled, &out),
+        } => chart(&csv, &names, unscaled, legend, &out),
     }
 }

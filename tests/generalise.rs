@@ -11,6 +11,7 @@ use lodcloth::experiments::generalise::{suite, twin_floor, SuiteOptions};
 use lodcloth::experiments::lod::{lod_plan, Horizon};
 use lodcloth::plan::{Estimator, GridLevel, Level};
 use lodcloth::scene::Scene;
+use lodcloth::sim::{SpringClass, SpringKind};
 
 /// A small cloth of `width × height` at `nx × ny`, top edge pinned, pulled
 /// at its bottom edge, with fabric stiffness scaled by `k`.
@@ -91,6 +92,7 @@ fn the_suite_scores_each_scene_at_its_aspect_and_carries_corrections_as_ratios()
         train_fraction: 0.5,
         short_window: 0.05,
         floor_perturbation: 1e-6,
+        bend_scale: (1.0, 1.0),
     };
     let rows = suite(&scenes, &options, &no_cache(), &mut |_| {}).expect("suite runs");
     assert_eq!(rows.len(), 4);
@@ -188,4 +190,57 @@ fn lod_plan_takes_levels_of_any_shape_and_skips_those_not_coarser_than_the_refer
     }
     // Restarted every 50 ms, the same model drifts less than over the run.
     assert!(errors[1] < errors[0], "short {} vs long {}", errors[1], errors[0]);
+}
+
+/// `bend_scale` scores every estimate with its bend class scaled (and
+/// only that class), says so in the row's notes, and is refused when it is
+/// not a positive factor.
+#[test]
+fn a_bend_scale_scores_the_estimate_with_its_bend_class_scaled() {
+    let s = scene("wide-cotton", 2.0, 1.0, 17, 9, 1.0);
+    let scenes = vec![(s.clone(), record(&s))];
+    let options = |bend_scale| SuiteOptions {
+        level: GridLevel::Long(9),
+        methods: vec![Method::Same],
+        fit: FitOptions::default(),
+        train_fraction: 0.5,
+        short_window: 0.05,
+        floor_perturbation: 1e-6,
+        bend_scale,
+    };
+    let run = |bend_scale| suite(&scenes, &options(bend_scale), &no_cache(), &mut |_| {});
+    let plain = run((1.0, 1.0)).expect("runs").remove(0);
+    let scaled = run((4.0, 0.5)).expect("runs").remove(0);
+    for class in SpringClass::ALL {
+        let (a, b) = (
+            plain.material.springs[class.index()],
+            scaled.material.springs[class.index()],
+        );
+        let (k, c) = if class.kind() == SpringKind::Bend {
+            (4.0, 0.5)
+        } else {
+            (1.0, 1.0)
+        };
+        assert!(
+            (b.k - k * a.k).abs() <= 1e-12 * a.k.abs().max(1e-300),
+            "{class:?}: K {} → {}",
+            a.k,
+            b.k
+        );
+        assert!(
+            (b.c - c * a.c).abs() <= 1e-12 * a.c.abs().max(1e-300),
+            "{class:?}: C {} → {}",
+            a.c,
+            b.c
+        );
+    }
+    assert!(plain.notes.is_empty(), "{:?}", plain.notes);
+    assert!(scaled.notes.contains("bend class K ×4, C ×0.5"), "{:?}", scaled.notes);
+    // A four times stiffer bend class moves the level: its score is not
+    // `same`'s.
+    assert_ne!(scaled.own, plain.own);
+    for bad in [(0.0, 1.0), (1.0, -1.0), (f64::NAN, 1.0)] {
+        let e = run(bad).expect_err("refused").to_string();
+        assert!(e.contains("bend class's scales"), "{bad:?}: {e}");
+    }
 }

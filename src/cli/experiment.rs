@@ -279,6 +279,14 @@ pub enum Experiment {
         /// larger one, e.g. 1e-3, shows where the drift saturates).
         #[arg(long, default_value_t = TWIN_PERTURBATION)]
         floor_perturbation: f64,
+        /// Multiply every estimate's bend class (K and C) by this before
+        /// it is scored: what a bending factor costs held out.
+        #[arg(long, default_value_t = 1.0, value_parser = parse_factor)]
+        bend_scale: f64,
+        /// The bend class's damping factor, when it differs from
+        /// --bend-scale.
+        #[arg(long, value_parser = parse_factor)]
+        bend_damping_scale: Option<f64>,
     },
     /// The paper's BCD and GKD under every reading of its lost equations
     /// 3–8, with per-node masses over its levels, scored against the trend
@@ -404,10 +412,13 @@ pub fn run(experiment: Experiment) -> Result<()> {
             level,
             methods,
             floor_perturbation,
+            bend_scale,
+            bend_damping_scale,
         } => {
             common.apply_quick();
             let level = level.unwrap_or(GridLevel::Long(if common.quick { 16 } else { 40 }));
-            generalise::generalise_cmd(&common, level, &parse_methods(&methods)?, floor_perturbation)
+            let bend = (bend_scale, bend_damping_scale.unwrap_or(bend_scale));
+            generalise::generalise_cmd(&common, level, &parse_methods(&methods)?, floor_perturbation, bend)
         }
         Experiment::Readings {
             mut common,
@@ -463,6 +474,15 @@ pub fn run(experiment: Experiment) -> Result<()> {
             let method = Method::from_name(&method).with_context(|| format!("--method: unknown method {method:?}"))?;
             switch_cmd(&common, level, method, at, window)
         }
+    }
+}
+
+/// A factor on a coefficient: finite and positive.
+fn parse_factor(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
+        Ok(v) => Err(format!("a factor must be finite and positive, got {v}")),
+        Err(e) => Err(format!("{s:?} is not a number: {e}")),
     }
 }
 

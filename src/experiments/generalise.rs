@@ -34,7 +34,7 @@ use rayon::prelude::*;
 use crate::estimate::{no_progress, ErrorReport, FitOptions, LodProblem, Method, Reference};
 use crate::plan::{default_problem, stable_problem, Estimator, GridLevel, Level, PlanError};
 use crate::scene::{MassConvention, Scene};
-use crate::sim::{Material, SpringCoeffs};
+use crate::sim::{Material, SpringClass, SpringCoeffs, SpringKind};
 
 /// Options of [`suite`].
 #[derive(Debug, Clone)]
@@ -54,6 +54,10 @@ pub struct SuiteOptions {
     /// Relative change of the chaos floor's twins' coefficients
     /// ([`TWIN_PERTURBATION`] by default).
     pub floor_perturbation: f64,
+    /// Factors on every estimate's bend class, (stiffness K, damping C),
+    /// applied before it is scored: what a bending factor costs held out
+    /// ((1, 1): the estimates as they are).
+    pub bend_scale: (f64, f64),
 }
 
 /// Held-out statistics of one model on one scene (fractions of O_max).
@@ -140,6 +144,12 @@ pub fn suite(
             options.train_fraction
         )));
     }
+    let (bend_k, bend_c) = options.bend_scale;
+    if !(bend_k.is_finite() && bend_k > 0.0 && bend_c.is_finite() && bend_c > 0.0) {
+        return Err(PlanError::Invalid(format!(
+            "the bend class's scales must be finite and positive, got K ×{bend_k}, C ×{bend_c}"
+        )));
+    }
     let mut problems = Vec::with_capacity(scenes.len());
     for (scene, reference) in scenes {
         let level = options
@@ -173,7 +183,16 @@ pub fn suite(
             ..options.fit.clone()
         };
         for &method in &options.methods {
-            let est = estimator.estimate(p, method, &fit)?;
+            let mut est = estimator.estimate(p, method, &fit)?;
+            if options.bend_scale != (1.0, 1.0) {
+                scale_bend(&mut est.material, options.bend_scale);
+                let scaled = format!("bend class K ×{bend_k}, C ×{bend_c}");
+                est.notes = if est.notes.is_empty() {
+                    scaled
+                } else {
+                    format!("{}; {scaled}", est.notes)
+                };
+            }
             let own = held_out(p, est.material, train_end, options.short_window)?;
             log(format!(
                 "{} {} {:<4} held-out mean {:.2}%  p95 {:.2}%  last quarter {:.2}%  short horizon {:.2}%  est {:.0} s{}",
@@ -338,6 +357,17 @@ fn held_out(
         short_mean: short.mean,
         short_p95: short.p95,
     })
+}
+
+/// `material` with its bend class's K and C multiplied by `(k, c)`.
+fn scale_bend(material: &mut Material, (k, c): (f64, f64)) {
+    for class in SpringClass::ALL {
+        if class.kind() == SpringKind::Bend {
+            let s = &mut material.springs[class.index()];
+            s.k *= k;
+            s.c *= c;
+        }
+    }
 }
 
 #[cfg(test)]

@@ -19,6 +19,7 @@ pub(super) fn generalise_cmd(
     level: GridLevel,
     methods: &[Method],
     floor_perturbation: f64,
+    bend_scale: (f64, f64),
 ) -> Result<()> {
     let out = common.out("out/generalise")?;
     let spec = common.spec()?;
@@ -36,6 +37,7 @@ pub(super) fn generalise_cmd(
         train_fraction: common.train_fraction,
         short_window: SHORT_WINDOW,
         floor_perturbation,
+        bend_scale,
     };
     let rows = suite(&pairs, &options, &common.estimator()?, &mut log_line)?;
     fs::write(out.join("generalise.csv"), suite_csv(&rows)).context("writing generalise.csv")?;
