@@ -9,7 +9,7 @@
 //! ```text
 //! cargo run --release --example drape_scan -- run SCENE --levels 721v,100% [--bend 1,1.35] [--stretch 2] [--dt 1e-4] [--twins 8 [--jitter 1e-6]] [--stencils-from MESH.obj | --stencils triangle|quartic|mixed|mixed-exact] [--csv FILE]
 //! cargo run --release --example drape_scan -- restart SCENE --levels 1081v,721v [--bend 1,1.35] [--stretch 2] [--unstressed] [--csv FILE]
-//! cargo run --release --example drape_scan -- spectrum SCENE --levels 100%,60%,40% [--modes 24] [--stencils triangle|quartic|mixed|mixed-exact] [--drape]
+//! cargo run --release --example drape_scan -- spectrum SCENE --levels 100%,60%,40% [--modes 24] [--stencils triangle|quartic|mixed|mixed-exact] [--drape] [--clamped]
 //! cargo run --release --example drape_scan -- membrane SCENE --levels 100%,60%,40% [--rings 2,3,4]
 //! cargo run --release --example drape_scan -- write SCENE --levels 1800v [--relax 20 --flip] [--shuffle 0.05 [--seed 1]] [--top-radius 0.08 [--top-vertices 40]] --out LEVEL.obj
 //! cargo run --release --example drape_scan -- chart --csv FILE[,FILE …] [--names A,B …] [--unscaled] [--legend upper-right] --out CHART.svg
@@ -24,7 +24,9 @@
 //! that shape (`--unstressed`: with those lengths as rest lengths).
 //! `spectrum` prints the softest modes of each level's bending operator
 //! against the first level's (and, with `--drape`, weighted by where the
-//! first level's drape holds its bending energy). `write` saves a level as OBJ, to be
+//! first level's drape holds its bending energy; with `--clamped`, of the
+//! free vertices with every pin held, so a clamp's inside does not count
+//! as zero modes). `write` saves a level as OBJ, to be
 //! used as another scene's mesh (a reference of that resolution), and can
 //! remesh it in its rest plane first (Delaunay flips, tangential
 //! relaxation; border fixed; flat meshes only) or flip a share of its
@@ -126,6 +128,14 @@ enum Command {
         /// wavenumbers.
         #[arg(long)]
         drape: bool,
+        /// Modes of the cloth that moves: every pinned vertex held at 0
+        /// (the clamp's Dirichlet problem, on the free vertices alone),
+        /// with --drape weighing by the drape's displacement from rest.
+        /// Without it a clamp's inside is a block of zero modes (its
+        /// stencils store nothing), as many as it has vertices, and the
+        /// levels' modes no longer line up with the reference's.
+        #[arg(long)]
+        clamped: bool,
     },
     /// The spring membrane of each level under a homogeneous in-plane
     /// strain: its energy with every vertex moved affinely, and with the
@@ -1282,6 +1292,152 @@ fn spectrum(args: &Levels, modes: usize, stencils: &str, drape: bool) {
     }
 }
 
+/// `spectrum --clamped`: the vertical modes of each level's bending
+/// stencils on the free vertices, `W_ff z = λ M_f z` (every pinned vertex
+/// held at 0), the ratio of the first level's j-th eigenvalue over each
+/// level's, and with `drape` that ratio weighed by the first level's drape
+/// energy in each of its modes (its displacement from the start, zero on
+/// the pins, so `uᵀWu = u_fᵀ W_ff u_f`).
+fn spectrum_clamped(args: &Levels, modes: usize, stencils: &str, drape: bool) {
+    let mut setup = Setup::new(args);
+    restencil(&mut setup, stencils);
+    let drape = drape.then(|| {
+        let first = &setup.levels[0];
+        let mut reference = setup
+            .scene
+            .build_on(first, setup.material(first, 1.0, 1.0))
+            .expect("builds");
+        let dc = setup.stepped(&mut reference, setup.scene.duration.round() as usize);
+        println!("{}: drape stepped, DC {:.4}", first.level, dc.last().expect("a second"));
+        reference.state().pos.clone()
+    });
+    // The first level's eigenvalues (ascending) and its drape's energy per mode.
+    let mut first: Option<(Vec<f64>, Option<Vec<f64>>)> = None;
+    for cloth in &setup.levels {
+        let topo = &cloth.topology;
+        let n = topo.n_nodes;
+        let sim = setup
+            .scene
+            .build_on(cloth, setup.material(cloth, 1.0, 1.0))
+            .expect("builds");
+        let mut pinned = vec![false; n];
+        for pin in &sim.loads().pins {
+            pinned[pin.node as usize] = true;
+        }
+        let free: Vec<usize> = (0..n).filter(|&i| !pinned[i]).collect();
+        let mut slot = vec![usize::MAX; n];
+        for (f, &i) in free.iter().enumerate() {
+            slot[i] = f;
+        }
+        let m = free.len();
+        let areas = &topo.node_areas;
+        let mut b = nalgebra::DMatrix::<f64>::zeros(m, m);
+        for s in 0..topo.bending.len() {
+            let (nodes, weights) = topo.bending.row(s);
+            for (&i, &wi) in nodes.iter().zip(weights) {
+                for (&j, &wj) in nodes.iter().zip(weights) {
+                    let (a, c) = (slot[i as usize], slot[j as usize]);
+                    if a != usize::MAX && c != usize::MAX {
+                        b[(a, c)] += wi * wj / (areas[i as usize] * areas[j as usize]).sqrt();
+                    }
+                }
+            }
+        }
+        let eigen = b.symmetric_eigen();
+        let mut order: Vec<usize> = (0..m).collect();
+        order.sort_by(|&i, &j| eigen.eigenvalues[i].total_cmp(&eigen.eigenvalues[j]));
+        let values: Vec<f64> = order.iter().map(|&i| eigen.eigenvalues[i]).collect();
+        let k = |v: f64| v.max(0.0).powf(0.25);
+        let mut line = format!(
+            "{} ({n} v, {m} free): wavenumbers of the {} softest (1/m): {}; largest {:.0}",
+            cloth.level,
+            modes.min(m),
+            values
+                .iter()
+                .take(modes)
+                .map(|&v| format!("{:.1}", k(v)))
+                .collect::<Vec<_>>()
+                .join(" "),
+            k(values[m - 1]),
+        );
+        match &first {
+            None => {
+                let energy = drape.as_ref().map(|pos| {
+                    // The displacement from the start, where the pins hold.
+                    let start = &sim.state().pos;
+                    let e: Vec<f64> = order
+                        .iter()
+                        .zip(&values)
+                        .map(|(&col, &value)| {
+                            let v = eigen.eigenvectors.column(col);
+                            (0..3)
+                                .map(|c| {
+                                    free.iter()
+                                        .enumerate()
+                                        .map(|(f, &i)| v[f] * areas[i].sqrt() * (pos[c * n + i] - start[c * n + i]))
+                                        .sum::<f64>()
+                                        .powi(2)
+                                })
+                                .sum::<f64>()
+                                * value.max(0.0)
+                        })
+                        .collect();
+                    let total: f64 = e.iter().sum();
+                    let bands = [(0, 12), (12, 24), (24, 50), (50, 100), (100, 200), (200, m)];
+                    line += &format!(
+                        "\n  the drape's bending energy by mode: {}",
+                        bands
+                            .iter()
+                            .filter(|&&(a, _)| a < m)
+                            .map(|&(a, b)| format!("{a}–{b} {:.3}", e[a..b.min(m)].iter().sum::<f64>() / total))
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    );
+                    e
+                });
+                first = Some((values, energy));
+            }
+            Some((v0, energy)) => {
+                let upto = m.min(v0.len());
+                line += &format!(
+                    "\n  first level's λ over this one's, softest {}: {}",
+                    modes.min(upto),
+                    (0..modes.min(upto))
+                        .map(|j| format!("{:.3}", v0[j] / values[j]))
+                        .collect::<Vec<_>>()
+                        .join(" ")
+                );
+                let bands = [(0, 12), (12, 24), (24, 50), (50, 100), (100, 200), (200, upto)];
+                line += &format!(
+                    "\n  by band (mean): {}",
+                    bands
+                        .iter()
+                        .filter(|&&(a, b)| a < b.min(upto))
+                        .map(|&(a, b)| {
+                            let b = b.min(upto);
+                            format!(
+                                "{a}–{b} {:.3}",
+                                (a..b).map(|j| v0[j] / values[j]).sum::<f64>() / (b - a) as f64
+                            )
+                        })
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                );
+                if let Some(e) = energy {
+                    let (num, den) = (0..upto).fold((0.0, 0.0), |(n, d), j| (n + e[j] * v0[j] / values[j], d + e[j]));
+                    let total: f64 = e.iter().sum();
+                    line += &format!(
+                        "\n  the drape's energy-weighted λ ratio (first level's over this one's): {:.3}, over the {:.1} % of its energy in this level's {upto} modes",
+                        num / den,
+                        100.0 * den / total
+                    );
+                }
+            }
+        }
+        println!("{line}");
+    }
+}
+
 /// `write`'s remeshing.
 struct Remesh {
     relax: usize,
@@ -1670,7 +1826,14 @@ fn main() {
             modes,
             stencils,
             drape,
-        } => spectrum(&levels, modes, &stencils, drape),
+            clamped,
+        } => {
+            if clamped {
+                spectrum_clamped(&levels, modes, &stencils, drape)
+            } else {
+                spectrum(&levels, modes, &stencils, drape)
+            }
+        }
         Command::Membrane { levels, rings } => membrane(&levels, &rings),
         Command::Write {
             levels,
