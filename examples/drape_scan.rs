@@ -1259,22 +1259,9 @@ fn spectrum(args: &Levels, modes: usize, stencils: &str, drape: bool) {
             if let Some(pos) = &drape {
                 // E = Σ_j λ_j Σ_c (v_jᵀ M^½ x_c)², x_c one coordinate of the
                 // drape (the stencils vanish on the affine rest positions).
-                let energy: Vec<f64> = order
-                    .iter()
-                    .zip(&values)
-                    .map(|(&col, &value)| {
-                        let v = eigen.eigenvectors.column(col);
-                        (0..3)
-                            .map(|c| {
-                                (0..n)
-                                    .map(|i| v[i] * areas[i].sqrt() * pos[c * n + i])
-                                    .sum::<f64>()
-                                    .powi(2)
-                            })
-                            .sum::<f64>()
-                            * value.max(0.0)
-                    })
-                    .collect();
+                let energy = mode_energies(&eigen.eigenvectors, &order, &values, |row, c| {
+                    areas[row].sqrt() * pos[c * n + row]
+                });
                 let total: f64 = energy.iter().sum();
                 let bands = [(0, 12), (12, 24), (24, 50), (50, 100), (100, 200), (200, n - zero)];
                 line += &format!(
@@ -1290,6 +1277,29 @@ fn spectrum(args: &Levels, modes: usize, stencils: &str, drape: bool) {
         }
         println!("{line}");
     }
+}
+
+/// A shape's bending energy in each mode, `λ_j Σ_c (v_jᵀ y_c)²`, the
+/// modes the columns `order` of `vectors` (eigenvalues `values`, in that
+/// order) and `y(row, c)` the shape's coordinate `c` at a row, scaled by
+/// `M^½` (`√A` of the row's vertex).
+fn mode_energies(
+    vectors: &nalgebra::DMatrix<f64>,
+    order: &[usize],
+    values: &[f64],
+    y: impl Fn(usize, usize) -> f64,
+) -> Vec<f64> {
+    order
+        .iter()
+        .zip(values)
+        .map(|(&col, &value)| {
+            let v = vectors.column(col);
+            (0..3)
+                .map(|c| (0..v.len()).map(|row| v[row] * y(row, c)).sum::<f64>().powi(2))
+                .sum::<f64>()
+                * value.max(0.0)
+        })
+        .collect()
 }
 
 /// `spectrum --clamped`: the vertical modes of each level's bending
@@ -1365,23 +1375,10 @@ fn spectrum_clamped(args: &Levels, modes: usize, stencils: &str, drape: bool) {
                 let energy = drape.as_ref().map(|pos| {
                     // The displacement from the start, where the pins hold.
                     let start = &sim.state().pos;
-                    let e: Vec<f64> = order
-                        .iter()
-                        .zip(&values)
-                        .map(|(&col, &value)| {
-                            let v = eigen.eigenvectors.column(col);
-                            (0..3)
-                                .map(|c| {
-                                    free.iter()
-                                        .enumerate()
-                                        .map(|(f, &i)| v[f] * areas[i].sqrt() * (pos[c * n + i] - start[c * n + i]))
-                                        .sum::<f64>()
-                                        .powi(2)
-                                })
-                                .sum::<f64>()
-                                * value.max(0.0)
-                        })
-                        .collect();
+                    let e = mode_energies(&eigen.eigenvectors, &order, &values, |f, c| {
+                        let i = free[f];
+                        areas[i].sqrt() * (pos[c * n + i] - start[c * n + i])
+                    });
                     let total: f64 = e.iter().sum();
                     let bands = [(0, 12), (12, 24), (24, 50), (50, 100), (100, 200), (200, m)];
                     line += &format!(
