@@ -130,7 +130,8 @@ enum Command {
         drape: bool,
         /// Modes of the cloth that moves: every pinned vertex held at 0
         /// (the clamp's Dirichlet problem, on the free vertices alone),
-        /// with --drape weighing by the drape's displacement from rest.
+        /// with --drape weighing by the drape's displacement from the
+        /// start (zero on the pins).
         /// Without it a clamp's inside is a block of zero modes (its
         /// stencils store nothing), as many as it has vertices, and the
         /// levels' modes no longer line up with the reference's.
@@ -200,9 +201,8 @@ enum Command {
         /// stretch ×1).
         #[arg(long)]
         unscaled: bool,
-        /// Where the legend goes: upper-left, upper-right, lower-left or
-        /// lower-right (clear of the points).
-        #[arg(long, default_value = "lower-right", value_parser = parse_corner)]
+        /// Where the legend goes (clear of the points).
+        #[arg(long, value_enum, default_value_t = Corner::LowerRight)]
         legend: Corner,
         #[arg(long)]
         out: PathBuf,
@@ -210,22 +210,12 @@ enum Command {
 }
 
 /// A corner of a chart.
-#[derive(Clone, Copy)]
+#[derive(Clone, Copy, clap::ValueEnum)]
 enum Corner {
     UpperLeft,
     UpperRight,
     LowerLeft,
     LowerRight,
-}
-
-fn parse_corner(s: &str) -> Result<Corner, String> {
-    Ok(match s {
-        "upper-left" => Corner::UpperLeft,
-        "upper-right" => Corner::UpperRight,
-        "lower-left" => Corner::LowerLeft,
-        "lower-right" => Corner::LowerRight,
-        _ => return Err(format!("{s:?}: upper-left, upper-right, lower-left or lower-right")),
-    })
 }
 
 #[derive(clap::Args)]
