@@ -46,8 +46,10 @@
 //! Runs go two at a time (rayon). Measured with it: docs/results.md,
 //! "Mesh cloths".
 use std::collections::{HashMap, HashSet};
+use std::ops::Range;
 use std::path::{Path, PathBuf};
 
+use lodcloth_core::estimate::modal::{self, ClampedModes};
 use lodcloth_core::drape::{drape_coefficient, fold_count, jitter_heights, shadow_area};
 use lodcloth_core::level::GridLevel;
 use lodcloth_core::mesh::{triangle_area, TriMesh};
@@ -137,6 +139,11 @@ enum Command {
         /// levels' modes no longer line up with the reference's.
         #[arg(long)]
         clamped: bool,
+        /// With --clamped: stiffen every level but the reference as `run
+        /// --modal` does first, to see its modes in the band meet the
+        /// reference's and the others stay.
+        #[arg(long, value_parser = parse_band, requires = "clamped")]
+        modal: Option<Range<usize>>,
     },
     /// The spring membrane of each level under a homogeneous in-plane
     /// strain: its energy with every vertex moved affinely, and with the
@@ -240,6 +247,20 @@ struct Runs {
     /// Append every run to this CSV.
     #[arg(long)]
     csv: Option<PathBuf>,
+    /// Stiffen each level's bending modes FIRST..END (softest first, every
+    /// pin held) to the reference's, paired by order
+    /// (`lodcloth_core::estimate::modal`); the CSV's scene says so.
+    #[arg(long, value_parser = parse_band)]
+    modal: Option<Range<usize>>,
+}
+
+/// `FIRST..END`, a non-empty band of modes.
+fn parse_band(s: &str) -> Result<Range<usize>, String> {
+    let (a, b) = s.split_once("..").ok_or_else(|| format!("{s:?} is not FIRST..END"))?;
+    match (a.parse::<usize>(), b.parse::<usize>()) {
+        (Ok(a), Ok(b)) if a < b => Ok(a..b),
+        _ => Err(format!("{s:?} is not a non-empty band FIRST..END of mode numbers")),
+    }
 }
 
 /// The scene, its stepping geometry and the levels asked for.
@@ -248,6 +269,8 @@ struct Setup {
     cloth: f64,
     support: f64,
     levels: Vec<ClothLevel>,
+    /// What was done to the levels, for the CSV's scene column.
+    variant: String,
 }
 
 impl Setup {
@@ -273,6 +296,7 @@ impl Setup {
             support,
             levels,
             scene,
+            variant: String::new(),
         }
     }
 
@@ -323,7 +347,43 @@ impl Setup {
 
     /// The scene's file name, for CSV rows.
     fn name(&self) -> String {
-        self.scene.origin.rsplit('/').next().unwrap_or_default().to_string()
+        self.scene.origin.rsplit('/').next().unwrap_or_default().to_string() + &self.variant
+    }
+
+    /// Every level but the reference with its bending modes in `band`
+    /// stiffened to the reference's.
+    fn stiffen(&mut self, band: Option<&Range<usize>>) {
+        let Some(band) = band else { return };
+        let held = |cloth: &ClothLevel| {
+            let loads = self
+                .scene
+                .loads_on(&cloth.topology, cloth.mesh.as_deref())
+                .expect("the scene's pins resolve");
+            modal::pinned_flags(cloth.topology.n_nodes, loads.pins.iter().map(|p| p.node))
+        };
+        let reference = self.scene.cloth_level(self.scene.reference_level()).expect("the reference");
+        let target = ClampedModes::of(&reference.topology, &held(&reference));
+        for cloth in &mut self.levels {
+            if cloth.topology.n_nodes == reference.topology.n_nodes {
+                continue;
+            }
+            let pinned = held(cloth);
+            let modes = ClampedModes::of(&cloth.topology, &pinned);
+            let rows = modal::stiffening(&cloth.topology, &pinned, &modes, &target, band.clone())
+                .unwrap_or_else(|e| panic!("--modal {}..{}: {e}", band.start, band.end));
+            println!(
+                "{}: {} of its modes {}..{} stiffened to the reference's ({} entries)",
+                cloth.level,
+                rows.len(),
+                band.start,
+                band.end,
+                rows.nodes.len()
+            );
+            let mut topology = (*cloth.topology).clone();
+            topology.bending = topology.bending.extended(&rows);
+            cloth.topology = std::sync::Arc::new(topology);
+        }
+        self.variant = format!(" modal {}..{}", band.start, band.end);
     }
 }
 
@@ -494,6 +554,7 @@ fn run(args: &Runs, dt: Option<f64>, twins: u64, jitter: f64, stencils_from: Opt
         }
     }
     restencil(&mut setup, stencils);
+    setup.stiffen(args.modal.as_ref());
     let (bends, stretch) = (&args.bend, args.stretch);
     let support_radius = (setup.support / std::f64::consts::PI).sqrt();
     let jobs: Vec<_> = setup
@@ -629,6 +690,7 @@ fn spread(runs: &[Run<'_>]) {
 
 fn restart(args: &Runs, unstressed: bool) {
     let mut setup = Setup::new(&args.levels);
+    setup.stiffen(args.modal.as_ref());
     let (bends, stretch) = (&args.bend, args.stretch);
     let mut reference = setup.scene.build().expect("builds");
     let n = reference.topology().n_nodes;
@@ -1298,9 +1360,10 @@ fn mode_energies(
 /// level's, and with `drape` that ratio weighed by the first level's drape
 /// energy in each of its modes (its displacement from the start, zero on
 /// the pins, so `uᵀWu = u_fᵀ W_ff u_f`).
-fn spectrum_clamped(args: &Levels, modes: usize, stencils: &str, drape: bool) {
+fn spectrum_clamped(args: &Levels, modes: usize, stencils: &str, drape: bool, modal: Option<&Range<usize>>) {
     let mut setup = Setup::new(args);
     restencil(&mut setup, stencils);
+    setup.stiffen(modal);
     let drape = drape.then(|| {
         let first = &setup.levels[0];
         let mut reference = setup
@@ -1320,33 +1383,11 @@ fn spectrum_clamped(args: &Levels, modes: usize, stencils: &str, drape: bool) {
             .scene
             .build_on(cloth, setup.material(cloth, 1.0, 1.0))
             .expect("builds");
-        let mut pinned = vec![false; n];
-        for pin in &sim.loads().pins {
-            pinned[pin.node as usize] = true;
-        }
-        let free: Vec<usize> = (0..n).filter(|&i| !pinned[i]).collect();
-        let mut slot = vec![usize::MAX; n];
-        for (f, &i) in free.iter().enumerate() {
-            slot[i] = f;
-        }
-        let m = free.len();
+        let pinned = modal::pinned_flags(n, sim.loads().pins.iter().map(|p| p.node));
         let areas = &topo.node_areas;
-        let mut b = nalgebra::DMatrix::<f64>::zeros(m, m);
-        for s in 0..topo.bending.len() {
-            let (nodes, weights) = topo.bending.row(s);
-            for (&i, &wi) in nodes.iter().zip(weights) {
-                for (&j, &wj) in nodes.iter().zip(weights) {
-                    let (a, c) = (slot[i as usize], slot[j as usize]);
-                    if a != usize::MAX && c != usize::MAX {
-                        b[(a, c)] += wi * wj / (areas[i as usize] * areas[j as usize]).sqrt();
-                    }
-                }
-            }
-        }
-        let eigen = b.symmetric_eigen();
-        let mut order: Vec<usize> = (0..m).collect();
-        order.sort_by(|&i, &j| eigen.eigenvalues[i].total_cmp(&eigen.eigenvalues[j]));
-        let values: Vec<f64> = order.iter().map(|&i| eigen.eigenvalues[i]).collect();
+        let ClampedModes { free, values, vectors } = ClampedModes::of(topo, &pinned);
+        let m = free.len();
+        let order: Vec<usize> = (0..m).collect();
         let k = |v: f64| v.max(0.0).powf(0.25);
         let mut line = format!(
             "{} ({n} v, {m} free): wavenumbers of the {} softest (1/m): {}; largest {:.0}",
@@ -1365,8 +1406,8 @@ fn spectrum_clamped(args: &Levels, modes: usize, stencils: &str, drape: bool) {
                 let energy = drape.as_ref().map(|pos| {
                     // The displacement from the start, where the pins hold.
                     let start = &sim.state().pos;
-                    let e = mode_energies(&eigen.eigenvectors, &order, &values, |f, c| {
-                        let i = free[f];
+                    let e = mode_energies(&vectors, &order, &values, |f, c| {
+                        let i = free[f] as usize;
                         areas[i].sqrt() * (pos[c * n + i] - start[c * n + i])
                     });
                     let total: f64 = e.iter().sum();
@@ -1814,9 +1855,10 @@ fn main() {
             stencils,
             drape,
             clamped,
+            modal,
         } => {
             if clamped {
-                spectrum_clamped(&levels, modes, &stencils, drape)
+                spectrum_clamped(&levels, modes, &stencils, drape, modal.as_ref())
             } else {
                 spectrum(&levels, modes, &stencils, drape)
             }

@@ -93,6 +93,7 @@ fn the_suite_scores_each_scene_at_its_aspect_and_carries_corrections_as_ratios()
         short_window: 0.05,
         floor_perturbation: 1e-6,
         bend_scale: (1.0, 1.0),
+        modal: None,
     };
     let rows = suite(&scenes, &options, &no_cache(), &mut |_| {}).expect("suite runs");
     assert_eq!(rows.len(), 4);
@@ -207,6 +208,7 @@ fn a_bend_scale_scores_the_estimate_with_its_bend_class_scaled() {
         short_window: 0.05,
         floor_perturbation: 1e-6,
         bend_scale,
+        modal: None,
     };
     let run = |bend_scale| suite(&scenes, &options(bend_scale), &no_cache(), &mut |_| {});
     let plain = run((1.0, 1.0)).expect("runs").remove(0);

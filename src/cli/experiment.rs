@@ -287,6 +287,13 @@ pub enum Experiment {
         /// --bend-scale.
         #[arg(long, value_parser = parse_factor)]
         bend_damping_scale: Option<f64>,
+        /// Stiffen each level's bending modes FIRST..END (softest first,
+        /// every pin held) to the reference's eigenvalues, paired by
+        /// order, before estimating and scoring: a mesh cloth's level made
+        /// as stiff as its reference where it is softer, leaving its
+        /// softest modes alone (`lodcloth_core::estimate::modal`).
+        #[arg(long, value_parser = parse_band)]
+        modal: Option<std::ops::Range<usize>>,
     },
     /// The paper's BCD and GKD under every reading of its lost equations
     /// 3–8, with per-node masses over its levels, scored against the trend
@@ -414,11 +421,12 @@ pub fn run(experiment: Experiment) -> Result<()> {
             floor_perturbation,
             bend_scale,
             bend_damping_scale,
+            modal,
         } => {
             common.apply_quick();
             let level = level.unwrap_or(GridLevel::Long(if common.quick { 16 } else { 40 }));
             let bend = (bend_scale, bend_damping_scale.unwrap_or(bend_scale));
-            generalise::generalise_cmd(&common, level, &parse_methods(&methods)?, floor_perturbation, bend)
+            generalise::generalise_cmd(&common, level, &parse_methods(&methods)?, floor_perturbation, bend, modal)
         }
         Experiment::Readings {
             mut common,
@@ -484,6 +492,17 @@ fn parse_factor(s: &str) -> Result<f64, String> {
         Ok(v) => Err(format!("a factor must be finite and positive, got {v}")),
         Err(e) => Err(format!("{s:?} is not a number: {e}")),
     }
+}
+
+/// `FIRST..END`, a non-empty band of modes.
+fn parse_band(s: &str) -> Result<std::ops::Range<usize>, String> {
+    let (a, b) = s.split_once("..").ok_or_else(|| format!("{s:?} is not a band FIRST..END"))?;
+    let parse = |v: &str| v.trim().parse::<usize>().map_err(|e| format!("{v:?} in {s:?} is not a mode number: {e}"));
+    let (a, b) = (parse(a)?, parse(b)?);
+    if a >= b {
+        return Err(format!("the band {s:?} is empty: FIRST must be below END"));
+    }
+    Ok(a..b)
 }
 
 fn parse_reading(name: &str) -> Result<Reading, lodcloth::names::UnknownName> {

@@ -31,6 +31,7 @@ use std::sync::Arc;
 
 use rayon::prelude::*;
 
+use crate::estimate::modal::{self, ClampedModes};
 use crate::estimate::{no_progress, ErrorReport, FitOptions, LodProblem, Method, Reference};
 use crate::plan::{default_problem, stable_problem, Estimator, GridLevel, Level, PlanError};
 use crate::scene::{MassConvention, Scene};
@@ -58,6 +59,11 @@ pub struct SuiteOptions {
     /// applied before it is scored: what a bending factor costs held out
     /// ((1, 1): the estimates as they are).
     pub bend_scale: (f64, f64),
+    /// Stiffen every level's bending modes in this band to the reference's
+    /// ([`crate::estimate::modal::stiffening`], paired by order) before
+    /// estimating and scoring; estimates are then never cached (the cache
+    /// does not know the level's stencils).
+    pub modal: Option<Range<usize>>,
 }
 
 /// Held-out statistics of one model on one scene (fractions of O_max).
@@ -160,8 +166,22 @@ pub fn suite(
                 scene.mesh.as_ref().map(|m| m.reference.vertices()),
             )
             .map_err(|e| PlanError::Invalid(format!("{}: {e}", scene.name)))?;
-        problems.push(default_problem(scene, reference, level)?);
+        let problem = default_problem(scene, reference, level)?;
+        problems.push(match &options.modal {
+            Some(band) => stiffened(&problem, band.clone())?,
+            None => problem,
+        });
     }
+    let uncached;
+    let estimator = if options.modal.is_some() {
+        uncached = Estimator {
+            cache: None,
+            tag: estimator.tag.clone(),
+        };
+        &uncached
+    } else {
+        estimator
+    };
     // Every scene's own estimate, per method.
     let mut rows = Vec::new();
     for p in &problems {
@@ -184,6 +204,14 @@ pub fn suite(
         };
         for &method in &options.methods {
             let mut est = estimator.estimate(p, method, &fit)?;
+            if let Some(band) = &options.modal {
+                let stiffened = format!("bending modes {}..{} stiffened to the reference's", band.start, band.end);
+                est.notes = if est.notes.is_empty() {
+                    stiffened
+                } else {
+                    format!("{}; {stiffened}", est.notes)
+                };
+            }
             if options.bend_scale != (1.0, 1.0) {
                 scale_bend(&mut est.material, options.bend_scale);
                 let scaled = format!("bend class K ×{bend_k}, C ×{bend_c}");
@@ -357,6 +385,29 @@ fn held_out(
         short_mean: short.mean,
         short_p95: short.p95,
     })
+}
+
+/// `problem` with its bending modes in `band` stiffened to its
+/// reference's ([`modal::stiffening`]: both clamped spectra, dense).
+fn stiffened(problem: &LodProblem, band: Range<usize>) -> Result<LodProblem, PlanError> {
+    let invalid = |e: &dyn std::fmt::Display| PlanError::Invalid(format!("{} {}: {e}", problem.scene.name, problem.level));
+    let reference = &problem.reference.topology;
+    let held = problem
+        .scene
+        .loads_on(reference, reference.mesh.as_deref())
+        .map_err(|e| invalid(&e))?;
+    let reference_pinned = modal::pinned_flags(reference.n_nodes, held.pins.iter().map(|p| p.node));
+    let topology = problem.topology();
+    let pinned = modal::pinned_flags(topology.n_nodes, problem.loads().pins.iter().map(|p| p.node));
+    let rows = modal::stiffening(
+        topology,
+        &pinned,
+        &ClampedModes::of(topology, &pinned),
+        &ClampedModes::of(reference, &reference_pinned),
+        band,
+    )
+    .map_err(|e| invalid(&e))?;
+    Ok(problem.with_bending(&rows))
 }
 
 /// `material` with its bend class's K and C multiplied by `(k, c)`.

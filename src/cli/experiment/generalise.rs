@@ -20,6 +20,7 @@ pub(super) fn generalise_cmd(
     methods: &[Method],
     floor_perturbation: f64,
     bend_scale: (f64, f64),
+    modal: Option<std::ops::Range<usize>>,
 ) -> Result<()> {
     let out = common.out("out/generalise")?;
     let spec = common.spec()?;
@@ -38,6 +39,7 @@ pub(super) fn generalise_cmd(
         short_window: SHORT_WINDOW,
         floor_perturbation,
         bend_scale,
+        modal,
     };
     let rows = suite(&pairs, &options, &common.estimator()?, &mut log_line)?;
     fs::write(out.join("generalise.csv"), suite_csv(&rows)).context("writing generalise.csv")?;

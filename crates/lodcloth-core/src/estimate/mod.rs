@@ -24,6 +24,7 @@
 pub mod fit;
 pub mod inverse;
 pub mod metric;
+pub mod modal;
 pub mod reference;
 pub mod replayed;
 pub mod touched;
@@ -43,7 +44,7 @@ use crate::level::Level;
 use crate::lod::{Correlation, LodError};
 use crate::scene::{MassConvention, Scene, SceneError};
 use crate::sim::{
-    Integrator, Loads, Material, SimError, SimParams, Simulation, SpringPrecision, StabilityCheck, State, Topology,
+    Bending, Integrator, Loads, Material, SimError, SimParams, Simulation, SpringPrecision, StabilityCheck, State, Topology,
 };
 use crate::turns::Turns;
 
@@ -315,6 +316,23 @@ impl LodProblem {
     /// The coarse cloth.
     pub fn topology(&self) -> &Arc<Topology> {
         &self.topology
+    }
+
+    /// The coarse cloth's pins and loads.
+    pub fn loads(&self) -> &Loads {
+        &self.loads
+    }
+
+    /// The same level with `more` bending stencils after its own (a
+    /// mode-selective correction, [`modal::stiffening`]), scored and
+    /// estimated like any level; the same nodes, springs and correlation.
+    pub fn with_bending(&self, more: &Bending) -> LodProblem {
+        let mut topology = Topology::clone(&self.topology);
+        topology.bending = topology.bending.extended(more);
+        LodProblem {
+            topology: Arc::new(topology),
+            ..self.clone()
+        }
     }
 
     /// Reference → coarse correlation.

@@ -55,6 +55,26 @@ impl Bending {
         b
     }
 
+    /// These stencils followed by `more`'s.
+    pub fn extended(&self, more: &Bending) -> Bending {
+        (0..self.len())
+            .map(|s| self.row(s))
+            .chain((0..more.len()).map(|s| more.row(s)))
+            .fold(Bending::from_rows(std::iter::empty()), |mut b, (nodes, weights)| {
+                b.push_row(nodes, weights);
+                b
+            })
+    }
+
+    fn push_row(&mut self, nodes: &[u32], weights: &[f64]) {
+        if self.offsets.is_empty() {
+            self.offsets.push(0);
+        }
+        self.nodes.extend_from_slice(nodes);
+        self.weights.extend_from_slice(weights);
+        self.offsets.push(self.nodes.len() as u32);
+    }
+
     /// Number of stencils.
     pub fn len(&self) -> usize {
         self.offsets.len().saturating_sub(1)
