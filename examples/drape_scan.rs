@@ -49,8 +49,8 @@ use std::collections::{HashMap, HashSet};
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 
-use lodcloth_core::estimate::modal::{self, ClampedModes};
 use lodcloth_core::drape::{drape_coefficient, fold_count, jitter_heights, shadow_area};
+use lodcloth_core::estimate::modal::{self, ClampedModes};
 use lodcloth_core::level::GridLevel;
 use lodcloth_core::mesh::{triangle_area, TriMesh};
 use lodcloth_core::scene::{ClothLevel, Scene};
@@ -254,9 +254,10 @@ struct Runs {
     modal: Option<Range<usize>>,
 }
 
-/// `FIRST..END`, a non-empty band of modes.
+/// `FIRST..END`, a non-empty band of modes (`FIRST..`: to the last mode).
 fn parse_band(s: &str) -> Result<Range<usize>, String> {
     let (a, b) = s.split_once("..").ok_or_else(|| format!("{s:?} is not FIRST..END"))?;
+    let b = if b.is_empty() { "18446744073709551615" } else { b };
     match (a.parse::<usize>(), b.parse::<usize>()) {
         (Ok(a), Ok(b)) if a < b => Ok(a..b),
         _ => Err(format!("{s:?} is not a non-empty band FIRST..END of mode numbers")),
@@ -361,29 +362,35 @@ impl Setup {
                 .expect("the scene's pins resolve");
             modal::pinned_flags(cloth.topology.n_nodes, loads.pins.iter().map(|p| p.node))
         };
-        let reference = self.scene.cloth_level(self.scene.reference_level()).expect("the reference");
-        let target = ClampedModes::of(&reference.topology, &held(&reference));
+        let reference = self
+            .scene
+            .cloth_level(self.scene.reference_level())
+            .expect("the reference");
+        let target = ClampedModes::of(&reference.topology, &held(&reference), "reference").expect("stencils");
         for cloth in &mut self.levels {
             if cloth.topology.n_nodes == reference.topology.n_nodes {
                 continue;
             }
             let pinned = held(cloth);
-            let modes = ClampedModes::of(&cloth.topology, &pinned);
-            let rows = modal::stiffening(&cloth.topology, &pinned, &modes, &target, band.clone())
+            let modes = ClampedModes::of(&cloth.topology, &pinned, "level").expect("stencils");
+            let upto = band.end.min(modes.len()).min(target.len());
+            let rows = modal::stiffening(&cloth.topology, &pinned, &modes, &target, band.start..upto)
                 .unwrap_or_else(|e| panic!("--modal {}..{}: {e}", band.start, band.end));
             println!(
-                "{}: {} of its modes {}..{} stiffened to the reference's ({} entries)",
+                "{}: {} of its modes {}..{upto} stiffened to the reference's ({} entries)",
                 cloth.level,
                 rows.len(),
                 band.start,
-                band.end,
                 rows.nodes.len()
             );
             let mut topology = (*cloth.topology).clone();
             topology.bending = topology.bending.extended(&rows);
             cloth.topology = std::sync::Arc::new(topology);
         }
-        self.variant = format!(" modal {}..{}", band.start, band.end);
+        self.variant = match band.end {
+            usize::MAX => format!(" modal {}..", band.start),
+            end => format!(" modal {}..{end}", band.start),
+        };
     }
 }
 
@@ -1385,7 +1392,7 @@ fn spectrum_clamped(args: &Levels, modes: usize, stencils: &str, drape: bool, mo
             .expect("builds");
         let pinned = modal::pinned_flags(n, sim.loads().pins.iter().map(|p| p.node));
         let areas = &topo.node_areas;
-        let ClampedModes { free, values, vectors } = ClampedModes::of(topo, &pinned);
+        let ClampedModes { free, values, vectors } = ClampedModes::of(topo, &pinned, "level").expect("stencils");
         let m = free.len();
         let order: Vec<usize> = (0..m).collect();
         let k = |v: f64| v.max(0.0).powf(0.25);

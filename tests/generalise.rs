@@ -246,3 +246,75 @@ fn a_bend_scale_scores_the_estimate_with_its_bend_class_scaled() {
         assert!(e.contains("bend class's scales"), "{bad:?}: {e}");
     }
 }
+
+/// `modal` gives every level its bending modes in the band at the
+/// reference's stiffness before it is estimated and scored: the level's
+/// score moves, the row's notes say so, and a cloth without bending
+/// stencils (every grid) is refused naming the scene.
+#[test]
+fn a_modal_band_scores_the_level_with_its_bending_modes_stiffened() {
+    use lodcloth::mesh::generate;
+    // A strip clamped at one end, bending under gravity with a bending
+    // rigidity (stencils, not bend springs).
+    let strip = generate::sheet(0.14, 0.03, 0.005);
+    let clamp: Vec<usize> = (0..strip.vertices())
+        .filter(|&k| strip.positions[k][0] <= 0.02 + 1e-9)
+        .collect();
+    let dir = tempfile::tempdir().expect("temp dir");
+    std::fs::write(dir.path().join("mesh.obj"), generate::to_obj(&strip, "strip")).expect("mesh");
+    let path = dir.path().join("strip.toml");
+    std::fs::write(
+        &path,
+        format!(
+            "name = \"strip\"\n[cloth]\nmesh = \"mesh.obj\"\nareal_density = 0.2\n\
+             [material]\nstiffness = {{ stretch_u = 300.0, stretch_v = 300.0, shear = 40.0 }}\n\
+             damping_time = 1e-4\nbending_rigidity = 1e-5\n\
+             [simulation]\nintegrator = \"implicit_euler\"\ndt = 1e-3\nduration = 2.0\n\
+             [[pins]]\nnodes = {{ vertices = {clamp:?} }}\n"
+        ),
+    )
+    .expect("scene");
+    let s = Scene::load(&path).expect("a valid mesh scene");
+    let scenes = vec![(s.clone(), record(&s))];
+    let options = |level, modal| SuiteOptions {
+        level,
+        methods: vec![Method::Same],
+        fit: FitOptions::default(),
+        train_fraction: 0.5,
+        short_window: 0.05,
+        floor_perturbation: 1e-6,
+        bend_scale: (1.0, 1.0),
+        modal,
+    };
+    let run = |modal| {
+        suite(
+            &scenes,
+            &options(GridLevel::Percent(40), modal),
+            &no_cache(),
+            &mut |_| {},
+        )
+    };
+    let plain = run(None).expect("runs").remove(0);
+    let stiffened = run(Some(1..usize::MAX)).expect("runs").remove(0);
+    assert!(plain.notes.is_empty(), "{:?}", plain.notes);
+    assert!(
+        stiffened
+            .notes
+            .contains("bending modes 1.. stiffened to the reference's"),
+        "{:?}",
+        stiffened.notes
+    );
+    assert_eq!(stiffened.material, plain.material, "the coefficients stay `same`'s");
+    assert_ne!(stiffened.own, plain.own, "the stiffened stencils were not scored");
+    let grid = scene("wide-cotton", 2.0, 1.0, 17, 9, 1.0);
+    let grids = vec![(grid.clone(), record(&grid))];
+    let e = suite(
+        &grids,
+        &options(GridLevel::Long(9), Some(0..10)),
+        &no_cache(),
+        &mut |_| {},
+    )
+    .expect_err("a grid has no stencils")
+    .to_string();
+    assert!(e.contains("wide-cotton") && e.contains("no bending stencils"), "{e}");
+}

@@ -287,7 +287,7 @@ pub enum Experiment {
         /// --bend-scale.
         #[arg(long, value_parser = parse_factor)]
         bend_damping_scale: Option<f64>,
-        /// Stiffen each level's bending modes FIRST..END (softest first,
+        /// Stiffen each level's bending modes FIRST..END or FIRST.. (softest first,
         /// every pin held) to the reference's eigenvalues, paired by
         /// order, before estimating and scoring: a mesh cloth's level made
         /// as stiff as its reference where it is softer, leaving its
@@ -426,7 +426,14 @@ pub fn run(experiment: Experiment) -> Result<()> {
             common.apply_quick();
             let level = level.unwrap_or(GridLevel::Long(if common.quick { 16 } else { 40 }));
             let bend = (bend_scale, bend_damping_scale.unwrap_or(bend_scale));
-            generalise::generalise_cmd(&common, level, &parse_methods(&methods)?, floor_perturbation, bend, modal)
+            generalise::generalise_cmd(
+                &common,
+                level,
+                &parse_methods(&methods)?,
+                floor_perturbation,
+                bend,
+                modal,
+            )
         }
         Experiment::Readings {
             mut common,
@@ -494,11 +501,17 @@ fn parse_factor(s: &str) -> Result<f64, String> {
     }
 }
 
-/// `FIRST..END`, a non-empty band of modes.
+/// `FIRST..END`, a non-empty band of modes (`FIRST..`: to the last mode).
 fn parse_band(s: &str) -> Result<std::ops::Range<usize>, String> {
-    let (a, b) = s.split_once("..").ok_or_else(|| format!("{s:?} is not a band FIRST..END"))?;
-    let parse = |v: &str| v.trim().parse::<usize>().map_err(|e| format!("{v:?} in {s:?} is not a mode number: {e}"));
-    let (a, b) = (parse(a)?, parse(b)?);
+    let (a, b) = s
+        .split_once("..")
+        .ok_or_else(|| format!("{s:?} is not a band FIRST..END"))?;
+    let parse = |v: &str| {
+        v.trim()
+            .parse::<usize>()
+            .map_err(|e| format!("{v:?} in {s:?} is not a mode number: {e}"))
+    };
+    let (a, b) = (parse(a)?, if b.is_empty() { usize::MAX } else { parse(b)? });
     if a >= b {
         return Err(format!("the band {s:?} is empty: FIRST must be below END"));
     }

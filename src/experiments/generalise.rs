@@ -59,7 +59,8 @@ pub struct SuiteOptions {
     /// applied before it is scored: what a bending factor costs held out
     /// ((1, 1): the estimates as they are).
     pub bend_scale: (f64, f64),
-    /// Stiffen every level's bending modes in this band to the reference's
+    /// Stiffen every level's bending modes in this band (its end cut to
+    /// the modes both have) to the reference's
     /// ([`crate::estimate::modal::stiffening`], paired by order) before
     /// estimating and scoring; estimates are then never cached (the cache
     /// does not know the level's stencils).
@@ -205,7 +206,12 @@ pub fn suite(
         for &method in &options.methods {
             let mut est = estimator.estimate(p, method, &fit)?;
             if let Some(band) = &options.modal {
-                let stiffened = format!("bending modes {}..{} stiffened to the reference's", band.start, band.end);
+                let end = if band.end == usize::MAX {
+                    String::new()
+                } else {
+                    band.end.to_string()
+                };
+                let stiffened = format!("bending modes {}..{end} stiffened to the reference's", band.start);
                 est.notes = if est.notes.is_empty() {
                     stiffened
                 } else {
@@ -390,23 +396,20 @@ fn held_out(
 /// `problem` with its bending modes in `band` stiffened to its
 /// reference's ([`modal::stiffening`]: both clamped spectra, dense).
 fn stiffened(problem: &LodProblem, band: Range<usize>) -> Result<LodProblem, PlanError> {
-    let invalid = |e: &dyn std::fmt::Display| PlanError::Invalid(format!("{} {}: {e}", problem.scene.name, problem.level));
+    let invalid =
+        |e: &dyn std::fmt::Display| PlanError::Invalid(format!("{} {}: {e}", problem.scene.name, problem.level));
     let reference = &problem.reference.topology;
+    let topology = problem.topology();
     let held = problem
         .scene
         .loads_on(reference, reference.mesh.as_deref())
         .map_err(|e| invalid(&e))?;
     let reference_pinned = modal::pinned_flags(reference.n_nodes, held.pins.iter().map(|p| p.node));
-    let topology = problem.topology();
     let pinned = modal::pinned_flags(topology.n_nodes, problem.loads().pins.iter().map(|p| p.node));
-    let rows = modal::stiffening(
-        topology,
-        &pinned,
-        &ClampedModes::of(topology, &pinned),
-        &ClampedModes::of(reference, &reference_pinned),
-        band,
-    )
-    .map_err(|e| invalid(&e))?;
+    let modes = ClampedModes::of(topology, &pinned, "level").map_err(|e| invalid(&e))?;
+    let target = ClampedModes::of(reference, &reference_pinned, "reference").map_err(|e| invalid(&e))?;
+    let upto = band.end.min(modes.len()).min(target.len());
+    let rows = modal::stiffening(topology, &pinned, &modes, &target, band.start..upto).map_err(|e| invalid(&e))?;
     Ok(problem.with_bending(&rows))
 }
 

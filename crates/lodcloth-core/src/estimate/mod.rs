@@ -20,6 +20,10 @@
 //!
 //! Every method but `same_spring` gives per-direction coefficients (one K and
 //! C per [`crate::sim::SpringClass`]).
+//!
+//! Beside the coefficients, [`modal`] changes a mesh level's bending
+//! operator itself: its modes in a band made as stiff as the reference's
+//! ([`LodProblem::with_bending`] scores a level with it).
 
 pub mod fit;
 pub mod inverse;
@@ -44,7 +48,8 @@ use crate::level::Level;
 use crate::lod::{Correlation, LodError};
 use crate::scene::{MassConvention, Scene, SceneError};
 use crate::sim::{
-    Bending, Integrator, Loads, Material, SimError, SimParams, Simulation, SpringPrecision, StabilityCheck, State, Topology,
+    Bending, Integrator, Loads, Material, SimError, SimParams, Simulation, SpringPrecision, StabilityCheck, State,
+    Topology,
 };
 use crate::turns::Turns;
 

@@ -39,6 +39,14 @@ pub enum ModalError {
         /// "reference" or "level".
         which: &'static str,
     },
+    /// More free vertices than a dense eigendecomposition is for.
+    #[error("the {which} has {free} free vertices; the dense eigendecomposition here stops at {MAX_DENSE}")]
+    TooLarge {
+        /// "reference" or "level".
+        which: &'static str,
+        /// Its free vertices.
+        free: usize,
+    },
     /// Too few pins to hold the correction's rows at rest.
     #[error("the level's pinned vertices must span the rest plane (three not on a line) to hold a mode row at rest")]
     Pins,
@@ -56,6 +64,10 @@ pub enum ModalError {
     },
 }
 
+/// The most free vertices [`ClampedModes::of`] decomposes (a dense
+/// symmetric eigendecomposition: about a second at 800, a minute at 4000).
+pub const MAX_DENSE: usize = 4000;
+
 /// The bending modes of a cloth's free vertices, every pinned vertex held.
 #[derive(Debug, Clone)]
 pub struct ClampedModes {
@@ -69,11 +81,24 @@ pub struct ClampedModes {
 
 impl ClampedModes {
     /// The modes of `topology`'s stencils with the vertices `pinned` says
-    /// held.
-    pub fn of(topology: &Topology, pinned: &[bool]) -> ClampedModes {
+    /// held (`which` names the cloth in an error).
+    ///
+    /// # Errors
+    /// A cloth without stencils, or with more than [`MAX_DENSE`] free
+    /// vertices.
+    pub fn of(topology: &Topology, pinned: &[bool], which: &'static str) -> Result<ClampedModes, ModalError> {
         let n = topology.n_nodes;
         assert_eq!(pinned.len(), n, "one pinned flag per node");
+        if topology.bending.is_empty() {
+            return Err(ModalError::NoStencils { which });
+        }
         let free: Vec<u32> = (0..n as u32).filter(|&i| !pinned[i as usize]).collect();
+        if free.len() > MAX_DENSE {
+            return Err(ModalError::TooLarge {
+                which,
+                free: free.len(),
+            });
+        }
         let mut slot = vec![usize::MAX; n];
         for (f, &i) in free.iter().enumerate() {
             slot[i as usize] = f;
@@ -101,7 +126,7 @@ impl ClampedModes {
         order.sort_by(|&i, &j| eigen.eigenvalues[i].total_cmp(&eigen.eigenvalues[j]));
         let values = order.iter().map(|&i| eigen.eigenvalues[i]).collect();
         let vectors = DMatrix::from_fn(m, m, |r, c| eigen.eigenvectors[(r, order[c])]);
-        ClampedModes { free, values, vectors }
+        Ok(ClampedModes { free, values, vectors })
     }
 
     /// How many modes (free vertices).
@@ -218,7 +243,7 @@ mod tests {
     #[test]
     fn a_band_moves_its_modes_to_the_reference_and_leaves_the_rest() {
         let (topology, pinned) = clamped_disc();
-        let modes = ClampedModes::of(&topology, &pinned);
+        let modes = ClampedModes::of(&topology, &pinned, "disc").expect("stencils");
         // A "reference" twice as stiff in modes 5..20.
         let mut reference = modes.clone();
         for v in &mut reference.values[5..20] {
@@ -228,7 +253,7 @@ mod tests {
         assert_eq!(rows.len(), 15, "no row for modes already as stiff");
         let mut stiffer = topology.clone();
         stiffer.bending = stiffer.bending.extended(&rows);
-        let after = ClampedModes::of(&stiffer, &pinned);
+        let after = ClampedModes::of(&stiffer, &pinned, "disc").expect("stencils");
         let mut want: Vec<f64> = modes.values.clone();
         for v in &mut want[5..20] {
             *v *= 2.0;
@@ -242,7 +267,7 @@ mod tests {
     #[test]
     fn the_rows_read_nothing_on_an_affine_map_of_the_rest_shape() {
         let (topology, pinned) = clamped_disc();
-        let modes = ClampedModes::of(&topology, &pinned);
+        let modes = ClampedModes::of(&topology, &pinned, "disc").expect("stencils");
         let mut reference = modes.clone();
         for v in &mut reference.values {
             *v *= 1.5;
@@ -268,7 +293,7 @@ mod tests {
     #[test]
     fn a_band_past_the_modes_or_a_cloth_held_on_a_line_is_refused() {
         let (topology, pinned) = clamped_disc();
-        let modes = ClampedModes::of(&topology, &pinned);
+        let modes = ClampedModes::of(&topology, &pinned, "disc").expect("stencils");
         let err = stiffening(&topology, &pinned, &modes, &modes, 0..modes.len() + 1).unwrap_err();
         assert!(matches!(err, ModalError::Band { .. }), "{err}");
         let line: Vec<bool> = topology
@@ -276,7 +301,7 @@ mod tests {
             .iter()
             .map(|x| x[2].abs() < 1e-9 && x[0].abs() < 0.05)
             .collect();
-        let modes = ClampedModes::of(&topology, &line);
+        let modes = ClampedModes::of(&topology, &line, "disc").expect("stencils");
         let mut reference = modes.clone();
         reference.values.iter_mut().for_each(|v| *v *= 2.0);
         let err = stiffening(&topology, &line, &modes, &reference, 3..10).unwrap_err();
