@@ -49,6 +49,7 @@ use std::collections::{HashMap, HashSet};
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 
+use lodcloth::experiments::generalise::parse_band;
 use lodcloth_core::drape::{drape_coefficient, fold_count, jitter_heights, shadow_area};
 use lodcloth_core::estimate::modal::{self, ClampedModes};
 use lodcloth_core::level::GridLevel;
@@ -252,16 +253,6 @@ struct Runs {
     /// (`lodcloth_core::estimate::modal`); the CSV's scene says so.
     #[arg(long, value_parser = parse_band)]
     modal: Option<Range<usize>>,
-}
-
-/// `FIRST..END`, a non-empty band of modes (`FIRST..`: to the last mode).
-fn parse_band(s: &str) -> Result<Range<usize>, String> {
-    let (a, b) = s.split_once("..").ok_or_else(|| format!("{s:?} is not FIRST..END"))?;
-    let b = if b.is_empty() { "18446744073709551615" } else { b };
-    match (a.parse::<usize>(), b.parse::<usize>()) {
-        (Ok(a), Ok(b)) if a < b => Ok(a..b),
-        _ => Err(format!("{s:?} is not a non-empty band FIRST..END of mode numbers")),
-    }
 }
 
 /// The scene, its stepping geometry and the levels asked for.

@@ -292,7 +292,7 @@ pub enum Experiment {
         /// order, before estimating and scoring: a mesh cloth's level made
         /// as stiff as its reference where it is softer, leaving its
         /// softest modes alone (`lodcloth_core::estimate::modal`).
-        #[arg(long, value_parser = parse_band)]
+        #[arg(long, value_parser = lodcloth::experiments::generalise::parse_band)]
         modal: Option<std::ops::Range<usize>>,
     },
     /// The paper's BCD and GKD under every reading of its lost equations
@@ -499,23 +499,6 @@ fn parse_factor(s: &str) -> Result<f64, String> {
         Ok(v) => Err(format!("a factor must be finite and positive, got {v}")),
         Err(e) => Err(format!("{s:?} is not a number: {e}")),
     }
-}
-
-/// `FIRST..END`, a non-empty band of modes (`FIRST..`: to the last mode).
-fn parse_band(s: &str) -> Result<std::ops::Range<usize>, String> {
-    let (a, b) = s
-        .split_once("..")
-        .ok_or_else(|| format!("{s:?} is not a band FIRST..END"))?;
-    let parse = |v: &str| {
-        v.trim()
-            .parse::<usize>()
-            .map_err(|e| format!("{v:?} in {s:?} is not a mode number: {e}"))
-    };
-    let (a, b) = (parse(a)?, if b.is_empty() { usize::MAX } else { parse(b)? });
-    if a >= b {
-        return Err(format!("the band {s:?} is empty: FIRST must be below END"));
-    }
-    Ok(a..b)
 }
 
 fn parse_reading(name: &str) -> Result<Reading, lodcloth::names::UnknownName> {

@@ -393,6 +393,25 @@ fn held_out(
     })
 }
 
+/// A band of modes as the command line writes it: `FIRST..END`, or
+/// `FIRST..` for every mode from FIRST on (END `usize::MAX`, cut to the
+/// modes there are where it is used).
+pub fn parse_band(s: &str) -> Result<Range<usize>, String> {
+    let (a, b) = s
+        .split_once("..")
+        .ok_or_else(|| format!("{s:?} is not a band FIRST..END or FIRST.."))?;
+    let parse = |v: &str| {
+        v.trim()
+            .parse::<usize>()
+            .map_err(|e| format!("{v:?} in {s:?} is not a mode number: {e}"))
+    };
+    let (a, b) = (parse(a)?, if b.is_empty() { usize::MAX } else { parse(b)? });
+    if a >= b {
+        return Err(format!("the band {s:?} is empty: FIRST must be below END"));
+    }
+    Ok(a..b)
+}
+
 /// `problem` with its bending modes in `band` stiffened to its
 /// reference's ([`modal::stiffening`]: both clamped spectra, dense).
 fn stiffened(problem: &LodProblem, band: Range<usize>) -> Result<LodProblem, PlanError> {
@@ -430,6 +449,16 @@ mod tests {
 
     fn material(k: [f64; 3], c: [f64; 3]) -> Material {
         Material::isotropic([0, 1, 2].map(|t| SpringCoeffs { k: k[t], c: c[t] }))
+    }
+
+    #[test]
+    fn a_band_reads_as_written_and_an_empty_one_is_refused() {
+        assert_eq!(parse_band("12..50"), Ok(12..50));
+        assert_eq!(parse_band("12.."), Ok(12..usize::MAX));
+        for bad in ["50..12", "7..7", "12", "..5", "a..b", "1..-2"] {
+            let e = parse_band(bad).expect_err(bad);
+            assert!(e.contains(bad), "{bad}: {e}");
+        }
     }
 
     #[test]
