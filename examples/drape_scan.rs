@@ -365,7 +365,7 @@ impl Setup {
             let pinned = held(cloth);
             let modes = ClampedModes::of(&cloth.topology, &pinned, "level").expect("stencils");
             let upto = band.end.min(modes.len()).min(target.len());
-            let rows = modal::stiffening(&cloth.topology, &pinned, &modes, &target, band.start..upto)
+            let rows = modal::stiffening(&cloth.topology, &pinned, &modes, &target, band.clone())
                 .unwrap_or_else(|e| panic!("--modal {}..{}: {e}", band.start, band.end));
             println!(
                 "{}: {} of its modes {}..{upto} stiffened to the reference's ({} entries)",

@@ -427,8 +427,7 @@ fn stiffened(problem: &LodProblem, band: Range<usize>) -> Result<LodProblem, Pla
     let pinned = modal::pinned_flags(topology.n_nodes, problem.loads().pins.iter().map(|p| p.node));
     let modes = ClampedModes::of(topology, &pinned, "level").map_err(|e| invalid(&e))?;
     let target = ClampedModes::of(reference, &reference_pinned, "reference").map_err(|e| invalid(&e))?;
-    let upto = band.end.min(modes.len()).min(target.len());
-    let rows = modal::stiffening(topology, &pinned, &modes, &target, band.start..upto).map_err(|e| invalid(&e))?;
+    let rows = modal::stiffening(topology, &pinned, &modes, &target, band).map_err(|e| invalid(&e))?;
     Ok(problem.with_bending(&rows))
 }
 

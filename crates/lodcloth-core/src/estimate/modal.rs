@@ -53,7 +53,7 @@ pub enum ModalError {
     /// Too few pins to hold the correction's rows at rest.
     #[error("the level's pinned vertices must span the rest plane (three not on a line) to hold a mode row at rest")]
     Pins,
-    /// A band outside the modes both cloths have.
+    /// A band with no mode both cloths have.
     #[error("modes {start}..{end} asked for, the level has {level} and the reference {reference} (free vertices)")]
     Band {
         /// First mode asked for.
@@ -158,7 +158,8 @@ pub fn pinned_flags(n: usize, pins: impl IntoIterator<Item = u32>) -> Vec<bool> 
 /// reference's modes, paired by order), and leave every other mode as it
 /// is. Each row carries weights on the pinned vertices (least norm) so it
 /// sums to zero against 1, X, Y and Z of the rest shape. Modes already as
-/// stiff as the reference's get no row.
+/// stiff as the reference's get no row. The band's end is cut to the modes
+/// both cloths have (`FIRST..usize::MAX`: every mode from FIRST on).
 pub fn stiffening(
     level: &Topology,
     pinned: &[bool],
@@ -169,7 +170,8 @@ pub fn stiffening(
     if level.bending.is_empty() {
         return Err(ModalError::NoStencils { which: "level" });
     }
-    if band.start >= band.end || band.end > modes.len().min(reference.len()) {
+    let band = band.start..band.end.min(modes.len()).min(reference.len());
+    if band.is_empty() {
         return Err(ModalError::Band {
             start: band.start,
             end: band.end,
@@ -298,7 +300,7 @@ mod tests {
     fn a_band_past_the_modes_or_a_cloth_held_on_a_line_is_refused() {
         let (topology, pinned) = clamped_disc();
         let modes = ClampedModes::of(&topology, &pinned, "disc").expect("stencils");
-        let err = stiffening(&topology, &pinned, &modes, &modes, 0..modes.len() + 1).unwrap_err();
+        let err = stiffening(&topology, &pinned, &modes, &modes, modes.len()..usize::MAX).unwrap_err();
         assert!(matches!(err, ModalError::Band { .. }), "{err}");
         let line: Vec<bool> = topology
             .rest_positions

@@ -38,19 +38,9 @@ pub struct Bending {
 impl Bending {
     /// Stencils from rows of (node, weight) pairs.
     pub fn from_rows<'a>(rows: impl IntoIterator<Item = &'a [(u32, f64)]>) -> Bending {
-        let mut b = Bending {
-            offsets: vec![0],
-            ..Bending::default()
-        };
+        let mut b = Bending::default();
         for row in rows {
-            for &(i, w) in row {
-                b.nodes.push(i);
-                b.weights.push(w);
-            }
-            b.offsets.push(b.nodes.len() as u32);
-        }
-        if b.offsets.len() == 1 {
-            b.offsets.clear();
+            b.push_row(row.iter().copied());
         }
         b
     }
@@ -60,18 +50,21 @@ impl Bending {
         (0..self.len())
             .map(|s| self.row(s))
             .chain((0..more.len()).map(|s| more.row(s)))
-            .fold(Bending::from_rows(std::iter::empty()), |mut b, (nodes, weights)| {
-                b.push_row(nodes, weights);
+            .fold(Bending::default(), |mut b, (nodes, weights)| {
+                b.push_row(nodes.iter().copied().zip(weights.iter().copied()));
                 b
             })
     }
 
-    fn push_row(&mut self, nodes: &[u32], weights: &[f64]) {
+    /// Append one stencil (offsets start at 0 with the first).
+    fn push_row(&mut self, entries: impl IntoIterator<Item = (u32, f64)>) {
         if self.offsets.is_empty() {
             self.offsets.push(0);
         }
-        self.nodes.extend_from_slice(nodes);
-        self.weights.extend_from_slice(weights);
+        for (i, w) in entries {
+            self.nodes.push(i);
+            self.weights.push(w);
+        }
         self.offsets.push(self.nodes.len() as u32);
     }
 
