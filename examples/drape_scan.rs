@@ -8,7 +8,7 @@
 //!
 //! ```text
 //! cargo run --release --example drape_scan -- run SCENE --levels 721v,100% [--bend 1,1.35] [--stretch 2] [--dt 1e-4] [--twins 8 [--jitter 1e-6]] [--stencils-from MESH.obj | --stencils triangle|quartic|mixed|mixed-exact] [--csv FILE]
-//! cargo run --release --example drape_scan -- restart SCENE --levels 1081v,721v [--bend 1,1.35] [--stretch 2] [--unstressed] [--csv FILE]
+//! cargo run --release --example drape_scan -- restart SCENE --levels 1081v,721v [--bend 1,1.35] [--stretch 2] [--unstressed] [--settle 0.005] [--csv FILE]
 //! cargo run --release --example drape_scan -- spectrum SCENE --levels 100%,60%,40% [--modes 24] [--stencils triangle|quartic|mixed|mixed-exact] [--drape] [--clamped]
 //! cargo run --release --example drape_scan -- membrane SCENE --levels 100%,60%,40% [--rings 2,3,4]
 //! cargo run --release --example drape_scan -- write SCENE --levels 1800v [--relax 20 --flip] [--shuffle 0.05 [--seed 1]] [--top-radius 0.08 [--top-vertices 40]] --out LEVEL.obj
@@ -21,7 +21,8 @@
 //! against the reference's; then each level starts from the reference's
 //! last shape, at rest, and runs 3 s, printing how far each band of it
 //! moves in the first 0.2 s, the forces there and its springs' strain on
-//! that shape (`--unstressed`: with those lengths as rest lengths).
+//! that shape (`--unstressed`: with those lengths as rest lengths;
+//! `--settle H`: the start settled first, `lodcloth_core::lod::settle`).
 //! `spectrum` prints the softest modes of each level's bending operator
 //! against the first level's (and, with `--drape`, weighted by where the
 //! first level's drape holds its bending energy; with `--clamped`, of the
@@ -53,6 +54,7 @@ use lodcloth::experiments::generalise::parse_band;
 use lodcloth_core::drape::{drape_coefficient, fold_count, jitter_heights, shadow_area};
 use lodcloth_core::estimate::modal::{self, ClampedModes};
 use lodcloth_core::level::GridLevel;
+use lodcloth_core::lod;
 use lodcloth_core::mesh::{triangle_area, TriMesh};
 use lodcloth_core::scene::{ClothLevel, Scene};
 use lodcloth_core::sim::vec3::{add, cross, dist, dot, norm, normalize, scale, sub};
@@ -105,6 +107,11 @@ enum Command {
         /// from the bending's.
         #[arg(long)]
         unstressed: bool,
+        /// Settle each level's start by one backward-Euler step of this
+        /// length (s) from rest, with its own forces
+        /// (`lodcloth_core::lod::settle`).
+        #[arg(long)]
+        settle: Option<f64>,
     },
     /// The spectrum of each level's bending operator on its flat rest
     /// shape: the lowest eigenvalues λ of W z = λ M z (W the stencils'
@@ -686,7 +693,7 @@ fn spread(runs: &[Run<'_>]) {
     }
 }
 
-fn restart(args: &Runs, unstressed: bool) {
+fn restart(args: &Runs, unstressed: bool, settle_by: Option<f64>) {
     let mut setup = Setup::new(&args.levels);
     setup.stiffen(args.modal.as_ref());
     let (bends, stretch) = (&args.bend, args.stretch);
@@ -762,6 +769,15 @@ fn restart(args: &Runs, unstressed: bool) {
                 }
             }
             sim.set_state(state).expect("same size");
+            if let Some(h) = settle_by {
+                let moved = lod::settle(&mut sim, h).unwrap_or_else(|e| panic!("--settle {h}: {e}"));
+                println!(
+                    "{} bend ×{bend}: settled by {h} s, moved rms {:.3} mm, max {:.3} mm",
+                    cloth.level,
+                    1e3 * moved.rms,
+                    1e3 * moved.max
+                );
+            }
             let first = setup.dc(&sim);
             let departure = departure(&setup, cloth, stretch, &mut sim);
             let run = Run {
@@ -1846,7 +1862,11 @@ fn main() {
             stencils_from,
             stencils,
         } => run(&runs, dt, twins, jitter, stencils_from.as_deref(), &stencils),
-        Command::Restart { runs, unstressed } => restart(&runs, unstressed),
+        Command::Restart {
+            runs,
+            unstressed,
+            settle,
+        } => restart(&runs, unstressed, settle),
         Command::Spectrum {
             levels,
             modes,

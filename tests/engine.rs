@@ -175,6 +175,97 @@ fn instances_are_spread_by_their_measured_step_cost() {
     assert_ne!(thread[1], thread[2], "the mesh shares a thread with the small grid");
 }
 
+/// A switch to a coarser cloth level settles the carried shape when the
+/// instance asks for it (`switch_settle`), and only then: the state after
+/// the switch is, bit for bit, the old level's state transferred to the
+/// new one and settled by `lod::settle` (or merely transferred: without
+/// `switch_settle`, and on the way up to a finer level).
+#[test]
+fn a_switch_down_settles_the_carried_shape_when_asked() {
+    use lodcloth::engine::Snapshot;
+    use lodcloth::lod::{settle, transfer_state};
+    let scene = Scene::load(std::path::Path::new("config/scenes/skirt-swaying.toml")).expect("scene");
+    let (fine, coarse) = (Level::Vertices(1370), Level::Vertices(915));
+    let build = |level| scene.build_level(level).expect("builds");
+    let h = 1.0 / 60.0;
+    let engine = Engine::start(
+        vec![
+            InstanceSetup {
+                switch_settle: Some(h),
+                ..InstanceSetup::new("settled", build(fine), fine)
+            },
+            InstanceSetup::new("plain", build(fine), fine),
+        ],
+        settings(2),
+    )
+    .expect("engine");
+    std::thread::sleep(Duration::from_millis(300));
+    let snapshot = |i: usize| -> Box<Snapshot> {
+        let (tx, rx) = tokio::sync::oneshot::channel();
+        engine.handles()[i]
+            .send(Command::Snapshot { reply: tx })
+            .expect("engine running");
+        rx.blocking_recv().expect("a reply").expect("a snapshot")
+    };
+    let switch = |i: usize, level: Level| {
+        let (tx, rx) = tokio::sync::oneshot::channel();
+        engine.handles()[i]
+            .send(Command::Switch {
+                level,
+                prepared: None,
+                sim: Box::new(build(level)),
+                cloud: None,
+                reply: tx,
+            })
+            .expect("engine running");
+        rx.blocking_recv().expect("a reply").expect("switched");
+    };
+    let bits = |s: &lodcloth::sim::State| -> Vec<u64> { s.pos.iter().chain(&s.vel).map(|x| x.to_bits()).collect() };
+    for i in 0..2 {
+        let (tx, rx) = tokio::sync::oneshot::channel();
+        engine.handles()[i]
+            .send(Command::Pause {
+                paused: true,
+                reply: tx,
+            })
+            .expect("engine running");
+        rx.blocking_recv().expect("paused");
+    }
+    for (i, settled) in [(0, true), (1, false)] {
+        let before = snapshot(i).state;
+        assert!(before.step > 0, "instance {i} never stepped");
+        let old = build(fine);
+        switch(i, coarse);
+        let mut want = build(coarse);
+        want.set_state(transfer_state(old.topology(), &before, want.topology()).expect("transfer"))
+            .expect("state");
+        let transferred = want.state().clone();
+        if settled {
+            let moved = settle(&mut want, h).expect("settles");
+            assert!(moved.max > 0.0, "nothing to settle: {moved:?}");
+        }
+        let after = snapshot(i).state;
+        assert!(
+            bits(&after) == bits(want.state()),
+            "instance {i}: the state after the switch down is not the {} transfer",
+            if settled { "settled" } else { "plain" }
+        );
+        // Back up to the finer level: never settled.
+        switch(i, fine);
+        let mut up = build(fine);
+        up.set_state(transfer_state(want.topology(), &after, up.topology()).expect("transfer"))
+            .expect("state");
+        assert!(
+            bits(&snapshot(i).state) == bits(up.state()),
+            "instance {i}: the switch up was settled"
+        );
+        if settled {
+            assert!(bits(&after) != bits(&transferred), "the settled state is the transfer");
+        }
+    }
+    engine.stop();
+}
+
 /// The daemon's default pacing on `threads` stepping threads.
 fn settings(threads: usize) -> EngineSettings {
     EngineSettings {

@@ -94,6 +94,7 @@ fn the_suite_scores_each_scene_at_its_aspect_and_carries_corrections_as_ratios()
         floor_perturbation: 1e-6,
         bend_scale: (1.0, 1.0),
         modal: None,
+        settle: None,
     };
     let rows = suite(&scenes, &options, &no_cache(), &mut |_| {}).expect("suite runs");
     assert_eq!(rows.len(), 4);
@@ -209,6 +210,7 @@ fn a_bend_scale_scores_the_estimate_with_its_bend_class_scaled() {
         floor_perturbation: 1e-6,
         bend_scale,
         modal: None,
+        settle: None,
     };
     let run = |bend_scale| suite(&scenes, &options(bend_scale), &no_cache(), &mut |_| {});
     let plain = run((1.0, 1.0)).expect("runs").remove(0);
@@ -247,22 +249,16 @@ fn a_bend_scale_scores_the_estimate_with_its_bend_class_scaled() {
     }
 }
 
-/// `modal` gives every level its bending modes in the band at the
-/// reference's stiffness before it is estimated and scored: the level's
-/// score moves, the row's notes say so, and a cloth without bending
-/// stencils (every grid) is refused naming the scene.
-#[test]
-fn a_modal_band_scores_the_level_with_its_bending_modes_stiffened() {
+/// A strip clamped at one end, bending under gravity with a bending
+/// rigidity (stencils, not bend springs), written into `dir`.
+fn clamped_strip(dir: &std::path::Path) -> Scene {
     use lodcloth::mesh::generate;
-    // A strip clamped at one end, bending under gravity with a bending
-    // rigidity (stencils, not bend springs).
     let strip = generate::sheet(0.14, 0.03, 0.005);
     let clamp: Vec<usize> = (0..strip.vertices())
         .filter(|&k| strip.positions[k][0] <= 0.02 + 1e-9)
         .collect();
-    let dir = tempfile::tempdir().expect("temp dir");
-    std::fs::write(dir.path().join("mesh.obj"), generate::to_obj(&strip, "strip")).expect("mesh");
-    let path = dir.path().join("strip.toml");
+    std::fs::write(dir.join("mesh.obj"), generate::to_obj(&strip, "strip")).expect("mesh");
+    let path = dir.join("strip.toml");
     std::fs::write(
         &path,
         format!(
@@ -274,7 +270,68 @@ fn a_modal_band_scores_the_level_with_its_bending_modes_stiffened() {
         ),
     )
     .expect("scene");
-    let s = Scene::load(&path).expect("a valid mesh scene");
+    Scene::load(&path).expect("a valid mesh scene")
+}
+
+/// `settle` settles every restart of the short horizon before it runs:
+/// the short horizon moves, the long horizon (one run from rest) and the
+/// estimate do not, the row's notes say so, and a step that is not a
+/// positive time is refused naming it.
+#[test]
+fn settling_moves_the_short_horizon_alone() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let s = clamped_strip(dir.path());
+    let scenes = vec![(s.clone(), record(&s))];
+    let run = |settle| {
+        suite(
+            &scenes,
+            &SuiteOptions {
+                level: GridLevel::Percent(40),
+                methods: vec![Method::Same],
+                fit: FitOptions::default(),
+                train_fraction: 0.5,
+                short_window: 0.05,
+                floor_perturbation: 1e-6,
+                bend_scale: (1.0, 1.0),
+                modal: None,
+                settle,
+            },
+            &no_cache(),
+            &mut |_| {},
+        )
+    };
+    let plain = run(None).expect("runs").remove(0);
+    let settled = run(Some(0.01)).expect("runs").remove(0);
+    assert!(plain.notes.is_empty(), "{:?}", plain.notes);
+    assert!(
+        settled
+            .notes
+            .contains("restarts settled by a backward-Euler step of 0.01 s"),
+        "{:?}",
+        settled.notes
+    );
+    assert_eq!(settled.material, plain.material);
+    assert_eq!(
+        (settled.own.mean, settled.own.p95),
+        (plain.own.mean, plain.own.p95),
+        "the long horizon restarts nothing"
+    );
+    assert_ne!(
+        settled.own.short_mean, plain.own.short_mean,
+        "the restarts were not settled"
+    );
+    let e = run(Some(-1.0)).expect_err("refused").to_string();
+    assert!(e.contains("settling step"), "{e}");
+}
+
+/// `modal` gives every level its bending modes in the band at the
+/// reference's stiffness before it is estimated and scored: the level's
+/// score moves, the row's notes say so, and a cloth without bending
+/// stencils (every grid) is refused naming the scene.
+#[test]
+fn a_modal_band_scores_the_level_with_its_bending_modes_stiffened() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let s = clamped_strip(dir.path());
     let scenes = vec![(s.clone(), record(&s))];
     let options = |level, modal| SuiteOptions {
         level,
@@ -285,6 +342,7 @@ fn a_modal_band_scores_the_level_with_its_bending_modes_stiffened() {
         floor_perturbation: 1e-6,
         bend_scale: (1.0, 1.0),
         modal,
+        settle: None,
     };
     let run = |modal| {
         suite(

@@ -106,6 +106,7 @@ dt = 1e-4
 publish_hz = 30.0
 shadow_reference = false
 loop = true
+switch_settle = 0.0167
 "#;
 
 /// Small valid clouds in every format `io::read` takes: (file name, bytes).
@@ -1216,6 +1217,37 @@ fn instance_dt_that_is_not_positive_and_finite_is_refused_by_path() {
         assert!(problems[0].starts_with("instances[0].dt: "), "{problems:#?}");
         assert!(problems[0].contains("must be positive and finite"), "{problems:#?}");
     }
+}
+
+/// A switch's settling step must be a time in (0, 1] s, and a surface has
+/// no cloth shape to settle: each refused naming the instance's field.
+#[test]
+fn a_switch_settle_that_is_not_a_time_or_on_a_surface_is_refused_by_path() {
+    for value in ["0.0", "-0.01", "nan", "2.0"] {
+        let text = config_with("switch_settle = 0.0167", &format!("switch_settle = {value}"));
+        let err = ServiceConfig::from_toml(&text, "small.toml")
+            .map(|_| ())
+            .expect_err(value);
+        let ConfigError::Invalid { problems, .. } = &err else {
+            panic!("{value}: refused, but not as invalid values: {err}");
+        };
+        assert_eq!(problems.len(), 1, "{problems:#?}");
+        assert!(problems[0].starts_with("instances[0].switch_settle: "), "{problems:#?}");
+    }
+    let surface =
+        "[[instances]]\nname = \"sphere\"\nkind = \"surface\"\nscene = \"config/surfaces/sphere-pulled.toml\"\n\
+                   levels = [85, 327]\nstart = 85\nswitch_settle = 0.01\n";
+    let text = format!("{SMALL_CONFIG}\n{surface}");
+    let err = ServiceConfig::from_toml(&text, "small.toml")
+        .map(|_| ())
+        .expect_err("a surface");
+    let ConfigError::Invalid { problems, .. } = &err else {
+        panic!("refused, but not as invalid values: {err}");
+    };
+    assert!(
+        problems.len() == 1 && problems[0].starts_with("instances[1].switch_settle: a surface"),
+        "{problems:#?}"
+    );
 }
 
 /// The config load does not know a level's stability limit (it depends on

@@ -294,6 +294,12 @@ pub enum Experiment {
         /// softest modes alone (`lodcloth_core::estimate::modal`).
         #[arg(long, value_parser = lodcloth::experiments::generalise::parse_band)]
         modal: Option<std::ops::Range<usize>>,
+        /// Settle every restart of the short horizon by one backward-Euler
+        /// step of this many seconds from rest at the transferred shape
+        /// (`lodcloth_core::lod::settle`): what the level cannot hold of
+        /// the reference's shape relaxes before the window runs.
+        #[arg(long, value_parser = parse_factor)]
+        settle: Option<f64>,
     },
     /// The paper's BCD and GKD under every reading of its lost equations
     /// 3–8, with per-node masses over its levels, scored against the trend
@@ -422,6 +428,7 @@ pub fn run(experiment: Experiment) -> Result<()> {
             bend_scale,
             bend_damping_scale,
             modal,
+            settle,
         } => {
             common.apply_quick();
             let level = level.unwrap_or(GridLevel::Long(if common.quick { 16 } else { 40 }));
@@ -433,6 +440,7 @@ pub fn run(experiment: Experiment) -> Result<()> {
                 floor_perturbation,
                 bend,
                 modal,
+                settle,
             )
         }
         Experiment::Readings {

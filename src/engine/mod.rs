@@ -77,6 +77,9 @@ pub struct InstanceSetup {
     /// Seconds without an input after which the instance lets go of
     /// everything and returns to its scene's script.
     pub input_idle: f64,
+    /// A switch to a coarser cloth level settles the carried shape by one
+    /// backward-Euler step of this many seconds ([`crate::lod::settle`]).
+    pub switch_settle: Option<f64>,
 }
 
 impl InstanceSetup {
@@ -100,6 +103,7 @@ impl InstanceSetup {
             hold: false,
             touch: None,
             input_idle: 10.0,
+            switch_settle: None,
         }
     }
 }

@@ -101,6 +101,8 @@ pub(super) struct Runner {
     /// An input acted in this episode: the recorded reference no longer
     /// describes the cloth, so there is no live error until the next one.
     pub(super) touched_episode: bool,
+    /// See [`InstanceSetup::switch_settle`].
+    pub(super) switch_settle: Option<f64>,
 }
 
 impl Runner {
@@ -188,6 +190,7 @@ impl Runner {
             last_input: now,
             input_idle: Duration::from_secs_f64(setup.input_idle),
             touched_episode: false,
+            switch_settle: setup.switch_settle,
         };
         let parts = HandleParts {
             name: setup.name,

@@ -44,18 +44,27 @@ impl Runner {
         let previous = self.level;
         let old_topology = self.sim.topology().clone();
         let before = self.snapshot(true);
+        let mut resampled = false;
         let state = match (self.cloud.as_mut(), cloud.as_ref()) {
             (Some(from), Some(to)) => from.carry(self.sim.state(), to),
             (None, None) => {
                 if Arc::ptr_eq(&old_topology, sim.topology()) || old_topology.n_nodes == sim.topology().n_nodes {
                     self.sim.state().clone()
                 } else {
+                    resampled = true;
                     transfer_state(&old_topology, self.sim.state(), sim.topology()).map_err(|e| e.to_string())?
                 }
             }
             _ => return Err("a switch between a cloth and a surface level".into()),
         };
         sim.set_state(state).map_err(|e| e.to_string())?;
+        // Only down: a coarser level reads more in a finer shape than it
+        // holds (docs/results.md, "Settling a switch").
+        let coarser = resampled && sim.topology().n_nodes < old_topology.n_nodes;
+        if let Some(h) = self.switch_settle.filter(|_| coarser) {
+            // Before the old level is let go: a refusal keeps it running.
+            crate::lod::settle(&mut sim, h).map_err(|e| e.to_string())?;
+        }
         self.sim = sim;
         self.carry_inputs();
         self.checkpoint = self.sim.state().clone();

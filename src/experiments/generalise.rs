@@ -65,6 +65,10 @@ pub struct SuiteOptions {
     /// estimating and scoring; estimates are then never cached (the cache
     /// does not know the level's stencils).
     pub modal: Option<Range<usize>>,
+    /// Settle every restart of the short horizon by one backward-Euler
+    /// step of this length (s) before it runs
+    /// ([`lodcloth_core::lod::settle`]); estimates are unchanged by it.
+    pub settle: Option<f64>,
 }
 
 /// Held-out statistics of one model on one scene (fractions of O_max).
@@ -145,6 +149,11 @@ pub fn suite(
             options.floor_perturbation
         )));
     }
+    if let Some(h) = options.settle.filter(|h| !(h.is_finite() && *h > 0.0)) {
+        return Err(PlanError::Invalid(format!(
+            "the settling step must be a positive, finite time (s), got {h}"
+        )));
+    }
     if !(options.train_fraction > 0.0 && options.train_fraction < 1.0) {
         return Err(PlanError::Invalid(format!(
             "the training fraction must be in (0, 1), got {}",
@@ -183,9 +192,18 @@ pub fn suite(
     } else {
         estimator
     };
+    // The problems the estimates are scored on: the same, their
+    // restarts settled when asked.
+    let scoring: Vec<LodProblem> = problems
+        .iter()
+        .map(|p| match options.settle {
+            Some(h) => p.clone().with_settling(h),
+            None => p.clone(),
+        })
+        .collect();
     // Every scene's own estimate, per method.
     let mut rows = Vec::new();
-    for p in &problems {
+    for (p, scored) in problems.iter().zip(&scoring) {
         let frames = p.frames();
         let train_end = train_end(frames, options.train_fraction);
         let eps = options.floor_perturbation;
@@ -227,7 +245,15 @@ pub fn suite(
                     format!("{}; {scaled}", est.notes)
                 };
             }
-            let own = held_out(p, est.material, train_end, options.short_window)?;
+            if let Some(h) = options.settle {
+                let settled = format!("restarts settled by a backward-Euler step of {h} s");
+                est.notes = if est.notes.is_empty() {
+                    settled
+                } else {
+                    format!("{}; {settled}", est.notes)
+                };
+            }
+            let own = held_out(scored, est.material, train_end, options.short_window)?;
             log(format!(
                 "{} {} {:<4} held-out mean {:.2}%  p95 {:.2}%  last quarter {:.2}%  short horizon {:.2}%  est {:.0} s{}",
                 p.scene.name,
@@ -273,7 +299,7 @@ pub fn suite(
                     .map(|(i, r)| (r.material, problems[i / m].same_material()))
                     .collect();
                 let material = corrected(p.same_material(), &others);
-                let score = held_out(p, material, train_end, options.short_window)?;
+                let score = held_out(&scoring[b], material, train_end, options.short_window)?;
                 log(format!(
                     "{} {:<4} from the other scenes: held-out mean {:.2}%, short horizon {:.2}%",
                     p.scene.name,

@@ -101,6 +101,7 @@ pub(super) fn start_engine(config: &ServiceConfig) -> Result<Started, ServiceErr
                 InstanceKind::Surface(_) => None,
             },
             input_idle: config.input.idle,
+            switch_settle: ic.switch_settle,
         });
         preparers.push(preparer);
     }

@@ -27,8 +27,23 @@
 //! path by [`Simulation::set_state`](crate::sim::Simulation::set_state).
 //! Mapping a fine state to a coarse one gives coarse positions equal to the
 //! "coherent positions" of the error metric: the switch causes no jump there.
+//!
+//! # Settling
+//! A coarse level samples a fine shape at its own nodes, and reads more in
+//! it than the fine cloth holds: folds finer than its spacing shorten its
+//! chords (its stretch springs go into compression where the fine cloth is
+//! in tension) and land in its short bending modes. Left there, the level
+//! springs out of the sampled shape within milliseconds. [`settle`] takes
+//! one backward-Euler step of length `h` from rest at the transferred
+//! positions, with the level's own forces: a mode of angular frequency ω
+//! moves by `1/(1 + ω²h²)` of the way to its equilibrium, so the stiff ones
+//! (the compressed chords, the aliased short folds) settle and the slow ones
+//! (the drape, its folds at the level's scale) stay; velocities, time and
+//! step are kept.
 
-use crate::sim::{GridShape, State, Topology};
+use std::sync::Arc;
+
+use crate::sim::{GridShape, Integrator, SimError, Simulation, StabilityCheck, State, Topology};
 
 /// Errors of correlating two cloths.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -270,6 +285,70 @@ pub fn transfer_state(source: &Topology, state: &State, target: &Topology) -> Re
     })
 }
 
+/// How far [`settle`] moved the nodes (m; pins stay where they are).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Settled {
+    /// Root mean square over the nodes.
+    pub rms: f64,
+    /// The largest move.
+    pub max: f64,
+}
+
+/// Settle `sim`'s state in place: its positions replaced by one backward
+/// Euler step of `h` (s) taken from rest there, with the level's own
+/// springs, bending, loads and contact (see the module docs); velocities,
+/// time and step kept, pins put back where they are at that time. Builds
+/// a twin of the simulation, so it allocates: for a switch, not a step.
+///
+/// # Errors
+/// A `h` that is not a positive finite step, or a step that diverged.
+pub fn settle(sim: &mut Simulation, h: f64) -> Result<Settled, SimError> {
+    if !(h.is_finite() && h > 0.0) {
+        return Err(SimError::InvalidParameter {
+            name: "settling step".into(),
+            value: h,
+            reason: "must be a positive, finite time (s)",
+        });
+    }
+    let mut params = *sim.params();
+    params.integrator = Integrator::ImplicitEuler;
+    params.dt = h;
+    let mut rest = sim.state().clone();
+    rest.vel.fill(0.0);
+    let mut twin = Simulation::new(
+        Arc::clone(sim.topology()),
+        sim.masses().to_vec(),
+        params,
+        sim.loads().clone(),
+        rest,
+        StabilityCheck::Force,
+    )?;
+    if !twin.step().finite {
+        return Err(SimError::InvalidParameter {
+            name: "settling step".into(),
+            value: h,
+            reason: "its backward-Euler step diverged",
+        });
+    }
+    let before = sim.state().pos.clone();
+    let mut state = sim.state().clone();
+    state.pos.copy_from_slice(&twin.state().pos);
+    sim.set_state(state)?;
+    let n = sim.topology().n_nodes;
+    let (mut sum, mut max) = (0.0f64, 0.0f64);
+    for k in 0..n {
+        let d2: f64 = (0..3)
+            .map(|c| (sim.state().pos[c * n + k] - before[c * n + k]).powi(2))
+            .sum();
+        sum += d2;
+        max = max.max(d2.sqrt());
+    }
+    Ok(Settled {
+        rms: (sum / n.max(1) as f64).sqrt(),
+        max,
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -347,6 +426,103 @@ mod tests {
                 assert!((e.weights.iter().sum::<f64>() - 1.0).abs() < 1e-12);
             }
         }
+    }
+
+    /// The centre of a 3×3 grid of 1 m cells, every other node pinned, moved δ along
+    /// x: linearised it feels its two x springs (2·K_s) and its four
+    /// diagonals at 45° (4·K_h/2), damped likewise, so one backward-Euler
+    /// step of h from rest takes it `h²·k·δ / (m + h·c + h²·k)` back,
+    /// whatever h: a mode settles by `ω²h² / (1 + ω²h²)` of its way.
+    #[test]
+    fn settling_moves_a_mode_by_its_backward_euler_share() {
+        use crate::sim::{CgSettings, Loads, Material, Pin, PinPath, SimParams, SpringCoeffs};
+        let square = GridShape {
+            nx: 3,
+            ny: 3,
+            width: 2.0,
+            height: 2.0,
+        };
+        let topology = Arc::new(Topology::grid(square, Orientation::Horizontal));
+        let (ks, cs, kh, ch, m) = (50.0, 0.3, 20.0, 0.1, 0.01);
+        let material = Material::isotropic([
+            SpringCoeffs { k: ks, c: cs },
+            SpringCoeffs { k: kh, c: ch },
+            SpringCoeffs { k: 5.0, c: 0.0 },
+        ]);
+        let params = SimParams {
+            dt: 1e-4,
+            integrator: Integrator::Rk4,
+            material,
+            gravity: [0.0; 3],
+            drag: 0.0,
+            stiffness_adjustment: None,
+            strain_limit: None,
+            cg: CgSettings {
+                tolerance: 1e-13,
+                max_iterations: 100,
+            },
+        };
+        let pins = (0..9u32)
+            .filter(|&k| k != 4)
+            .map(|k| Pin {
+                node: k,
+                anchor: topology.rest_positions[k as usize],
+                path: PinPath::Fixed,
+            })
+            .collect();
+        let loads = Loads {
+            pins,
+            ..Loads::default()
+        };
+        let (delta, v) = (1e-5, 0.3);
+        let (k, c) = (2.0 * ks + 2.0 * kh, 2.0 * cs + 2.0 * ch);
+        for h in [1e-3, 1e-2, 1e-1] {
+            let mut state = State::at_rest(&topology);
+            let x0 = state.pos[4];
+            state.pos[4] += delta;
+            state.vel[4] = v;
+            state.time = 0.7;
+            state.step = 7000;
+            let mut sim = Simulation::new(
+                topology.clone(),
+                vec![m; 9],
+                params,
+                loads.clone(),
+                state,
+                StabilityCheck::Enforce,
+            )
+            .unwrap();
+            let out = settle(&mut sim, h).unwrap();
+            let want = delta * (1.0 - h * h * k / (m + h * c + h * h * k));
+            let s = sim.state();
+            assert!(
+                (s.pos[4] - x0 - want).abs() < 1e-4 * delta,
+                "h {h}: {} against {want}",
+                s.pos[4] - x0
+            );
+            let rest = State::at_rest(&topology);
+            for (i, (a, b)) in s.pos.iter().zip(&rest.pos).enumerate().filter(|(i, _)| *i != 4) {
+                assert!((a - b).abs() < 1e-6 * delta, "h {h}: coordinate {i} moved {}", a - b);
+            }
+            assert_eq!(
+                (s.vel[4], s.time, s.step),
+                (v, 0.7, 7000),
+                "h {h}: velocity, time and step kept"
+            );
+            assert!((out.max - (delta - want)).abs() < 1e-4 * delta, "h {h}: {out:?}");
+            assert!((out.rms - out.max / 3.0).abs() < 1e-4 * delta, "h {h}: {out:?}");
+        }
+        let mut sim = Simulation::new(
+            topology.clone(),
+            vec![m; 9],
+            params,
+            loads,
+            State::at_rest(&topology),
+            StabilityCheck::Enforce,
+        )
+        .unwrap();
+        let err = settle(&mut sim, 0.0).unwrap_err().to_string();
+        assert!(err.contains("settling step"), "{err}");
     }
 
     #[test]

@@ -21,6 +21,7 @@ pub(super) fn generalise_cmd(
     floor_perturbation: f64,
     bend_scale: (f64, f64),
     modal: Option<std::ops::Range<usize>>,
+    settle: Option<f64>,
 ) -> Result<()> {
     let out = common.out("out/generalise")?;
     let spec = common.spec()?;
@@ -40,6 +41,7 @@ pub(super) fn generalise_cmd(
         floor_perturbation,
         bend_scale,
         modal,
+        settle,
     };
     let rows = suite(&pairs, &options, &common.estimator()?, &mut log_line)?;
     fs::write(out.join("generalise.csv"), suite_csv(&rows)).context("writing generalise.csv")?;

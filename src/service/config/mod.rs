@@ -442,6 +442,14 @@ fn instance(p: &mut Problems, all: &[RawInstance], i: usize, default_publish_hz:
     if let Some(hz) = r.publish_hz {
         p.in_open_closed(&format!("{at}.publish_hz"), hz, 0.0, 1000.0, "messages per second");
     }
+    if let Some(h) = r.switch_settle {
+        p.in_open_closed(&format!("{at}.switch_settle"), h, 0.0, 1.0, "s");
+        if r.kind == "surface" {
+            p.push(format!(
+                "{at}.switch_settle: a surface's switch carries its cloud, it has no cloth shape to settle"
+            ));
+        }
+    }
     if r.levels.is_empty() {
         p.push(format!("{at}.levels: at least one level is needed"));
     }
@@ -474,6 +482,7 @@ fn instance(p: &mut Problems, all: &[RawInstance], i: usize, default_publish_hz:
         shadow_reference: r.shadow_reference,
         looping: r.looping,
         spring_precision,
+        switch_settle: r.switch_settle,
     })
 }
 

@@ -331,6 +331,13 @@ pub struct RawInstance {
     /// "f32" (about 1.5x faster steps; the reference, the shadow and every
     /// estimate stay f64).
     pub spring_precision: Option<String>,
+    /// A cloth's switches to a coarser level settle the shape carried there by one
+    /// backward-Euler step of this many seconds from rest, with the new
+    /// level's own forces (`lodcloth_core::lod::settle`): what a coarser
+    /// level cannot hold of a finer shape (chords shortened by its folds,
+    /// folds finer than its spacing) relaxes at once instead of springing
+    /// back over the next frames. Default: none.
+    pub switch_settle: Option<f64>,
 }
 
 fn default_method() -> String {

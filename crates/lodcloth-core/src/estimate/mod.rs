@@ -219,6 +219,9 @@ pub struct LodProblem {
     steps_per_frame: u64,
     /// Given way at every metric frame of every run ([`LodProblem::with_turns`]).
     turns: Turns,
+    /// The step that settles a restart from the reference
+    /// ([`LodProblem::with_settling`]).
+    settle: Option<f64>,
 }
 
 /// Coarse steps of `dt` per metric frame of `reference`, when `dt` divides it.
@@ -293,6 +296,7 @@ impl LodProblem {
             same,
             steps_per_frame,
             turns: Turns::none(),
+            settle: None,
         })
     }
 
@@ -311,6 +315,16 @@ impl LodProblem {
     /// input) give way at every metric frame as `turns` says.
     pub fn with_turns(self, turns: Turns) -> LodProblem {
         LodProblem { turns, ..self }
+    }
+
+    /// The same level whose restarts from the reference (the short
+    /// horizon's windows) are settled by one backward-Euler step of `h`
+    /// seconds ([`crate::lod::settle`]) before they run.
+    pub fn with_settling(self, h: f64) -> LodProblem {
+        LodProblem {
+            settle: Some(h),
+            ..self
+        }
     }
 
     /// Where this level's runs give way ([`LodProblem::with_turns`]).
@@ -521,6 +535,12 @@ impl LodProblem {
                     level: self.level,
                     source,
                 })?;
+                if let Some(h) = self.settle {
+                    crate::lod::settle(&mut sim, h).map_err(|source| EstimateError::Sim {
+                        level: self.level,
+                        source,
+                    })?;
+                }
                 start
             };
             for f in first..end {

@@ -67,6 +67,10 @@ pub struct InstancePlan {
     /// The precision of the live level's spring forces (the reference, the
     /// shadow and every estimate stay f64).
     pub spring_precision: SpringPrecision,
+    /// A cloth's switches to a coarser level settle the transferred shape by one
+    /// backward-Euler step of this many seconds ([`crate::lod::settle`]);
+    /// `None`: the transferred shape as it is.
+    pub switch_settle: Option<f64>,
 }
 
 impl InstancePlan {
