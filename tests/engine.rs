@@ -179,11 +179,12 @@ fn instances_are_spread_by_their_measured_step_cost() {
 /// instance asks for it (`switch_settle`), and only then: the state after
 /// the switch is, bit for bit, the old level's state transferred to the
 /// new one and settled by `lod::settle` (or merely transferred: without
-/// `switch_settle`, and on the way up to a finer level).
+/// `switch_settle`, and on the way up to a finer level), whether the
+/// switch brings its settling twin (as the service sends it) or not.
 #[test]
 fn a_switch_down_settles_the_carried_shape_when_asked() {
     use lodcloth::engine::Snapshot;
-    use lodcloth::lod::{settle, transfer_state};
+    use lodcloth::lod::{settle, settler, transfer_state};
     let scene = Scene::load(std::path::Path::new("config/scenes/skirt-swaying.toml")).expect("scene");
     let (fine, coarse) = (Level::Vertices(1370), Level::Vertices(915));
     let build = |level| scene.build_level(level).expect("builds");
@@ -195,6 +196,10 @@ fn a_switch_down_settles_the_carried_shape_when_asked() {
                 ..InstanceSetup::new("settled", build(fine), fine)
             },
             InstanceSetup::new("plain", build(fine), fine),
+            InstanceSetup {
+                switch_settle: Some(h),
+                ..InstanceSetup::new("untwinned", build(fine), fine)
+            },
         ],
         settings(2),
     )
@@ -207,21 +212,24 @@ fn a_switch_down_settles_the_carried_shape_when_asked() {
             .expect("engine running");
         rx.blocking_recv().expect("a reply").expect("a snapshot")
     };
-    let switch = |i: usize, level: Level| {
+    let switch = |i: usize, level: Level, twin: bool| {
         let (tx, rx) = tokio::sync::oneshot::channel();
+        let sim = build(level);
+        let settler = twin.then(|| Box::new(settler(&sim, h).expect("a twin")));
         engine.handles()[i]
             .send(Command::Switch {
                 level,
                 prepared: None,
-                sim: Box::new(build(level)),
+                sim: Box::new(sim),
                 cloud: None,
+                settler,
                 reply: tx,
             })
             .expect("engine running");
         rx.blocking_recv().expect("a reply").expect("switched");
     };
     let bits = |s: &lodcloth::sim::State| -> Vec<u64> { s.pos.iter().chain(&s.vel).map(|x| x.to_bits()).collect() };
-    for i in 0..2 {
+    for i in 0..3 {
         let (tx, rx) = tokio::sync::oneshot::channel();
         engine.handles()[i]
             .send(Command::Pause {
@@ -231,11 +239,11 @@ fn a_switch_down_settles_the_carried_shape_when_asked() {
             .expect("engine running");
         rx.blocking_recv().expect("paused");
     }
-    for (i, settled) in [(0, true), (1, false)] {
+    for (i, settled, twin) in [(0, true, true), (1, false, false), (2, true, false)] {
         let before = snapshot(i).state;
         assert!(before.step > 0, "instance {i} never stepped");
         let old = build(fine);
-        switch(i, coarse);
+        switch(i, coarse, twin);
         let mut want = build(coarse);
         want.set_state(transfer_state(old.topology(), &before, want.topology()).expect("transfer"))
             .expect("state");
@@ -251,7 +259,7 @@ fn a_switch_down_settles_the_carried_shape_when_asked() {
             if settled { "settled" } else { "plain" }
         );
         // Back up to the finer level: never settled.
-        switch(i, fine);
+        switch(i, fine, twin);
         let mut up = build(fine);
         up.set_state(transfer_state(want.topology(), &after, up.topology()).expect("transfer"))
             .expect("state");

@@ -18,9 +18,10 @@ impl Runner {
                 prepared,
                 sim,
                 cloud,
+                settler,
                 reply,
             } => {
-                let outcome = self.switch(level, prepared, *sim, cloud.map(|c| *c));
+                let outcome = self.switch(level, prepared, *sim, cloud.map(|c| *c), settler.map(|s| *s));
                 let _ = reply.send(outcome);
             }
             Command::Pause { paused, reply } => {

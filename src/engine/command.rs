@@ -25,6 +25,10 @@ pub enum Command {
         sim: Box<Simulation>,
         /// Surfaces: the new level's cloud map (built off the stepping thread too).
         cloud: Option<Box<CloudMap>>,
+        /// A switch down with `switch_settle`: the new level's settling
+        /// twin (`lod::settler`, built off the stepping thread too; made
+        /// there when missing).
+        settler: Option<Box<Simulation>>,
         reply: oneshot::Sender<Result<SwitchOutcome, String>>,
     },
     Pause {

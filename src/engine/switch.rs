@@ -34,6 +34,7 @@ impl Runner {
         prepared: Option<Arc<Prepared>>,
         mut sim: Simulation,
         cloud: Option<CloudMap>,
+        settler: Option<Simulation>,
     ) -> Result<SwitchOutcome, String> {
         if prepared.as_ref().is_some_and(|p| p.level != level) {
             return Err(format!(
@@ -63,7 +64,11 @@ impl Runner {
         let coarser = resampled && sim.topology().n_nodes < old_topology.n_nodes;
         if let Some(h) = self.switch_settle.filter(|_| coarser) {
             // Before the old level is let go: a refusal keeps it running.
-            crate::lod::settle(&mut sim, h).map_err(|e| e.to_string())?;
+            match settler {
+                Some(mut twin) => crate::lod::settle_with(&mut sim, &mut twin),
+                None => crate::lod::settle(&mut sim, h),
+            }
+            .map_err(|e| e.to_string())?;
         }
         self.sim = sim;
         self.carry_inputs();

@@ -214,7 +214,7 @@ pub(super) async fn apply_in_place(
         }
     }
     match prepared {
-        Ok(ready) => match switch_to(&inst.handle, ready).await {
+        Ok(ready) => match switch_to(&inst.handle, ready, inst.preparer.plan().switch_settle).await {
             Ok(o) => {
                 tracing::info!(
                     instance = %name,
@@ -241,9 +241,13 @@ pub(super) async fn apply_in_place(
     }
 }
 
-pub(super) async fn switch_to(handle: &InstanceHandle, ready: Ready) -> Result<SwitchOutcome, String> {
+pub(super) async fn switch_to(
+    handle: &InstanceHandle,
+    ready: Ready,
+    settle: Option<f64>,
+) -> Result<SwitchOutcome, String> {
     let level = ready.prepared.level;
-    send_switch(handle, level, Some(ready.prepared), ready.sim, ready.cloud).await
+    send_switch(handle, level, Some(ready.prepared), ready.sim, ready.cloud, settle).await
 }
 
 /// Run `work` on a thread of its own in the class of work a client waits
@@ -273,6 +277,7 @@ pub(super) async fn switch_at_once(
     preparer: Arc<Preparer>,
     level: Level,
 ) -> Result<SwitchOutcome, PrepareError> {
+    let settle = preparer.plan().switch_settle;
     let start = on_client_thread(move || preparer.quick(level))
         .await
         .map_err(|e| PrepareError::Failed {
@@ -280,7 +285,7 @@ pub(super) async fn switch_at_once(
             method: Method::Same,
             message: format!("building the level: {e}"),
         })??;
-    send_switch(handle, level, None, start.sim, start.cloud)
+    send_switch(handle, level, None, start.sim, start.cloud, settle)
         .await
         .map_err(|message| PrepareError::Failed {
             level,
@@ -295,7 +300,23 @@ async fn send_switch(
     prepared: Option<Arc<Prepared>>,
     sim: Simulation,
     cloud: Option<CloudMap>,
+    settle: Option<f64>,
 ) -> Result<SwitchOutcome, String> {
+    // A switch down with `switch_settle` settles the carried shape; its
+    // twin's stability estimate alone takes ~30 ms on the skirt's 915v
+    // level, which the stepping thread should not wait for.
+    let down = cloud.is_none() && sim.topology().n_nodes < handle.status().topology.n_nodes;
+    let settler = match settle.filter(|_| down) {
+        Some(h) => {
+            let base = sim.clone();
+            Some(Box::new(
+                on_client_thread(move || crate::lod::settler(&base, h))
+                    .await?
+                    .map_err(|e| format!("settling the switch: {e}"))?,
+            ))
+        }
+        None => None,
+    };
     let (tx, rx) = oneshot::channel();
     handle
         .send(Command::Switch {
@@ -303,6 +324,7 @@ async fn send_switch(
             prepared,
             sim: Box::new(sim),
             cloud: cloud.map(Box::new),
+            settler,
             reply: tx,
         })
         .map_err(str::to_string)?;

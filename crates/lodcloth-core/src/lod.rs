@@ -36,10 +36,11 @@
 //! springs out of the sampled shape within milliseconds. [`settle`] takes
 //! one backward-Euler step of length `h` from rest at the transferred
 //! positions, with the level's own forces: a mode of angular frequency ω
-//! moves by `1/(1 + ω²h²)` of the way to its equilibrium, so the stiff ones
+//! moves `ω²h²/(1 + ω²h²)` of the way to its equilibrium, so the stiff ones
 //! (the compressed chords, the aliased short folds) settle and the slow ones
 //! (the drape, its folds at the level's scale) stay; velocities, time and
-//! step are kept.
+//! step are kept. A slow mode still moves by about h²·a where the cloth
+//! accelerates ((1/60 s)²·g is 2.7 mm).
 
 use std::sync::Arc;
 
@@ -297,12 +298,26 @@ pub struct Settled {
 /// Settle `sim`'s state in place: its positions replaced by one backward
 /// Euler step of `h` (s) taken from rest there, with the level's own
 /// springs, bending, loads and contact (see the module docs); velocities,
-/// time and step kept, pins put back where they are at that time. Builds
-/// a twin of the simulation, so it allocates: for a switch, not a step.
+/// time and step kept, pins put back where they are at that time.
+/// [`settler`] then [`settle_with`]: it builds the settling twin, so it
+/// allocates (and estimates the twin's stability, tens of milliseconds on
+/// a thousand nodes): for a switch or a restart, not a step.
 ///
 /// # Errors
 /// A `h` that is not a positive finite step, or a step that diverged.
 pub fn settle(sim: &mut Simulation, h: f64) -> Result<Settled, SimError> {
+    let mut twin = settler(sim, h)?;
+    settle_with(sim, &mut twin)
+}
+
+/// The twin [`settle_with`] settles `sim`'s states with: the same cloth,
+/// masses, material and loads, stepped by backward Euler at `h`. Build it
+/// where time is cheap (a level's twin before a switch reaches its
+/// stepping thread).
+///
+/// # Errors
+/// A `h` that is not a positive finite step.
+pub fn settler(sim: &Simulation, h: f64) -> Result<Simulation, SimError> {
     if !(h.is_finite() && h > 0.0) {
         return Err(SimError::InvalidParameter {
             name: "settling step".into(),
@@ -313,20 +328,37 @@ pub fn settle(sim: &mut Simulation, h: f64) -> Result<Settled, SimError> {
     let mut params = *sim.params();
     params.integrator = Integrator::ImplicitEuler;
     params.dt = h;
-    let mut rest = sim.state().clone();
-    rest.vel.fill(0.0);
-    let mut twin = Simulation::new(
+    Simulation::new(
         Arc::clone(sim.topology()),
         sim.masses().to_vec(),
         params,
         sim.loads().clone(),
-        rest,
+        sim.state().clone(),
         StabilityCheck::Force,
-    )?;
+    )
+}
+
+/// [`settle`] with a twin made by [`settler`] for `sim`'s cloth (its
+/// state is overwritten): one set state and one implicit step.
+///
+/// # Errors
+/// A twin of another cloth, or a step that diverged.
+pub fn settle_with(sim: &mut Simulation, twin: &mut Simulation) -> Result<Settled, SimError> {
+    let n = sim.topology().n_nodes;
+    if twin.topology().n_nodes != n {
+        return Err(SimError::SizeMismatch {
+            what: "settling twin",
+            got: twin.topology().n_nodes,
+            expected: n,
+        });
+    }
+    let mut rest = sim.state().clone();
+    rest.vel.fill(0.0);
+    twin.set_state(rest)?;
     if !twin.step().finite {
         return Err(SimError::InvalidParameter {
             name: "settling step".into(),
-            value: h,
+            value: twin.params().dt,
             reason: "its backward-Euler step diverged",
         });
     }
@@ -334,7 +366,6 @@ pub fn settle(sim: &mut Simulation, h: f64) -> Result<Settled, SimError> {
     let mut state = sim.state().clone();
     state.pos.copy_from_slice(&twin.state().pos);
     sim.set_state(state)?;
-    let n = sim.topology().n_nodes;
     let (mut sum, mut max) = (0.0f64, 0.0f64);
     for k in 0..n {
         let d2: f64 = (0..3)

@@ -141,7 +141,7 @@ pub(in crate::service) async fn answer_switch(ctx: Arc<Context>, q: Query) {
     let cached = !provisional && (was_ready || ready.prepared.cached);
     let live_error = ready.prepared.predicted_error;
     let live = ready.prepared.clone();
-    match switch_to(&inst.handle, ready).await {
+    match switch_to(&inst.handle, ready, inst.preparer.plan().switch_settle).await {
         Ok(o) => {
             inst.predict_under_input(&live);
             if provisional {
