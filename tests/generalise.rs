@@ -273,6 +273,22 @@ fn clamped_strip(dir: &std::path::Path) -> Scene {
     Scene::load(&path).expect("a valid mesh scene")
 }
 
+/// `same` alone at `level` on the strip, half trained, 0.05 s windows,
+/// modes in `modal` stiffened.
+fn same_at(level: GridLevel, modal: Option<std::ops::Range<usize>>) -> SuiteOptions {
+    SuiteOptions {
+        level,
+        methods: vec![Method::Same],
+        fit: FitOptions::default(),
+        train_fraction: 0.5,
+        short_window: 0.05,
+        floor_perturbation: 1e-6,
+        bend_scale: (1.0, 1.0),
+        modal,
+        settle: None,
+    }
+}
+
 /// `settle` settles every restart of the short horizon before it runs:
 /// the short horizon moves, the long horizon (one run from rest) and the
 /// estimate do not, the row's notes say so, and a step that is not a
@@ -286,15 +302,8 @@ fn settling_moves_the_short_horizon_alone() {
         suite(
             &scenes,
             &SuiteOptions {
-                level: GridLevel::Percent(40),
-                methods: vec![Method::Same],
-                fit: FitOptions::default(),
-                train_fraction: 0.5,
-                short_window: 0.05,
-                floor_perturbation: 1e-6,
-                bend_scale: (1.0, 1.0),
-                modal: None,
                 settle,
+                ..same_at(GridLevel::Percent(40), None)
             },
             &no_cache(),
             &mut |_| {},
@@ -333,17 +342,7 @@ fn a_modal_band_scores_the_level_with_its_bending_modes_stiffened() {
     let dir = tempfile::tempdir().expect("temp dir");
     let s = clamped_strip(dir.path());
     let scenes = vec![(s.clone(), record(&s))];
-    let options = |level, modal| SuiteOptions {
-        level,
-        methods: vec![Method::Same],
-        fit: FitOptions::default(),
-        train_fraction: 0.5,
-        short_window: 0.05,
-        floor_perturbation: 1e-6,
-        bend_scale: (1.0, 1.0),
-        modal,
-        settle: None,
-    };
+    let options = same_at;
     let run = |modal| {
         suite(
             &scenes,
