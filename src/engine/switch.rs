@@ -60,7 +60,7 @@ impl Runner {
         };
         sim.set_state(state).map_err(|e| e.to_string())?;
         // Only down: a coarser level reads more in a finer shape than it
-        // holds (docs/results.md, "Settling a switch").
+        // holds (docs/results.md, "Settling what a level cannot hold").
         let coarser = resampled && sim.topology().n_nodes < old_topology.n_nodes;
         if let Some(h) = self.switch_settle.filter(|_| coarser) {
             // Before the old level is let go: a refusal keeps it running.
