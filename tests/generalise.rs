@@ -7,7 +7,7 @@
 use std::sync::Arc;
 
 use lodcloth::estimate::{FitOptions, Method, RecordSpec, Reference};
-use lodcloth::experiments::generalise::{suite, twin_floor, SuiteOptions};
+use lodcloth::experiments::generalise::{draw_offset, reference_draw, suite, twin_floor, SuiteOptions};
 use lodcloth::experiments::lod::{lod_plan, Horizon};
 use lodcloth::plan::{Estimator, GridLevel, Level};
 use lodcloth::scene::Scene;
@@ -247,6 +247,79 @@ fn a_bend_scale_scores_the_estimate_with_its_bend_class_scaled() {
         let e = run(bad).expect_err("refused").to_string();
         assert!(e.contains("bend class's scales"), "{bad:?}: {e}");
     }
+}
+
+/// A reference draw is the scene with every stiffness — a grid's springs,
+/// a mesh's membrane and bending rigidity — × (1 + d·ε), d = 0, +1, −1,
+/// +2, −2, and nothing else: damping, masses and shape as written, draw 0
+/// the scene itself, every other draw a hash of its own (no cache mixes
+/// their estimates). Its recording is another one, a hair away.
+#[test]
+fn a_reference_draw_scales_every_stiffness_and_nothing_else() {
+    assert_eq!([0, 1, 2, 3, 4].map(draw_offset), [0.0, 1.0, -1.0, 2.0, -2.0]);
+    let eps = 1e-6;
+    let dir = tempfile::tempdir().expect("temp dir");
+    let grid = scene("wide-cotton", 2.0, 1.0, 17, 9, 1.0);
+    let strip = clamped_strip(dir.path());
+    for s in [&grid, &strip] {
+        let plain = s.build().expect("builds");
+        let mut hashes = vec![s.source_hash];
+        for d in 0..5 {
+            let drawn = reference_draw(s, d, eps);
+            let sim = drawn.build().expect("a draw builds");
+            let f = 1.0 + draw_offset(d) * eps;
+            let mut stiff = 0;
+            for class in SpringClass::ALL {
+                let (a, b) = (
+                    plain.params().material.springs[class.index()],
+                    sim.params().material.springs[class.index()],
+                );
+                assert!(
+                    (b.k - a.k * f).abs() <= 1e-14 * a.k.abs(),
+                    "{} draw {d} {class:?}: K {} against {} × {f}",
+                    s.name,
+                    b.k,
+                    a.k
+                );
+                assert_eq!(b.c, a.c, "{} draw {d} {class:?}: damping changed", s.name);
+                stiff += usize::from(a.k > 0.0);
+            }
+            assert!(stiff >= 3, "{}: {stiff} classes with a stiffness", s.name);
+            assert_eq!(sim.state().pos, plain.state().pos, "{} draw {d}: the shape", s.name);
+            assert_eq!(
+                sim.topology().node_areas,
+                plain.topology().node_areas,
+                "{} draw {d}: the masses",
+                s.name
+            );
+            if d == 0 {
+                assert_eq!(drawn.source_hash, s.source_hash, "draw 0 is the scene");
+            } else {
+                assert!(
+                    !hashes.contains(&drawn.source_hash),
+                    "{} draw {d}: a hash of its own",
+                    s.name
+                );
+                hashes.push(drawn.source_hash);
+            }
+        }
+    }
+    // Two draws score alike but not the same.
+    let run = |d| {
+        let s = reference_draw(&grid, d, eps);
+        let r = record(&s);
+        suite(&[(s, r)], &same_at(GridLevel::Long(9), None), &no_cache(), &mut |_| {})
+            .expect("runs")
+            .remove(0)
+    };
+    let (a, b) = (run(0), run(1));
+    assert_ne!(a.own.short_mean, b.own.short_mean, "the draw changed nothing");
+    assert!(
+        (a.own.short_mean - b.own.short_mean).abs() < 1e-3 * a.own.short_mean,
+        "a millionth apart, {} against {}",
+        a.own.short_mean,
+        b.own.short_mean
+    );
 }
 
 /// A strip clamped at one end, bending under gravity with a bending

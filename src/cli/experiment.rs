@@ -300,6 +300,13 @@ pub enum Experiment {
         /// the reference's shape relaxes before the window runs.
         #[arg(long, value_parser = parse_factor)]
         settle: Option<f64>,
+        /// Record every scene's reference this many times, its stiffnesses
+        /// × (1 + d · --floor-perturbation) for d = 0, +1, −1, +2, …, and
+        /// score every method on each: on a chaotic scene one recording is
+        /// one draw of its outcome, and a level's held-out error is judged
+        /// by the mean over the draws (with their spread).
+        #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=100))]
+        reference_draws: u32,
     },
     /// The paper's BCD and GKD under every reading of its lost equations
     /// 3–8, with per-node masses over its levels, scored against the trend
@@ -429,6 +436,7 @@ pub fn run(experiment: Experiment) -> Result<()> {
             bend_damping_scale,
             modal,
             settle,
+            reference_draws,
         } => {
             common.apply_quick();
             let level = level.unwrap_or(GridLevel::Long(if common.quick { 16 } else { 40 }));
@@ -441,6 +449,7 @@ pub fn run(experiment: Experiment) -> Result<()> {
                 bend,
                 modal,
                 settle,
+                reference_draws as usize,
             )
         }
         Experiment::Readings {

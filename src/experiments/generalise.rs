@@ -37,6 +37,102 @@ use crate::plan::{default_problem, stable_problem, Estimator, GridLevel, Level, 
 use crate::scene::{MassConvention, Scene};
 use crate::sim::{Material, SpringClass, SpringCoeffs, SpringKind};
 
+/// The offset of reference draw `draw` in units of the draws'
+/// perturbation: 0, +1, −1, +2, −2, … (draw 0 is the scene as written).
+pub fn draw_offset(draw: usize) -> f64 {
+    let m = draw.div_ceil(2) as f64;
+    if draw % 2 == 1 {
+        m
+    } else {
+        -m
+    }
+}
+
+/// Draw `draw` of `scene`'s reference: every stiffness of its material —
+/// a grid's springs, a mesh's membrane moduli and bending rigidity — times
+/// `1 + draw_offset(draw) · perturbation`, nothing else changed, and a
+/// source hash of its own, so no cache takes one draw's estimates for
+/// another's. On a chaotic scene each draw is another outcome of the same
+/// fabric (the reference's twins of [`twin_floor`], recorded as references
+/// themselves), and a level's short horizon is one sample of it: one
+/// recording can land 0.3–1.5 points from another a millionth apart
+/// (docs/results.md, "One recording is one draw of the short horizon").
+/// Draw 0 is `scene` itself, hash included.
+pub fn reference_draw(scene: &Scene, draw: usize, perturbation: f64) -> Scene {
+    let mut s = scene.clone();
+    if draw == 0 {
+        return s;
+    }
+    let f = 1.0 + draw_offset(draw) * perturbation;
+    for spring in &mut s.params.material.springs {
+        spring.k *= f;
+    }
+    if let Some(mesh) = s.mesh.as_mut() {
+        let mesh = Arc::make_mut(mesh);
+        let m = &mut mesh.membrane.stiffness;
+        for v in [
+            &mut m.stretch_u,
+            &mut m.stretch_v,
+            &mut m.shear,
+            &mut m.bend_u,
+            &mut m.bend_v,
+        ] {
+            *v *= f;
+        }
+        if let Some(b) = mesh.bending.as_mut() {
+            b.k *= f;
+        }
+    }
+    s.source_hash = crate::hash::fnv1a64(
+        &[
+            &scene.source_hash.to_le_bytes()[..],
+            &(draw as u64).to_le_bytes(),
+            &perturbation.to_bits().to_le_bytes(),
+        ]
+        .concat(),
+    );
+    s
+}
+
+/// A measure over reference draws: mean, sample standard deviation (0 for
+/// one draw) and range.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Spread {
+    /// The mean over the draws.
+    pub mean: f64,
+    /// The sample standard deviation (n − 1), 0 for a single draw.
+    pub sd: f64,
+    /// The smallest draw.
+    pub min: f64,
+    /// The largest draw.
+    pub max: f64,
+    /// How many draws.
+    pub n: usize,
+}
+
+impl Spread {
+    /// The spread of `values`; `None` when there are none.
+    pub fn of(values: &[f64]) -> Option<Spread> {
+        let n = values.len();
+        if n == 0 {
+            return None;
+        }
+        let mean = values.iter().sum::<f64>() / n as f64;
+        let sd = if n > 1 {
+            (values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1) as f64).sqrt()
+        } else {
+            0.0
+        };
+        Some(Spread {
+            mean,
+            sd,
+            min: values.iter().copied().fold(f64::INFINITY, f64::min),
+            max: values.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+            n,
+        })
+    }
+}
+
 /// Options of [`suite`].
 #[derive(Debug, Clone)]
 pub struct SuiteOptions {
@@ -474,6 +570,16 @@ mod tests {
 
     fn material(k: [f64; 3], c: [f64; 3]) -> Material {
         Material::isotropic([0, 1, 2].map(|t| SpringCoeffs { k: k[t], c: c[t] }))
+    }
+
+    #[test]
+    fn a_spread_is_the_mean_sample_sd_and_range() {
+        let s = Spread::of(&[1.0, 2.0, 3.0, 4.0]).expect("four values");
+        assert_eq!((s.mean, s.min, s.max, s.n), (2.5, 1.0, 4.0, 4));
+        assert!((s.sd - (5.0f64 / 3.0).sqrt()).abs() < 1e-15, "{}", s.sd);
+        let one = Spread::of(&[0.03]).expect("one value");
+        assert_eq!((one.mean, one.sd, one.min, one.max), (0.03, 0.0, 0.03, 0.03));
+        assert_eq!(Spread::of(&[]), None);
     }
 
     #[test]
