@@ -163,7 +163,8 @@ pub struct SuiteOptions {
     pub modal: Option<Range<usize>>,
     /// Settle every restart of the short horizon by one backward-Euler
     /// step of this length (s) before it runs
-    /// ([`lodcloth_core::lod::settle`]); estimates are unchanged by it.
+    /// ([`lodcloth_core::lod::settle`]); estimates are unchanged by it but
+    /// `follow`'s, which fits the restarts as they are scored.
     pub settle: Option<f64>,
 }
 
@@ -318,7 +319,10 @@ pub fn suite(
             ..options.fit.clone()
         };
         for &method in &options.methods {
-            let mut est = estimator.estimate(p, method, &fit)?;
+            // `follow` fits the restarts as they are scored: settled when
+            // they are.
+            let estimating = if method == Method::Follow { scored } else { p };
+            let mut est = estimator.estimate(estimating, method, &fit)?;
             if let Some(band) = &options.modal {
                 let end = if band.end == usize::MAX {
                     String::new()

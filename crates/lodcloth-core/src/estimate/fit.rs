@@ -45,6 +45,16 @@
 //! the shape fit (bending ×2.25) raised the short-horizon eq. 9 error from
 //! 4.88 % to 5.86 %, the reference's drape not being an equilibrium of a
 //! coarser mesh with any bending (results.md, "Mesh cloths").
+//!
+//! A [`FitTarget::Windows`] fit (`follow`) fits the measure the short
+//! horizon scores: its residuals are the eq. 9 ones of the level restarted
+//! from the reference every `guard_window` (0.25 s) over the training
+//! frames, settled as the problem settles its restarts. Each evaluation
+//! runs the whole training range in windows (the sampled frames are
+//! where residuals are read, not where runs stop), so it costs what
+//! scoring the training half's short horizon costs. Its guard's training
+//! RMS is that windowed error, so its second check (the short horizon) asks
+//! the same of all training frames.
 
 use std::ops::Range;
 
@@ -89,6 +99,13 @@ pub enum FitTarget {
     /// where the eq. 9 residuals read mostly where the folds went
     /// (results.md, "A fit on the shape").
     Shape,
+    /// `(p_ref − p_sim)/O_max` as for `Positions`, the level restarted from
+    /// the reference every `guard_window` (and settled when the problem
+    /// settles its restarts, [`LodProblem::with_settling`]) as the short
+    /// horizon is scored ([`LodProblem::score_windows`]): how well the
+    /// level follows the reference from its states, which on a chaotic
+    /// scene is what a level can be judged on (`follow`).
+    Windows,
 }
 
 /// Quantiles per world coordinate of the [`FitTarget::Shape`] residuals.
@@ -268,6 +285,10 @@ pub struct FitReport {
 struct Objective<'a> {
     problem: &'a LodProblem,
     target: FitTarget,
+    /// The first training frame (where a `Windows` target's windows begin).
+    first: usize,
+    /// A `Windows` target's window (metric frames).
+    window: usize,
     frames: Vec<usize>,
     targets: Vec<Vec<f64>>,
     margin: f64,
@@ -283,6 +304,21 @@ impl Objective<'_> {
         let n = self.problem.topology().n_nodes;
         let inv = self.weight / self.problem.reference.o_max;
         let mut r = Vec::with_capacity(self.frames.len() * 3 * n);
+        if self.target == FitTarget::Windows {
+            drop(sim);
+            let mut next = 0;
+            let last = *self.frames.last()?;
+            let diverged = self
+                .problem
+                .windows(*material, self.first..last + 1, self.window, &mut |_| {}, &mut |f, pos| {
+                    if self.frames.get(next) == Some(&f) {
+                        r.extend(self.targets[next].iter().zip(pos).map(|(t, p)| (t - p) * inv));
+                        next += 1;
+                    }
+                })
+                .ok()?;
+            return (!diverged && next == self.frames.len()).then_some(r);
+        }
         let mut scratch = ShapeScratch::default();
         let mut shape = Vec::new();
         let mut next = 0;
@@ -298,7 +334,9 @@ impl Objective<'_> {
             if self.frames[next] == f {
                 let pos = &sim.state().pos;
                 match self.target {
-                    FitTarget::Positions => r.extend(self.targets[next].iter().zip(pos).map(|(t, p)| (t - p) * inv)),
+                    FitTarget::Positions | FitTarget::Windows => {
+                        r.extend(self.targets[next].iter().zip(pos).map(|(t, p)| (t - p) * inv))
+                    }
                     FitTarget::Shape => {
                         shape.clear();
                         shape_quantiles(pos, self.problem.masses(), &mut scratch, &mut shape);
@@ -333,7 +371,7 @@ impl<'a> Objective<'a> {
                 let mut m = vec![0.0; 3 * n];
                 problem.correlation().map(&problem.reference.frames[f], &mut m);
                 match options.target {
-                    FitTarget::Positions => m,
+                    FitTarget::Positions | FitTarget::Windows => m,
                     FitTarget::Shape => {
                         let mut q = Vec::with_capacity(3 * SHAPE_QUANTILES);
                         shape_quantiles(&m, problem.masses(), &mut scratch, &mut q);
@@ -345,12 +383,15 @@ impl<'a> Objective<'a> {
         // Positions: the mean squared eq. 9 error of a node; shape: of a
         // quantile (both per coordinate summed, so comparable).
         let per_frame = match options.target {
-            FitTarget::Positions => n,
+            FitTarget::Positions | FitTarget::Windows => n,
             FitTarget::Shape => SHAPE_QUANTILES,
         };
+        let interval = problem.reference.dt * problem.reference.spec.metric_stride as f64;
         Objective {
             problem,
             target: options.target,
+            first: train.start,
+            window: ((options.guard_window / interval).round() as usize).max(1),
             frames,
             targets,
             margin: options.stability_margin,
@@ -656,7 +697,7 @@ pub fn fit(problem: &LodProblem, options: &FitOptions, progress: ProgressFn<'_>)
         let window = ((options.guard_window / interval).round() as usize).max(1);
         let short = |m: Material| -> Result<f64, EstimateError> {
             match options.target {
-                FitTarget::Positions => {
+                FitTarget::Positions | FitTarget::Windows => {
                     let report = problem.score_windows(m, train.clone(), window, &mut |_| {})?;
                     Ok(if report.diverged { f64::INFINITY } else { report.mean })
                 }

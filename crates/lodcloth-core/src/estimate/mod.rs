@@ -96,11 +96,18 @@ pub enum Method {
     /// node by node ([`fit::FitTarget::Shape`]), for scenes whose folds form
     /// where rounding decides (a drape).
     Shape,
+    /// Coefficients fitted so the coarse level follows the reference from
+    /// the reference's own states: the same Levenberg–Marquardt fit on the
+    /// eq. 9 residuals of the level restarted from the reference every
+    /// 0.25 s (and settled, when the problem settles its restarts)
+    /// ([`fit::FitTarget::Windows`]): the short horizon a level lives in
+    /// after a switch, on a scene whose long horizon is chaos.
+    Follow,
 }
 
 impl Method {
     /// Every method, cheapest first.
-    pub const ALL: [Method; 7] = [
+    pub const ALL: [Method; 8] = [
         Method::Same,
         Method::SameSpring,
         Method::Bcd,
@@ -108,6 +115,7 @@ impl Method {
         Method::Lsq,
         Method::Fit,
         Method::Shape,
+        Method::Follow,
     ];
 
     /// Name used in config files, CLI and CSV.
@@ -120,6 +128,7 @@ impl Method {
             Method::Lsq => "lsq",
             Method::Fit => "fit",
             Method::Shape => "shape",
+            Method::Follow => "follow",
         }
     }
 
@@ -325,6 +334,12 @@ impl LodProblem {
             settle: Some(h),
             ..self
         }
+    }
+
+    /// The step that settles this level's restarts from the reference
+    /// ([`LodProblem::with_settling`]), if any.
+    pub fn settling(&self) -> Option<f64> {
+        self.settle
     }
 
     /// Where this level's runs give way ([`LodProblem::with_turns`]).
@@ -618,6 +633,13 @@ impl LodProblem {
                 let options = FitOptions {
                     target: FitTarget::Shape,
                     fd_step: options.fd_step.max(fit::SHAPE_FD_STEP),
+                    ..options.clone()
+                };
+                Details::Fit(fit::fit(self, &options, progress)?)
+            }
+            Method::Follow => {
+                let options = FitOptions {
+                    target: FitTarget::Windows,
                     ..options.clone()
                 };
                 Details::Fit(fit::fit(self, &options, progress)?)

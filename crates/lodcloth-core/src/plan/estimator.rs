@@ -131,7 +131,7 @@ impl Estimator {
                 fit.min_gain,
                 fit.short_tolerance,
                 fit.guard_window
-            ),
+            ) + &problem.settling().map_or(String::new(), |h| format!("[settle={h}]")),
             mass: problem.mass.name().to_string(),
             integrator: problem.integrator.name().to_string(),
             dt: problem.dt,

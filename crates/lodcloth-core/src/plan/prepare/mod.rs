@@ -496,13 +496,23 @@ impl Preparer {
             max_iterations: self.estimation.fit_iterations as usize,
             ..FitOptions::default()
         };
+        // `follow` fits the level's restarts from the reference as a switch
+        // down makes them: settled when the instance settles its switches.
+        let settled;
+        let estimating = match (method, self.plan.switch_settle) {
+            (Method::Follow, Some(h)) => {
+                settled = problem.clone().with_settling(h);
+                &settled
+            }
+            _ => &problem,
+        };
         let estimated = if cached_only {
-            match self.estimator.cached(&problem, method, &fit) {
+            match self.estimator.cached(estimating, method, &fit) {
                 Some(e) => e,
                 None => return Ok(None),
             }
         } else {
-            self.estimator.estimate(&problem, method, &fit).map_err(failed)?
+            self.estimator.estimate(estimating, method, &fit).map_err(failed)?
         };
         let material = estimated.material;
         let (problem, limit) = if self.plan.dt.is_some() {

@@ -64,11 +64,10 @@ impl Preparer {
             // A surface has no grid directions: both "same"s are its springs.
             Method::Same | Method::SameSpring => (model.sim.params().material, 0.0, false),
             Method::Fit => self.surface_fit(scene, &mut model, &reference, points)?,
-            Method::Shape => {
-                return Err(failed(
-                    "`shape` fits a cloth level's coefficients; a point-sampled surface's are fitted by `fit`"
-                        .to_string(),
-                ))
+            Method::Shape | Method::Follow => {
+                return Err(failed(format!(
+                    "`{method}` fits a cloth level's coefficients; a point-sampled surface's are fitted by `fit`"
+                )))
             }
             Method::Bcd | Method::Gkd | Method::Lsq => {
                 let estimated = self.surface_inverse(scene, &model, points, method)?;
