@@ -310,12 +310,18 @@ impl Objective<'_> {
             let last = *self.frames.last()?;
             let diverged = self
                 .problem
-                .windows(*material, self.first..last + 1, self.window, &mut |_| {}, &mut |f, pos| {
-                    if self.frames.get(next) == Some(&f) {
-                        r.extend(self.targets[next].iter().zip(pos).map(|(t, p)| (t - p) * inv));
-                        next += 1;
-                    }
-                })
+                .windows(
+                    *material,
+                    self.first..last + 1,
+                    self.window,
+                    &mut |_| {},
+                    &mut |f, pos| {
+                        if self.frames.get(next) == Some(&f) {
+                            r.extend(self.targets[next].iter().zip(pos).map(|(t, p)| (t - p) * inv));
+                            next += 1;
+                        }
+                    },
+                )
                 .ok()?;
             return (!diverged && next == self.frames.len()).then_some(r);
         }
