@@ -4,6 +4,7 @@
 
 use std::sync::Arc;
 
+use lodcloth::estimate::fit::FitReport;
 use lodcloth::estimate::{no_progress, Details, FitOptions, LodProblem, Method, Reading, RecordSpec, Reference};
 use lodcloth::scene::{MassConvention, Scene};
 use lodcloth::sim::{Integrator, Material, SpringClass, SpringCoeffs};
@@ -155,6 +156,30 @@ fn fit_recovers_known_coefficients_from_a_wrong_start() {
     );
 }
 
+/// `method` on an 8×8 pulled cloth at its own resolution, from
+/// [`from_a_wrong_start`] with `tweak` applied: the problem, the options,
+/// the fit's report and each coefficient's relative error.
+fn recover(
+    method: Method,
+    tweak: impl FnOnce(FitOptions) -> FitOptions,
+) -> (LodProblem, FitOptions, FitReport, [f64; 10]) {
+    let s = scene(8, "symplectic_euler", 2e-4);
+    let reference = record(&s, 2500, 10, 10);
+    let p = own_resolution(&s, &reference);
+    let truth = reference.material;
+    let options = tweak(from_a_wrong_start(&p, &truth));
+    let est = p.estimate(method, &options, &mut no_progress).unwrap();
+    let Details::Fit(report) = est.details else {
+        panic!("fit details")
+    };
+    let err = relative_errors(&est.material, &truth);
+    eprintln!(
+        "{method}: {} iterations, rms {:.3e} → {:.3e}, errors {err:?}",
+        report.iterations, report.start_rms, report.rms
+    );
+    (p, options, report, err)
+}
+
 #[test]
 fn shape_quantiles_are_the_mass_weighted_quantile_function() {
     use lodcloth::estimate::fit::{shape_quantiles, ShapeScratch, SHAPE_QUANTILES};
@@ -202,20 +227,7 @@ fn shape_fit_recovers_known_coefficients_from_a_wrong_start() {
     // As `fit_recovers_known_coefficients_from_a_wrong_start`, matching the
     // distribution of positions instead of every node: the pulled cloth's
     // spread in x, y and z over 0.5 s still tells every class's stiffness.
-    let s = scene(8, "symplectic_euler", 2e-4);
-    let reference = record(&s, 2500, 10, 10);
-    let p = own_resolution(&s, &reference);
-    let truth = reference.material;
-    let options = from_a_wrong_start(&p, &truth);
-    let est = p.estimate(Method::Shape, &options, &mut no_progress).unwrap();
-    let Details::Fit(report) = &est.details else {
-        panic!("fit details")
-    };
-    let err = relative_errors(&est.material, &truth);
-    eprintln!(
-        "shape: {} iterations, rms {:.3e} → {:.3e}, errors {err:?}",
-        report.iterations, report.start_rms, report.rms
-    );
+    let (_, _, report, err) = recover(Method::Shape, |o| o);
     assert!(report.kept_start.is_none(), "{:?}", report.kept_start);
     // Within 3 % (1.9 % measured on an AVX-512 Xeon). The damping is not
     // asserted: a distribution of positions tells it poorly here (0.2–0.9
@@ -236,23 +248,10 @@ fn follow_recovers_known_coefficients_from_a_wrong_start() {
     // As `fit_recovers_known_coefficients_from_a_wrong_start`, the level
     // restarted from the reference every 0.05 s (ten windows of the 0.5 s
     // run): each window's positions still tell every class's stiffness.
-    let s = scene(8, "symplectic_euler", 2e-4);
-    let reference = record(&s, 2500, 10, 10);
-    let p = own_resolution(&s, &reference);
-    let truth = reference.material;
-    let options = FitOptions {
+    let (p, options, report, err) = recover(Method::Follow, |o| FitOptions {
         guard_window: 0.05,
-        ..from_a_wrong_start(&p, &truth)
-    };
-    let est = p.estimate(Method::Follow, &options, &mut no_progress).unwrap();
-    let Details::Fit(report) = &est.details else {
-        panic!("fit details")
-    };
-    let err = relative_errors(&est.material, &truth);
-    eprintln!(
-        "follow: {} iterations, rms {:.3e} → {:.3e}, errors {err:?}",
-        report.iterations, report.start_rms, report.rms
-    );
+        ..o
+    });
     assert!(report.kept_start.is_none(), "{:?}", report.kept_start);
     // Within 1 % (0.54 % measured on an AVX-512 Xeon); the damping within
     // 10 % (6 %: a restart's velocities are central differences of the
@@ -286,6 +285,47 @@ fn follow_recovers_known_coefficients_from_a_wrong_start() {
         "follow's start {} against the run from rest's {}",
         report.start_rms,
         from_rest.start_rms
+    );
+}
+
+/// The cache keeps a fit of settled restarts apart from an unsettled
+/// problem's (and from another settling's): `follow` fits the restarts as
+/// the problem settles them, so its coefficients depend on the settling.
+#[test]
+fn a_settled_problems_estimate_is_cached_apart() {
+    use lodcloth::cache::CoefficientCache;
+    use lodcloth::plan::Estimator;
+    let s = scene(8, "symplectic_euler", 2e-4);
+    let reference = record(&s, 500, 10, 10);
+    let p = own_resolution(&s, &reference);
+    let dir = tempfile::tempdir().expect("temp dir");
+    let estimator = Estimator {
+        cache: Some(CoefficientCache::open(dir.path()).expect("cache")),
+        tag: "test".into(),
+    };
+    let options = FitOptions {
+        max_iterations: 1,
+        guard_window: 0.02,
+        ..FitOptions::default()
+    };
+    let settled = p.clone().with_settling(1e-3);
+    let est = estimator
+        .estimate(&settled, Method::Follow, &options)
+        .expect("estimates");
+    assert!(!est.cached);
+    let hit = estimator
+        .cached(&settled, Method::Follow, &options)
+        .expect("cached under its settling");
+    assert_eq!(hit.material, est.material);
+    assert!(
+        estimator.cached(&p, Method::Follow, &options).is_none(),
+        "the unsettled problem was served the settled fit"
+    );
+    assert!(
+        estimator
+            .cached(&p.clone().with_settling(2e-3), Method::Follow, &options)
+            .is_none(),
+        "another settling was served this one's fit"
     );
 }
 
