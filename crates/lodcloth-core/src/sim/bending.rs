@@ -33,7 +33,15 @@ pub struct Bending {
     pub nodes: Vec<u32>,
     /// The weight of each entry (1/m): a stencil's weights sum to 0.
     pub weights: Vec<f64>,
+    /// Where each group of stencils starts, and one past the last: a group
+    /// is up to [`GROUP`] consecutive stencils over the same nodes (a mesh
+    /// vertex's three second derivatives), which the kernels read and
+    /// write in one pass over those nodes.
+    groups: Vec<u32>,
 }
+
+/// Most stencils a kernel pass takes at once.
+const GROUP: usize = 4;
 
 impl Bending {
     /// Stencils from rows of (node, weight) pairs.
@@ -42,7 +50,7 @@ impl Bending {
         for row in rows {
             b.push_row(row.iter().copied());
         }
-        b
+        b.grouped()
     }
 
     /// These stencils followed by `more`'s.
@@ -54,6 +62,37 @@ impl Bending {
                 b.push_row(nodes.iter().copied().zip(weights.iter().copied()));
                 b
             })
+            .grouped()
+    }
+
+    /// These stencils with their groups found: each run of consecutive
+    /// stencils over the same nodes, in chunks of at most [`GROUP`].
+    fn grouped(mut self) -> Bending {
+        self.groups.clear();
+        let mut s = 0;
+        while s < self.len() {
+            self.groups.push(s as u32);
+            let nodes = self.row(s).0;
+            let mut end = s + 1;
+            while end < self.len() && end - s < GROUP && self.row(end).0 == nodes {
+                end += 1;
+            }
+            s = end;
+        }
+        self.groups.push(self.len() as u32);
+        self
+    }
+
+    /// Group g's first stencil and its stencils' count.
+    #[inline(always)]
+    fn group(&self, g: usize) -> (usize, usize) {
+        let (a, b) = (self.groups[g] as usize, self.groups[g + 1] as usize);
+        (a, b - a)
+    }
+
+    /// Number of groups.
+    fn groups(&self) -> usize {
+        self.groups.len().saturating_sub(1)
     }
 
     /// Append one stencil (offsets start at 0 with the first).
@@ -102,22 +141,66 @@ impl Bending {
     /// `n` nodes) and return the energy `½·k·|W pos|²` (J). Allocates
     /// nothing.
     pub fn add_forces(&self, k: f64, c: f64, pos: &[f64], vel: &[f64], force: &mut [f64]) -> f64 {
-        let n = pos.len() / 3;
         let mut energy = 0.0;
-        for s in 0..self.len() {
-            let (nodes, weights) = self.row(s);
-            let x = Self::read(nodes, weights, pos, n);
-            let v = Self::read(nodes, weights, vel, n);
-            energy += x[0] * x[0] + x[1] * x[1] + x[2] * x[2];
-            let g = [0, 1, 2].map(|d| -(k * x[d] + c * v[d]));
-            for (&i, &w) in nodes.iter().zip(weights) {
-                let i = i as usize;
-                force[i] += w * g[0];
-                force[n + i] += w * g[1];
-                force[2 * n + i] += w * g[2];
+        for g in 0..self.groups() {
+            let e = &mut energy;
+            match self.group(g) {
+                (s, 1) => self.forces_of::<1>(s, [k, c], pos, vel, force, e),
+                (s, 2) => self.forces_of::<2>(s, [k, c], pos, vel, force, e),
+                (s, 3) => self.forces_of::<3>(s, [k, c], pos, vel, force, e),
+                (s, _) => self.forces_of::<GROUP>(s, [k, c], pos, vel, force, e),
             }
         }
         0.5 * k * energy
+    }
+
+    /// The forces of the G stencils from s on, which share their nodes,
+    /// added as [`Bending::add_forces`] adds them stencil by stencil (the
+    /// same sums in the same order, so the same bits) in one pass over
+    /// the nodes; adds their `|W x|²` to `energy`.
+    #[inline(always)]
+    fn forces_of<const G: usize>(
+        &self,
+        s: usize,
+        [k, c]: [f64; 2],
+        pos: &[f64],
+        vel: &[f64],
+        force: &mut [f64],
+        energy: &mut f64,
+    ) {
+        let n = pos.len() / 3;
+        let nodes = self.row(s).0;
+        let m = nodes.len();
+        let start = self.offsets[s] as usize;
+        let weights = &self.weights[start..start + G * m];
+        let (mut x, mut v) = ([[0.0; 3]; G], [[0.0; 3]; G]);
+        for (e, &i) in nodes.iter().enumerate() {
+            let i = i as usize;
+            let (p, q) = ([pos[i], pos[n + i], pos[2 * n + i]], [vel[i], vel[n + i], vel[2 * n + i]]);
+            for r in 0..G {
+                let w = weights[r * m + e];
+                for d in 0..3 {
+                    x[r][d] += w * p[d];
+                    v[r][d] += w * q[d];
+                }
+            }
+        }
+        let mut g = [[0.0; 3]; G];
+        for r in 0..G {
+            *energy += x[r][0] * x[r][0] + x[r][1] * x[r][1] + x[r][2] * x[r][2];
+            g[r] = [0, 1, 2].map(|d| -(k * x[r][d] + c * v[r][d]));
+        }
+        for (e, &i) in nodes.iter().enumerate() {
+            let i = i as usize;
+            let mut f = [force[i], force[n + i], force[2 * n + i]];
+            for r in 0..G {
+                let w = weights[r * m + e];
+                for d in 0..3 {
+                    f[d] += w * g[r][d];
+                }
+            }
+            [force[i], force[n + i], force[2 * n + i]] = f;
+        }
     }
 
     /// Stencil s applied to a `[x…, y…, z…]` field: `Σ_i w_si·x_i`.
@@ -128,16 +211,47 @@ impl Bending {
 
     /// `out += scale·Wᵀ W x` (all `[x…, y…, z…]` of `n` nodes).
     pub fn add_product(&self, scale: f64, x: &[f64], out: &mut [f64]) {
-        let n = x.len() / 3;
-        for s in 0..self.len() {
-            let (nodes, weights) = self.row(s);
-            let r = Self::read(nodes, weights, x, n).map(|v| scale * v);
-            for (&i, &w) in nodes.iter().zip(weights) {
-                let i = i as usize;
-                out[i] += w * r[0];
-                out[n + i] += w * r[1];
-                out[2 * n + i] += w * r[2];
+        for g in 0..self.groups() {
+            match self.group(g) {
+                (s, 1) => self.product_of::<1>(s, scale, x, out),
+                (s, 2) => self.product_of::<2>(s, scale, x, out),
+                (s, 3) => self.product_of::<3>(s, scale, x, out),
+                (s, _) => self.product_of::<GROUP>(s, scale, x, out),
             }
+        }
+    }
+
+    /// [`Bending::add_product`] of the G stencils from s on, which share
+    /// their nodes (the same sums in the same order as stencil by stencil).
+    #[inline(always)]
+    fn product_of<const G: usize>(&self, s: usize, scale: f64, x: &[f64], out: &mut [f64]) {
+        let n = x.len() / 3;
+        let nodes = self.row(s).0;
+        let m = nodes.len();
+        let start = self.offsets[s] as usize;
+        let weights = &self.weights[start..start + G * m];
+        let mut r = [[0.0; 3]; G];
+        for (e, &i) in nodes.iter().enumerate() {
+            let i = i as usize;
+            let p = [x[i], x[n + i], x[2 * n + i]];
+            for (row, rw) in r.iter_mut().enumerate() {
+                let w = weights[row * m + e];
+                for d in 0..3 {
+                    rw[d] += w * p[d];
+                }
+            }
+        }
+        let r = r.map(|rw| rw.map(|v| scale * v));
+        for (e, &i) in nodes.iter().enumerate() {
+            let i = i as usize;
+            let mut o = [out[i], out[n + i], out[2 * n + i]];
+            for (row, rw) in r.iter().enumerate() {
+                let w = weights[row * m + e];
+                for d in 0..3 {
+                    o[d] += w * rw[d];
+                }
+            }
+            [out[i], out[n + i], out[2 * n + i]] = o;
         }
     }
 
@@ -190,6 +304,65 @@ mod tests {
 
     fn soa(points: &[[f64; 3]]) -> Vec<f64> {
         (0..3).flat_map(|d| points.iter().map(move |p| p[d])).collect()
+    }
+
+    /// The kernels take a run of stencils over the same nodes in one pass.
+    /// They must give the bits of the definition, stencil by stencil: runs
+    /// of 1, 3 and 6 rows (a chunk of 4 and one of 2) and single rows
+    /// between them, against the sums written out here.
+    #[test]
+    fn grouped_stencils_give_the_bits_of_one_stencil_at_a_time() {
+        let mut seed = 0x9e37_79b9_7f4a_7c15_u64;
+        let mut next = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        let n = 23;
+        let mut rows: Vec<Vec<(u32, f64)>> = Vec::new();
+        for (start, len, repeat) in [(0u32, 5u32, 1), (3, 7, 3), (10, 4, 6), (2, 9, 1), (14, 8, 2), (1, 6, 3)] {
+            for _ in 0..repeat {
+                rows.push((0..len).map(|e| ((start + 3 * e) % n, next())).collect());
+            }
+        }
+        let b = Bending::from_rows(rows.iter().map(Vec::as_slice));
+        assert_eq!(b.len(), 16);
+        assert_eq!(b.groups(), 7, "runs of 3, 6 (4 + 2), 2 and 3 rows, and two single rows");
+        let field = |next: &mut dyn FnMut() -> f64| (0..3 * n as usize).map(|_| next()).collect::<Vec<f64>>();
+        let (pos, vel) = (field(&mut next), field(&mut next));
+        let (k, c) = (1.7, 0.3);
+        let nn = n as usize;
+        let (mut want, mut want_energy) = (field(&mut next), 0.0);
+        let mut got = want.clone();
+        let (mut want_q, mut got_q) = (vel.clone(), vel.clone());
+        for row in &rows {
+            let read = |f: &[f64]| {
+                let mut s = [0.0; 3];
+                for &(i, w) in row {
+                    for (d, sd) in s.iter_mut().enumerate() {
+                        *sd += w * f[d * nn + i as usize];
+                    }
+                }
+                s
+            };
+            let (x, v) = (read(&pos), read(&vel));
+            want_energy += x[0] * x[0] + x[1] * x[1] + x[2] * x[2];
+            let q = x.map(|xd| k * xd);
+            for &(i, w) in row {
+                for d in 0..3 {
+                    want[d * nn + i as usize] += w * -(k * x[d] + c * v[d]);
+                    want_q[d * nn + i as usize] += w * q[d];
+                }
+            }
+        }
+        let energy = b.add_forces(k, c, &pos, &vel, &mut got);
+        b.add_product(k, &pos, &mut got_q);
+        assert_eq!(energy.to_bits(), (0.5 * k * want_energy).to_bits());
+        for j in 0..3 * nn {
+            assert_eq!(got[j].to_bits(), want[j].to_bits(), "force entry {j}");
+            assert_eq!(got_q[j].to_bits(), want_q[j].to_bits(), "product entry {j}");
+        }
     }
 
     /// Two rows that sum to zero: the forces are minus the gradient of their
