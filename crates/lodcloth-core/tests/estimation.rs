@@ -770,3 +770,89 @@ fn a_reference_recording_stops_where_its_caller_says() {
     let whole = Reference::record_while(sim(), spec, &mut |_, _| {}, &|| true).expect("records");
     assert_eq!(whole.frames.len(), 100);
 }
+
+/// Peirce's cantilever: a strip clamped along its first quarter, its
+/// overhang drooping under gravity for 3 s. How far it reaches, seen from
+/// above, is set by its bending alone (no folds to jump between).
+fn cantilever(n: usize) -> Scene {
+    let text = format!(
+        r#"
+name = "cantilever-test"
+[cloth]
+width = 0.3
+height = 0.1
+nx = {n}
+ny = 11
+orientation = "horizontal"
+areal_density = 0.2
+[springs]
+structural = {{ k = 400.0, c = 0.04 }}
+shear = {{ k = 60.0, c = 0.006 }}
+bend = {{ k = 50.0, c = 5e-4 }}
+[simulation]
+integrator = "symplectic_euler"
+dt = 5e-5
+duration = 3.0
+drag = 2.0
+[[pins]]
+nodes = {{ region = {{ u = [0.0, 0.25], v = [0.0, 1.0] }} }}
+"#
+    );
+    Scene::from_toml(&text, "cantilever-test").expect("valid test scene")
+}
+
+/// `drape` recovers a cloth's own bending from a start 3× too soft: the
+/// level is the reference's own grid, so at the true bending its drape is
+/// the reference's bit for bit, and nothing else moves the shadow.
+#[test]
+fn drape_recovers_a_known_bending_from_a_wrong_start() {
+    let s = cantilever(31);
+    // 1 s recorded; the fit resumes the reference from its last checkpoint
+    // to the scene's 3 s.
+    let reference = record(&s, 20000, 200, 400);
+    let p = LodProblem::new(
+        &s,
+        reference,
+        31,
+        11,
+        MassConvention::Lumped,
+        Integrator::SymplecticEuler,
+        5e-5,
+    )
+    .unwrap();
+    let truth = p.same_material();
+    let start = lodcloth::estimate::shadow::bend_scaled(&truth, 1.0 / 3.0);
+    let options = FitOptions {
+        start: Some(start),
+        ..FitOptions::default()
+    };
+    let est = p.estimate(Method::Drape, &options, &mut no_progress).unwrap();
+    let Details::Drape(report) = &est.details else {
+        panic!("drape reports a drape fit")
+    };
+    // The start droops visibly more: its shadow is far outside the tolerance.
+    let start_off = report.start_shadow / report.target - 1.0;
+    assert!(
+        start_off < -10.0 * lodcloth::estimate::shadow::DRAPE_TOLERANCE,
+        "the soft start's shadow is only {:.3}% off the reference's",
+        100.0 * start_off
+    );
+    assert!(report.converged, "{report:?}");
+    assert!((report.shadow / report.target - 1.0).abs() <= lodcloth::estimate::shadow::DRAPE_TOLERANCE);
+    // Every class but the bend class is the start's; the bend class is the
+    // truth's within 10 % (the shadow's tolerance, read through its slope).
+    for class in SpringClass::ALL {
+        let (got, want) = (est.material.get(class), truth.get(class));
+        let err = (got.k / want.k - 1.0).abs();
+        match class.kind() {
+            lodcloth::sim::SpringKind::Bend => {
+                assert!(err < 0.10, "{class:?}: K {} against {} ({report:?})", got.k, want.k);
+                assert!(
+                    (got.c / got.k - want.c / want.k).abs() < 1e-12 * want.c / want.k,
+                    "C scales with K"
+                );
+            }
+            _ => assert_eq!((got.k, got.c), (want.k, want.c), "{class:?} is left alone"),
+        }
+    }
+}

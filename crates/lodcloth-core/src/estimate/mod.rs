@@ -16,7 +16,10 @@
 //! - `bcd`, `gkd`: the paper's inverse-Hooke methods ([`inverse`]);
 //! - `lsq`: one global least-squares fit of the ten per-class coefficients
 //!   ([`inverse`]);
-//! - `fit`: minimise the simulated displacement error directly ([`fit`]).
+//! - `fit`: minimise the simulated displacement error directly ([`fit`]);
+//!   `shape` and `follow` fit other targets with it;
+//! - `drape`: `same` with its bend class scaled until the level, draped
+//!   from rest, casts the reference's shadow ([`shadow`]).
 //!
 //! Every method but `same_spring` gives per-direction coefficients (one K and
 //! C per [`crate::sim::SpringClass`]).
@@ -31,6 +34,7 @@ pub mod metric;
 pub mod modal;
 pub mod reference;
 pub mod replayed;
+pub mod shadow;
 pub mod touched;
 
 use std::fmt;
@@ -103,11 +107,16 @@ pub enum Method {
     /// ([`fit::FitTarget::Windows`]): the short horizon a level lives in
     /// after a switch, on a scene whose long horizon is chaos.
     Follow,
+    /// `same` with its bend class (K and C) scaled so that the level,
+    /// draped from rest over the scene's duration, casts the reference's
+    /// shadow at the end ([`shadow::drape_fit`]): the settled drape a Cusick
+    /// tester measures, which the motion-reading methods do not aim at.
+    Drape,
 }
 
 impl Method {
     /// Every method, cheapest first.
-    pub const ALL: [Method; 8] = [
+    pub const ALL: [Method; 9] = [
         Method::Same,
         Method::SameSpring,
         Method::Bcd,
@@ -116,6 +125,7 @@ impl Method {
         Method::Fit,
         Method::Shape,
         Method::Follow,
+        Method::Drape,
     ];
 
     /// Name used in config files, CLI and CSV.
@@ -129,6 +139,7 @@ impl Method {
             Method::Fit => "fit",
             Method::Shape => "shape",
             Method::Follow => "follow",
+            Method::Drape => "drape",
         }
     }
 
@@ -189,6 +200,9 @@ pub enum EstimateError {
         /// Metric frames recorded.
         frames: usize,
     },
+    /// A `drape` fit could not be made.
+    #[error("drape: {0}")]
+    Drape(String),
     /// A short-horizon window of no frame.
     #[error("a short-horizon window must hold at least one metric frame")]
     Window,
@@ -644,6 +658,10 @@ impl LodProblem {
                 };
                 Details::Fit(fit::fit(self, &options, progress)?)
             }
+            Method::Drape => {
+                let start = options.start.unwrap_or(same);
+                Details::Drape(shadow::drape_fit(self, &start, progress)?)
+            }
         };
         let material = match &details {
             Details::Same if method == Method::SameSpring => self.reference.material,
@@ -651,6 +669,7 @@ impl LodProblem {
             Details::Inverse(e) => e.material,
             Details::Lsq(e) => e.material,
             Details::Fit(e) => e.material,
+            Details::Drape(d) => shadow::bend_scaled(&options.start.unwrap_or(same), d.factor),
         };
         Ok(Estimate {
             method,
@@ -682,4 +701,6 @@ pub enum Details {
     Lsq(LsqEstimate),
     /// The fit.
     Fit(FitReport),
+    /// The drape fit.
+    Drape(shadow::DrapeReport),
 }

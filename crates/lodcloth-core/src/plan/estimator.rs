@@ -287,5 +287,15 @@ pub fn notes(details: &Details) -> String {
             f.stop,
             f.kept_start.as_ref().map_or(String::new(), |k| format!("; {k}"))
         ),
+        Details::Drape(d) => format!(
+            "bending x{:.4} of the start; shadow {:.6} m² against the reference's {:.6} ({:+.2}%; the start's {:+.2}%), {} runs{}",
+            d.factor,
+            d.shadow,
+            d.target,
+            100.0 * (d.shadow / d.target - 1.0),
+            100.0 * (d.start_shadow / d.target - 1.0),
+            d.runs.len(),
+            if d.converged { "" } else { ", not within the tolerance" }
+        ),
     }
 }

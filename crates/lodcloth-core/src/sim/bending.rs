@@ -176,7 +176,10 @@ impl Bending {
         let (mut x, mut v) = ([[0.0; 3]; G], [[0.0; 3]; G]);
         for (e, &i) in nodes.iter().enumerate() {
             let i = i as usize;
-            let (p, q) = ([pos[i], pos[n + i], pos[2 * n + i]], [vel[i], vel[n + i], vel[2 * n + i]]);
+            let (p, q) = (
+                [pos[i], pos[n + i], pos[2 * n + i]],
+                [vel[i], vel[n + i], vel[2 * n + i]],
+            );
             for r in 0..G {
                 let w = weights[r * m + e];
                 for d in 0..3 {

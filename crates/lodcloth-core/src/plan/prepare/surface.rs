@@ -64,7 +64,7 @@ impl Preparer {
             // A surface has no grid directions: both "same"s are its springs.
             Method::Same | Method::SameSpring => (model.sim.params().material, 0.0, false),
             Method::Fit => self.surface_fit(scene, &mut model, &reference, points)?,
-            Method::Shape | Method::Follow => {
+            Method::Shape | Method::Follow | Method::Drape => {
                 return Err(failed(format!(
                     "`{method}` fits a cloth level's coefficients; a point-sampled surface's are fitted by `fit`"
                 )))
