@@ -315,13 +315,8 @@ mod tests {
     /// between them, against the sums written out here.
     #[test]
     fn grouped_stencils_give_the_bits_of_one_stencil_at_a_time() {
-        let mut seed = 0x9e37_79b9_7f4a_7c15_u64;
-        let mut next = move || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-        };
+        let mut rng = crate::points::generate::SplitMix(7);
+        let mut next = move || rng.uniform() - 0.5;
         let n = 23;
         let mut rows: Vec<Vec<(u32, f64)>> = Vec::new();
         for (start, len, repeat) in [(0u32, 5u32, 1), (3, 7, 3), (10, 4, 6), (2, 9, 1), (14, 8, 2), (1, 6, 3)] {
