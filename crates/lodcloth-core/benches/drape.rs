@@ -200,7 +200,7 @@ fn main() {
     let methods: Vec<Method> = arg(&args, "--methods")
         .unwrap_or("same,bcd")
         .split(',')
-        .map(|s| Method::from_name(s).expect("--methods: same, same_spring, bcd, gkd, lsq, fit, shape, follow"))
+        .map(|s| Method::from_name(s).expect("--methods: same, same_spring, bcd, gkd, lsq, fit, shape, follow, drape"))
         .collect();
     let body = scene
         .colliders()

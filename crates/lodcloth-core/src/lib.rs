@@ -25,7 +25,7 @@
 //! - [`level`] — a level of detail: a grid, a point count or a mesh's
 //!   vertex count, as written in configs and on the command line.
 //! - [`lod`] — barycentric correlation between resolutions, state transfer.
-//! - [`estimate`] — coefficient estimation (same, BCD, GKD, lsq, fit, shape, follow),
+//! - [`estimate`] — coefficient estimation (same, BCD, GKD, lsq, fit, shape, follow, drape),
 //!   reference recording and the error metric (Sung 2018 eq. 9).
 //! - [`mesh`] — triangle-mesh cloths: OBJ, PLY and glTF files, springs on
 //!   and across edges, level chains by quadric simplification, closest points

@@ -94,7 +94,7 @@ mod tests {
         assert_eq!(parse_arg::<Integrator>("rk-5").unwrap_err().given, "rk-5");
         assert_eq!(
             parse::<Method>("magic").unwrap_err().to_string(),
-            "'magic' is not one of same, same_spring, bcd, gkd, lsq, fit, shape, follow"
+            "'magic' is not one of same, same_spring, bcd, gkd, lsq, fit, shape, follow, drape"
         );
     }
 }
