@@ -7,7 +7,7 @@
 //! of the stretch springs over the overhang.
 //!
 //! ```text
-//! cargo run --release --example drape_scan -- run SCENE --levels 721v,100% [--bend 1,1.35] [--stretch 2] [--dt 1e-4] [--twins 8 [--jitter 1e-6]] [--stencils-from MESH.obj | --stencils triangle|quartic|mixed|mixed-exact] [--csv FILE]
+//! cargo run --release --example drape_scan -- run SCENE --levels 721v,100% [--bend 1,1.35] [--stretch 2] [--dt 1e-4] [--integrator symplectic_euler] [--live] [--twins 8 [--jitter 1e-6]] [--stencils-from MESH.obj | --stencils triangle|quartic|mixed|mixed-exact] [--csv FILE]
 //! cargo run --release --example drape_scan -- restart SCENE --levels 1081v,721v [--bend 1,1.35] [--stretch 2] [--unstressed] [--settle 0.005] [--csv FILE]
 //! cargo run --release --example drape_scan -- spectrum SCENE --levels 100%,60%,40% [--modes 24] [--stencils triangle|quartic|mixed|mixed-exact] [--drape] [--clamped]
 //! cargo run --release --example drape_scan -- membrane SCENE --levels 100%,60%,40% [--rings 2,3,4]
@@ -58,7 +58,7 @@ use lodcloth_core::lod;
 use lodcloth_core::mesh::{triangle_area, TriMesh};
 use lodcloth_core::scene::{ClothLevel, Scene};
 use lodcloth_core::sim::vec3::{add, cross, dist, dot, norm, normalize, scale, sub};
-use lodcloth_core::sim::{Material, Shape, Simulation, SpringClass, SpringKind};
+use lodcloth_core::sim::{Integrator, Material, Shape, Simulation, SpringKind, SpringPrecision};
 use rayon::prelude::*;
 
 /// Shadow pixels (m), as the drape bench.
@@ -74,6 +74,15 @@ enum Command {
         /// The time step (s); default the scene's.
         #[arg(long)]
         dt: Option<f64>,
+        /// The integrator; default the scene's (e.g. `symplectic_euler`,
+        /// as config/cusick.toml serves the scene).
+        #[arg(long)]
+        integrator: Option<String>,
+        /// Step the levels as a daemon steps its live level with
+        /// `spring_precision = "f32"`: f32 springs and the bending's
+        /// assembled operator (`lodcloth_core::sim::SpringPrecision::F32`).
+        #[arg(long)]
+        live: bool,
         /// Runs per level and bend scale: the first from the scene's rest
         /// shape, every other with each vertex raised or lowered by a
         /// seeded normal draw of --jitter (its twins). Where the overhang
@@ -301,18 +310,11 @@ impl Setup {
 
     /// The scene's material on `cloth`, bend class and stretch K scaled.
     fn material(&self, cloth: &ClothLevel, bend: f64, stretch: f64) -> Material {
-        let mut m = self.scene.material_on(cloth);
-        for class in SpringClass::ALL {
-            let s = &mut m.springs[class.index()];
-            match class.kind() {
-                SpringKind::Bend => {
-                    s.k *= bend;
-                    s.c *= bend;
-                }
-                SpringKind::Structural | SpringKind::Shear => s.k *= stretch,
-            }
-        }
-        m
+        self.scene
+            .material_on(cloth)
+            .kind_scaled(SpringKind::Bend, bend, bend)
+            .kind_scaled(SpringKind::Structural, stretch, 1.0)
+            .kind_scaled(SpringKind::Shear, stretch, 1.0)
     }
 
     fn dc(&self, sim: &Simulation) -> f64 {
@@ -546,12 +548,23 @@ fn restencil(setup: &mut Setup, stencils: &str) {
     }
 }
 
-fn run(args: &Runs, dt: Option<f64>, twins: u64, jitter: f64, stencils_from: Option<&Path>, stencils: &str) {
+/// How `run` steps its levels beyond the scene: another dt or integrator,
+/// the live fast path.
+struct Stepping {
+    dt: Option<f64>,
+    integrator: Option<Integrator>,
+    live: bool,
+}
+
+fn run(args: &Runs, stepping: Stepping, twins: u64, jitter: f64, stencils_from: Option<&Path>, stencils: &str) {
     assert!(
         jitter.is_finite() && jitter >= 0.0,
         "--jitter must be a length ≥ 0, got {jitter}"
     );
     let mut setup = Setup::new(&args.levels);
+    if let Some(integrator) = stepping.integrator {
+        setup.scene.params.integrator = integrator;
+    }
     if let Some(path) = stencils_from {
         let other = lodcloth_core::mesh::load(path).unwrap_or_else(|e| failed(path, e));
         for cloth in &mut setup.levels {
@@ -572,12 +585,15 @@ fn run(args: &Runs, dt: Option<f64>, twins: u64, jitter: f64, stencils_from: Opt
         .map(|&(cloth, bend, twin)| {
             let clock = std::time::Instant::now();
             let mut scene = setup.scene.clone();
-            if let Some(dt) = dt {
+            if let Some(dt) = stepping.dt {
                 scene.params.dt = dt;
             }
             let mut sim = scene
                 .build_on(cloth, setup.material(cloth, bend, stretch))
                 .expect("builds");
+            if stepping.live {
+                sim.set_spring_precision(SpringPrecision::F32);
+            }
             if twin > 0 {
                 jitter_heights(&mut sim, twin, jitter);
             }
@@ -1857,11 +1873,19 @@ fn main() {
         Command::Run {
             runs,
             dt,
+            integrator,
+            live,
             twins,
             jitter,
             stencils_from,
             stencils,
-        } => run(&runs, dt, twins, jitter, stencils_from.as_deref(), &stencils),
+        } => {
+            let integrator = integrator.map(|name| {
+                Integrator::from_name(&name).unwrap_or_else(|| panic!("--integrator: no integrator named {name}"))
+            });
+            let stepping = Stepping { dt, integrator, live };
+            run(&runs, stepping, twins, jitter, stencils_from.as_deref(), &stencils)
+        }
         Command::Restart {
             runs,
             unstressed,

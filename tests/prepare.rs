@@ -170,3 +170,64 @@ fn a_preparer_gives_way_at_its_checkpoints_and_lets_held_work_go_on_when_it_wait
     let checkpoints = gate.checkpoints.load(Ordering::Relaxed);
     assert!(checkpoints >= 100 + frames, "{checkpoints} checkpoints");
 }
+
+/// An instance may serve its levels with another integrator than its
+/// scene's, one that is not stable at the scene's dt: the Cusick scene runs
+/// RK4 at 1e-4 s, beyond symplectic Euler's limit (6.2e-5 s at its 1,261
+/// vertices), and symplectic Euler is what serves its 504-vertex level in
+/// real time. The reference is the scene as written (RK4 at 1e-4 s); the
+/// level steps symplectic Euler at a dt under its own limit. Until
+/// 2026-12-05 the reference ran the instance's integrator at the scene's
+/// dt, and every preparation of such an instance failed with the stability
+/// error ("dt = 1e-4 s is beyond the predicted stability limit of
+/// symplectic_euler").
+#[test]
+fn an_instance_serves_another_integrator_than_its_reference_runs() {
+    let scene = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/scenes/cusick-drape.toml");
+    let text = format!(
+        r#"
+[estimation]
+reference_steps = 800
+metric_stride = 40
+estimate_stride = 40
+precompute = false
+[[instances]]
+name = "cusick"
+scene = "{}"
+levels = ["504v"]
+start = "504v"
+method = "same"
+integrator = "symplectic_euler"
+"#,
+        scene.display()
+    );
+    let config = lodcloth::service::config::ServiceConfig::from_toml(&text, "integrator test").expect("valid config");
+    let preparer = lodcloth::plan::Preparer::new(Arc::new(config.instances[0].clone()), config.estimation, None);
+    let prepared = preparer
+        .prepare(Level::Vertices(504), Method::Same)
+        .expect("prepared with symplectic Euler");
+    let lodcloth::plan::Basis::Cloth(problem) = &prepared.basis else {
+        panic!("a cloth level")
+    };
+    let reference = &problem.reference;
+    assert_eq!(
+        reference.integrator.name(),
+        "rk4",
+        "the reference runs the scene's integrator"
+    );
+    assert_eq!(reference.dt, 1e-4, "at the scene's dt");
+    assert_eq!(
+        problem.integrator.name(),
+        "symplectic_euler",
+        "the level the instance's"
+    );
+    assert!(
+        prepared.dt <= prepared.dt_limit && prepared.dt < reference.dt,
+        "the level steps under its own limit: dt {} limit {}",
+        prepared.dt,
+        prepared.dt_limit
+    );
+    assert!(prepared.predicted_error.is_finite(), "scored against the reference");
+    let live = preparer.live_simulation(&prepared).expect("live simulation");
+    assert_eq!(live.params().integrator.name(), "symplectic_euler");
+}

@@ -33,9 +33,9 @@ use rayon::prelude::*;
 
 use crate::estimate::modal::{self, ClampedModes};
 use crate::estimate::{no_progress, ErrorReport, FitOptions, LodProblem, Method, Reference};
-use crate::plan::{default_problem, stable_problem, Estimator, GridLevel, Level, PlanError};
+use crate::plan::{default_problem, progress_every, stable_problem, Estimator, GridLevel, Level, PlanError};
 use crate::scene::{MassConvention, Scene};
-use crate::sim::{Material, SpringClass, SpringCoeffs, SpringKind};
+use crate::sim::{Material, SpringCoeffs, SpringKind};
 
 /// The offset of reference draw `draw` in units of the draws'
 /// perturbation: 0, +1, −1, +2, −2, … (draw 0 is the scene as written).
@@ -322,7 +322,13 @@ pub fn suite(
             // `follow` fits the restarts as they are scored: settled when
             // they are.
             let estimating = if method == Method::Follow { scored } else { p };
-            let mut est = estimator.estimate(estimating, method, &fit)?;
+            let mut est = {
+                let name = &p.scene.name;
+                let mut progress = progress_every(10.0, |q| {
+                    log(format!("{name} {method}: {} {}/{}", q.stage, q.done, q.total))
+                });
+                estimator.estimate_reporting(estimating, method, &fit, &mut progress)?
+            };
             if let Some(band) = &options.modal {
                 let end = if band.end == usize::MAX {
                     String::new()
@@ -337,7 +343,9 @@ pub fn suite(
                 };
             }
             if options.bend_scale != (1.0, 1.0) {
-                scale_bend(&mut est.material, options.bend_scale);
+                est.material = est
+                    .material
+                    .kind_scaled(SpringKind::Bend, options.bend_scale.0, options.bend_scale.1);
                 let scaled = format!("bend class K ×{bend_k}, C ×{bend_c}");
                 est.notes = if est.notes.is_empty() {
                     scaled
@@ -555,17 +563,6 @@ fn stiffened(problem: &LodProblem, band: Range<usize>) -> Result<LodProblem, Pla
     let target = ClampedModes::of(reference, &reference_pinned, "reference").map_err(|e| invalid(&e))?;
     let rows = modal::stiffening(topology, &pinned, &modes, &target, band).map_err(|e| invalid(&e))?;
     Ok(problem.with_bending(&rows))
-}
-
-/// `material` with its bend class's K and C multiplied by `(k, c)`.
-fn scale_bend(material: &mut Material, (k, c): (f64, f64)) {
-    for class in SpringClass::ALL {
-        if class.kind() == SpringKind::Bend {
-            let s = &mut material.springs[class.index()];
-            s.k *= k;
-            s.c *= c;
-        }
-    }
 }
 
 #[cfg(test)]

@@ -255,7 +255,7 @@ pub fn switch_test(
     }
     // Re-run the fine reference to the switch frame (the recording keeps f32
     // positions only; a switch needs the f64 state with velocities).
-    let mut fine = problem.scene.build()?;
+    let mut fine = reference.scene_as_run(&problem.scene).build()?;
     let steps = reference.frame_steps[at - 1];
     for _ in 0..steps {
         fine.step();
@@ -327,7 +327,7 @@ pub fn switch_test(
     let back =
         transfer_state(problem.topology(), coarse_run.state(), &reference.topology).map_err(EstimateError::from)?;
     let ke_c = kinetic(coarse_run.masses(), &coarse_run.state().vel);
-    let mut fine2 = problem.scene.build()?;
+    let mut fine2 = reference.scene_as_run(&problem.scene).build()?;
     fine2.set_state(back).map_err(|source| EstimateError::Sim {
         level: problem.scene.reference_level(),
         source,

@@ -138,14 +138,20 @@ pub fn line_chart_svg_legend(
     Ok(())
 }
 
-/// Colours for series, in order.
-pub const PALETTE: [RGBColor; 6] = [
+/// Colours for series, in order: Tableau's ten (matplotlib's `tab10`), so
+/// a chart repeats a colour only past ten series (six until 2026-12-05,
+/// when a drape chart's seventh series took the first one's blue).
+pub const PALETTE: [RGBColor; 10] = [
     RGBColor(31, 119, 180),
     RGBColor(255, 127, 14),
     RGBColor(44, 160, 44),
     RGBColor(214, 39, 40),
     RGBColor(148, 103, 189),
     RGBColor(140, 86, 75),
+    RGBColor(227, 119, 194),
+    RGBColor(127, 127, 127),
+    RGBColor(188, 189, 34),
+    RGBColor(23, 190, 207),
 ];
 
 /// An axis tick with three significant digits and no trailing zeros (the

@@ -821,7 +821,7 @@ fn drape_recovers_a_known_bending_from_a_wrong_start() {
     )
     .unwrap();
     let truth = p.same_material();
-    let start = lodcloth::estimate::shadow::bend_scaled(&truth, 1.0 / 3.0);
+    let start = truth.kind_scaled(lodcloth::sim::SpringKind::Bend, 1.0 / 3.0, 1.0 / 3.0);
     let options = FitOptions {
         start: Some(start),
         ..FitOptions::default()

@@ -52,8 +52,8 @@ use crate::level::Level;
 use crate::lod::{Correlation, LodError};
 use crate::scene::{MassConvention, Scene, SceneError};
 use crate::sim::{
-    Bending, Integrator, Loads, Material, SimError, SimParams, Simulation, SpringPrecision, StabilityCheck, State,
-    Topology,
+    Bending, Integrator, Loads, Material, SimError, SimParams, Simulation, SpringKind, SpringPrecision, StabilityCheck,
+    State, Topology,
 };
 use crate::turns::Turns;
 
@@ -669,7 +669,10 @@ impl LodProblem {
             Details::Inverse(e) => e.material,
             Details::Lsq(e) => e.material,
             Details::Fit(e) => e.material,
-            Details::Drape(d) => shadow::bend_scaled(&options.start.unwrap_or(same), d.factor),
+            Details::Drape(d) => options
+                .start
+                .unwrap_or(same)
+                .kind_scaled(SpringKind::Bend, d.factor, d.factor),
         };
         Ok(Estimate {
             method,

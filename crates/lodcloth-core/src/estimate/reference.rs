@@ -133,6 +133,18 @@ pub enum ReferenceError {
 }
 
 impl Reference {
+    /// `scene` as this reference ran it: with its integrator and step. A
+    /// level may be served with another integrator than the scene's (the
+    /// daemon's `integrator`), one that need not be stable at the scene's
+    /// step; every run of the reference (resumed, replayed, jittered,
+    /// touched) is built from this, not from the level's scene.
+    pub fn scene_as_run(&self, scene: &crate::scene::Scene) -> crate::scene::Scene {
+        let mut scene = scene.clone();
+        scene.params.integrator = self.integrator;
+        scene.params.dt = self.dt;
+        scene
+    }
+
     /// Run `sim` (at rest, t = 0) for `spec.frames` steps and record it.
     /// `progress(done, total)` is called every 1 % of the run.
     pub fn record(

@@ -77,7 +77,11 @@ impl ReplayedReference {
     /// from `t` on: the steps from the checkpoint are those of a replay from
     /// rest, so every later position is the same to the bit.
     pub fn starting_before(problem: &LodProblem, t: f64) -> Result<ReplayedReference, ReplayError> {
-        let mut sim = problem.scene.build().map_err(|e| ReplayError::Build(e.to_string()))?;
+        let mut sim = problem
+            .reference
+            .scene_as_run(&problem.scene)
+            .build()
+            .map_err(|e| ReplayError::Build(e.to_string()))?;
         if let Some(state) = problem.reference.checkpoint_before(t) {
             sim.set_state(state.clone())
                 .map_err(|e| ReplayError::Build(e.to_string()))?;

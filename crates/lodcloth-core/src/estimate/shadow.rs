@@ -38,7 +38,7 @@ use rayon::prelude::*;
 
 use super::{EstimateError, LodProblem, Progress, ProgressFn};
 use crate::drape::{jitter_heights, shadow_area};
-use crate::sim::{Material, Simulation, SpringClass, SpringKind};
+use crate::sim::{Material, Simulation, SpringKind};
 
 /// The shadow a fit stops at: within this share of the reference's. On the
 /// Cusick disc 0.25 % of the shadow is 0.5 % of the drape coefficient.
@@ -77,19 +77,6 @@ pub struct DrapeReport {
     /// Whether the shadow came within [`DRAPE_TOLERANCE`] (else the
     /// closest run found within [`DRAPE_RUNS`] and [`DRAPE_RANGE`]).
     pub converged: bool,
-}
-
-/// `material` with its bend class's K and C times `factor`.
-pub fn bend_scaled(material: &Material, factor: f64) -> Material {
-    let mut m = *material;
-    for class in SpringClass::ALL {
-        if class.kind() == SpringKind::Bend {
-            let s = &mut m.springs[class.index()];
-            s.k *= factor;
-            s.c *= factor;
-        }
-    }
-    m
 }
 
 /// The side of a shadow pixel for `problem`'s cloth (m).
@@ -135,7 +122,7 @@ fn reference_shadow(problem: &LodProblem, end: f64, pixel: f64) -> Result<f64, E
     let shadows = (0..DRAPE_TWINS)
         .into_par_iter()
         .map(|twin| {
-            let mut sim = problem.scene.build()?;
+            let mut sim = problem.reference.scene_as_run(&problem.scene).build()?;
             if twin == 0 {
                 if let Some(state) = problem.reference.checkpoints.iter().rev().find(|s| s.time <= end) {
                     sim.set_state(state.clone()).map_err(sim_error)?;
@@ -203,7 +190,7 @@ pub fn drape_fit(
     let mut runs: Vec<(f64, f64)> = Vec::new();
     // The level's shadow against the target, in log: f(s) > 0 is too stiff.
     let run = |s: f64, runs: &mut Vec<(f64, f64)>, progress: &mut dyn FnMut(Progress)| {
-        let shadow = level_shadow(problem, bend_scaled(start, s), end, pixel);
+        let shadow = level_shadow(problem, start.kind_scaled(SpringKind::Bend, s, s), end, pixel);
         runs.push((s, shadow));
         progress(Progress {
             stage: "drape: level runs",

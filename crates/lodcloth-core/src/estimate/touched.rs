@@ -127,7 +127,10 @@ pub struct TouchedScore {
 /// The standard drags of `scene` (its reference resolution) against the
 /// recorded `reference` (rule: the module's docs).
 pub fn probes(scene: &Scene, reference: &Reference) -> Result<Vec<Probe>, TouchedError> {
-    let sim = scene.build().map_err(|e| TouchedError::Build(e.to_string()))?;
+    let sim = reference
+        .scene_as_run(scene)
+        .build()
+        .map_err(|e| TouchedError::Build(e.to_string()))?;
     let layout = match (reference.topology.grid, &reference.topology.mesh) {
         (Some(shape), _) => grid_layout(scene, reference, &shape, &sim),
         (None, Some(mesh)) => mesh_layout(scene, &mesh.mesh, &sim),
@@ -418,6 +421,7 @@ pub fn record_touched(
     probe: &Probe,
     stop: &dyn Fn() -> bool,
 ) -> Result<TouchedReference, TouchedError> {
+    let scene = &reference.scene_as_run(scene);
     let mut sim = scene.build().map_err(|e| TouchedError::Build(e.to_string()))?;
     let n = sim.topology().n_nodes;
     let rest = sim.state().pos.clone();

@@ -8,7 +8,8 @@ use std::time::Instant;
 
 use crate::cache::{CacheEntry, CacheError, CacheKey, CoefficientCache, Provenance};
 use crate::estimate::{
-    no_progress, Details, EstimateError, FitOptions, LodProblem, Method, RecordSpec, Reference, ReferenceError,
+    no_progress, Details, EstimateError, FitOptions, LodProblem, Method, Progress, ProgressFn, RecordSpec, Reference,
+    ReferenceError,
 };
 use crate::level::Level;
 use crate::scene::{MassConvention, Scene, SceneError};
@@ -74,9 +75,21 @@ pub struct Estimated {
 impl Estimator {
     /// Estimate with `method`, or read it from the cache.
     pub fn estimate(&self, problem: &LodProblem, method: Method, fit: &FitOptions) -> Result<Estimated, PlanError> {
-        let compute = || -> Result<Estimated, PlanError> {
+        self.estimate_reporting(problem, method, fit, &mut no_progress)
+    }
+
+    /// [`estimate`](Self::estimate), telling `progress` how a computed
+    /// estimate goes (nothing on a cache hit).
+    pub fn estimate_reporting(
+        &self,
+        problem: &LodProblem,
+        method: Method,
+        fit: &FitOptions,
+        progress: ProgressFn,
+    ) -> Result<Estimated, PlanError> {
+        let mut compute = || -> Result<Estimated, PlanError> {
             let t = Instant::now();
-            let est = problem.estimate(method, fit, &mut no_progress)?;
+            let est = problem.estimate(method, fit, progress)?;
             Ok(Estimated {
                 material: est.material,
                 notes: notes(&est.details),
@@ -131,10 +144,28 @@ impl Estimator {
                 fit.min_gain,
                 fit.short_tolerance,
                 fit.guard_window
-            ) + &problem.settling().map_or(String::new(), |h| format!("[settle={h}]")),
+            ) + &problem.settling().map_or(String::new(), |h| format!("[settle={h}]"))
+                // A level served with another integrator than its reference
+                // ran (keys before 2026-12-05 had both the level's).
+                + &(problem.reference.integrator != problem.integrator)
+                    .then(|| format!("[reference={}]", problem.reference.integrator.name()))
+                    .unwrap_or_default(),
             mass: problem.mass.name().to_string(),
             integrator: problem.integrator.name().to_string(),
             dt: problem.dt,
+        }
+    }
+}
+
+/// `log` given an estimate's progress at most once per `seconds` (the
+/// first report at once): what a long estimate (`drape`, minutes) shows
+/// while it runs.
+pub fn progress_every(seconds: f64, mut log: impl FnMut(Progress)) -> impl FnMut(Progress) {
+    let mut last: Option<Instant> = None;
+    move |p| {
+        if last.is_none_or(|t| t.elapsed().as_secs_f64() >= seconds) {
+            last = Some(Instant::now());
+            log(p);
         }
     }
 }

@@ -53,7 +53,7 @@ pub struct InstancePlan {
     pub start: Level,
     /// The estimation method of its levels unless a switch names another.
     pub method: Method,
-    /// The integrator of every level and of the reference.
+    /// The integrator of every level (the reference runs the scene's own).
     pub integrator: Integrator,
     /// A fixed time step (s) for every level; `None`: each level's own
     /// stable dt, dividing the reference's frame interval.

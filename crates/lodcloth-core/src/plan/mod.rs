@@ -12,7 +12,7 @@ mod touched;
 
 pub use crate::level::{GridLevel, Level};
 pub use estimator::{
-    default_problem, level_dt, notes, record_reference, stable_problem, Estimated, Estimator, PlanError,
+    default_problem, level_dt, notes, progress_every, record_reference, stable_problem, Estimated, Estimator, PlanError,
 };
 pub use instance::{EstimationPlan, InstanceKind, InstancePlan};
 pub use prepare::{allowed, Basis, PrepareError, Prepared, Preparer, Start};

@@ -31,7 +31,7 @@ mod xpbd;
 
 use std::sync::Arc;
 
-pub use bending::Bending;
+pub use bending::{Assembled, Bending};
 pub use contact::{Collider, Shape};
 pub use forces::{SpringKernel, SpringTotals};
 pub use live::GrabHeadroom;

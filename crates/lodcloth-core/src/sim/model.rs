@@ -13,7 +13,7 @@ use super::par::{inlined, node_halves_mut, Par};
 use super::params::{Integrator, SimParams, SpringClass};
 use super::strain::StrainWorkspace;
 use super::xpbd::XpbdWorkspace;
-use super::{Grab, Loads, PinShift, Topology};
+use super::{Assembled, Grab, Loads, PinShift, Topology};
 
 /// Scratch buffers; allocated once when the simulation is built.
 #[derive(Debug, Clone)]
@@ -51,6 +51,11 @@ pub(super) struct Mixed {
     pub(super) vel: Paged<f32>,
     pub(super) force: Paged<f32>,
     pub(super) kernel: KernelScratch<f32>,
+    /// The bending stencils' operator assembled (`None` without stencils):
+    /// the fast path's bending, in f64 like the stencils.
+    pub(super) bending: Option<Assembled>,
+    /// Its scratch: one entry per node.
+    pub(super) bending_scratch: Vec<[f64; 4]>,
 }
 
 impl Mixed {
@@ -66,6 +71,15 @@ impl Mixed {
             vel: Paged::new(n3, 1344),
             force: Paged::new(n3, 2688),
             kernel: KernelScratch::new(topology),
+            bending: (!topology.bending.is_empty()).then(|| topology.bending.assembled(topology.n_nodes)),
+            bending_scratch: vec![
+                [0.0; 4];
+                if topology.bending.is_empty() {
+                    0
+                } else {
+                    topology.n_nodes
+                }
+            ],
         }
     }
 }
@@ -254,9 +268,17 @@ impl Model {
         };
         if !topo.bending.is_empty() {
             // Bending stencils (a mesh cloth with a bending rigidity), in f64 whatever the springs'
-            // precision: few, and linear.
+            // precision: few, and linear. With f32 springs (the live level's fast path) through
+            // their assembled operator: the same forces up to rounding, cheaper (`Assembled`).
             let b = material.get(SpringClass::BendU);
-            totals.elastic_energy += topo.bending.add_forces(b.k, b.c, pos, vel, f);
+            totals.elastic_energy += match ws.mixed.as_deref_mut() {
+                Some(Mixed {
+                    bending: Some(op),
+                    bending_scratch,
+                    ..
+                }) => op.add_forces(b.k, b.c, (pos, vel), f, bending_scratch, stats),
+                _ => topo.bending.add_forces(b.k, b.c, pos, vel, f),
+            };
         }
         self.loads.add_forces(topo, t, pos, vel, f, &mut ws.normals);
         for grab in &self.grabs {

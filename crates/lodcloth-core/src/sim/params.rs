@@ -173,6 +173,20 @@ impl Material {
         let s = &self.springs;
         s[0] == s[1] && s[3] == s[4]
     }
+
+    /// This material with every class of `kind` (along u and v) having its
+    /// stiffness times `k` and its damping times `c`; on a mesh the bend
+    /// kind is the bending rigidity and its damping.
+    #[must_use]
+    pub fn kind_scaled(&self, kind: SpringKind, k: f64, c: f64) -> Material {
+        let mut m = *self;
+        for class in SpringClass::ALL.into_iter().filter(|class| class.kind() == kind) {
+            let s = &mut m.springs[class.index()];
+            s.k *= k;
+            s.c *= c;
+        }
+        m
+    }
 }
 
 /// Time integration scheme.
@@ -267,7 +281,10 @@ impl fmt::Display for Integrator {
 /// never accumulates f32 rounding. For live instances; estimation and
 /// references stay f64 (they difference positions twice, where f32 rounding
 /// would be of the order of gravity). Bit-reproducible like f64: the same
-/// bits on every instruction set.
+/// bits on every instruction set. A mesh's bending stencils stay f64 but
+/// go through their assembled operator with `F32` ([`super::Assembled`]:
+/// the same forces in another order of summation, fewer operations), so
+/// `F32` is the live level's fast path as a whole.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum SpringPrecision {
     /// Double precision (the default).

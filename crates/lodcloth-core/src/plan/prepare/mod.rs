@@ -10,7 +10,7 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 
-use super::estimator::{default_problem, record_reference_while, stable_problem, Estimator, PlanError};
+use super::estimator::{default_problem, progress_every, record_reference_while, stable_problem, Estimator, PlanError};
 use super::{EstimationPlan, InstanceKind, InstancePlan, Level};
 use crate::cache::CoefficientCache;
 use crate::estimate::{no_progress, FitOptions, LodProblem, Method, Reference};
@@ -267,9 +267,7 @@ impl Preparer {
     /// surface.
     pub fn reference_now(&self) -> Result<(), PrepareError> {
         match &self.plan.kind {
-            InstanceKind::Cloth(scene) => self
-                .reference_or_record(&Self::cloth_scene(scene, &self.plan), false)
-                .map(|_| ()),
+            InstanceKind::Cloth(scene) => self.reference_or_record(scene, false).map(|_| ()),
             InstanceKind::Surface(_) => Ok(()),
         }
     }
@@ -334,7 +332,13 @@ impl Preparer {
         }
     }
 
-    /// The cloth scene with the instance's integrator.
+    /// The cloth scene with the instance's integrator: what its levels run.
+    /// The reference runs the scene as written (its own integrator and
+    /// dt): it is the truth the levels are estimated and scored against,
+    /// and an integrator chosen to serve a level cheaply may not be stable
+    /// at the scene's dt (symplectic Euler at the Cusick scene's 1e-4 s,
+    /// beyond its 6.2e-5 s limit, failed every preparation until
+    /// 2026-12-05).
     fn cloth_scene(scene: &Scene, plan: &InstancePlan) -> Scene {
         let mut scene = scene.clone();
         scene.params.integrator = plan.integrator;
@@ -392,7 +396,7 @@ impl Preparer {
         }
         let prepared = match (&self.plan.kind, level) {
             (InstanceKind::Cloth(scene), Level::Grid { .. } | Level::Vertices(_)) => {
-                match self.prepare_cloth(&Self::cloth_scene(scene, &self.plan), level, method, cached_only)? {
+                match self.prepare_cloth(scene, &Self::cloth_scene(scene, &self.plan), level, method, cached_only)? {
                     Some(p) => p,
                     None => return Ok(None),
                 }
@@ -437,7 +441,7 @@ impl Preparer {
         // The reference first, on this thread: every method needs it.
         match &self.plan.kind {
             InstanceKind::Cloth(scene) => {
-                self.reference(&Self::cloth_scene(scene, &self.plan))?;
+                self.reference(scene)?;
             }
             InstanceKind::Surface(scene) => {
                 self.surface_reference(scene)?;
@@ -462,15 +466,18 @@ impl Preparer {
         }
     }
 
+    /// `level` of `scene` (the instance's integrator) estimated against
+    /// the reference of `own` (the scene as written).
     fn prepare_cloth(
         &self,
+        own: &Scene,
         scene: &Scene,
         level: Level,
         method: Method,
         cached_only: bool,
     ) -> Result<Option<Prepared>, PrepareError> {
         let started = Instant::now();
-        let reference = self.reference(scene)?;
+        let reference = self.reference(own)?;
         let failed = |e: PlanError| PrepareError::Failed {
             level,
             method,
@@ -512,7 +519,14 @@ impl Preparer {
                 None => return Ok(None),
             }
         } else {
-            self.estimator.estimate(estimating, method, &fit).map_err(failed)?
+            let name = &self.plan.name;
+            let mut progress = progress_every(
+                10.0,
+                |p| tracing::info!(instance = %name, %level, %method, stage = p.stage, done = p.done, total = p.total, "estimating"),
+            );
+            self.estimator
+                .estimate_reporting(estimating, method, &fit, &mut progress)
+                .map_err(failed)?
         };
         let material = estimated.material;
         let (problem, limit) = if self.plan.dt.is_some() {
