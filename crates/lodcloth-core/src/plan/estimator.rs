@@ -127,6 +127,13 @@ impl Estimator {
     /// The cache key of `method` on `problem` with `fit`'s settings.
     fn key(&self, problem: &LodProblem, method: Method, fit: &FitOptions) -> CacheKey {
         let train = fit.train_range(problem.frames());
+        // A level served with another integrator than its reference ran
+        // (keys before 2026-12-05 had the level's for both).
+        let reference_integrator = if problem.reference.integrator == problem.integrator {
+            String::new()
+        } else {
+            format!("[reference={}]", problem.reference.integrator.name())
+        };
         CacheKey {
             scene: problem.scene.name.clone(),
             scene_hash: problem.scene.source_hash,
@@ -145,11 +152,7 @@ impl Estimator {
                 fit.short_tolerance,
                 fit.guard_window
             ) + &problem.settling().map_or(String::new(), |h| format!("[settle={h}]"))
-                // A level served with another integrator than its reference
-                // ran (keys before 2026-12-05 had both the level's).
-                + &(problem.reference.integrator != problem.integrator)
-                    .then(|| format!("[reference={}]", problem.reference.integrator.name()))
-                    .unwrap_or_default(),
+                + &reference_integrator,
             mass: problem.mass.name().to_string(),
             integrator: problem.integrator.name().to_string(),
             dt: problem.dt,
