@@ -18,6 +18,34 @@ fn bits(sim: &Simulation) -> Vec<u64> {
     s.pos.iter().chain(&s.vel).map(|x| x.to_bits()).collect()
 }
 
+/// 100 steps of `build()`'s cloth with f32 springs give the same bits on
+/// the CPU's best path, on AVX2 and on the baseline, and not the bits of
+/// f64 springs.
+fn same_bits_on_every_path(label: &str, build: impl Fn() -> Simulation) {
+    let run = |precision, path| {
+        let before = force_path(path);
+        let mut sim = build();
+        sim.set_spring_precision(precision);
+        assert_eq!(sim.spring_precision(), precision);
+        for _ in 0..100 {
+            assert!(sim.step().finite, "{label} diverged on {path:?}");
+        }
+        force_path(before);
+        bits(&sim)
+    };
+    let best = run(SpringPrecision::F32, VectorPath::Best);
+    for path in [VectorPath::Avx2, VectorPath::Baseline] {
+        assert!(
+            run(SpringPrecision::F32, path) == best,
+            "{label}: f32 springs on {path:?} differ from the best path"
+        );
+    }
+    assert!(
+        run(SpringPrecision::F64, VectorPath::Best) != best,
+        "{label}: f32 springs gave f64's bits (the setting did nothing)"
+    );
+}
+
 /// Every explicit integrator on the windy, strain-limited flag and the
 /// shaken curtain (moving pins): 100 steps with f32 springs give the same
 /// bits on the CPU's best path, on AVX2 and on the baseline (SSE2 on
@@ -33,28 +61,8 @@ fn f32_springs_give_the_same_bits_on_every_vector_path() {
             let (nx, ny) = (33, 21);
             let probe = scene.build_at(nx, ny).expect("builds");
             scene.params.dt = 0.3 * probe.dt_limit();
-            let run = |precision, path| {
-                let before = force_path(path);
-                let mut sim = scene.build_at(nx, ny).expect("builds");
-                sim.set_spring_precision(precision);
-                assert_eq!(sim.spring_precision(), precision);
-                for _ in 0..100 {
-                    assert!(sim.step().finite, "{name} {integrator} diverged");
-                }
-                force_path(before);
-                bits(&sim)
-            };
-            let best = run(SpringPrecision::F32, VectorPath::Best);
-            for path in [VectorPath::Avx2, VectorPath::Baseline] {
-                assert!(
-                    run(SpringPrecision::F32, path) == best,
-                    "{name} {integrator}: f32 springs on {path:?} differ from the best path"
-                );
-            }
-            assert!(
-                run(SpringPrecision::F64, VectorPath::Best) != best,
-                "{name} {integrator}: f32 springs gave f64's bits (the setting did nothing)"
-            );
+            let label = format!("{name} {integrator}");
+            same_bits_on_every_path(&label, || scene.build_at(nx, ny).expect("builds"));
         }
     }
 }
@@ -466,25 +474,7 @@ fn a_mesh_bends_through_its_assembled_operator_with_the_same_bits_on_every_vecto
     scene.params.dt = 5e-5;
     let cloth = scene.cloth_level(Level::Vertices(300)).expect("a level");
     assert!(!cloth.topology.bending.is_empty(), "the disc bends through stencils");
-    let run = |precision, path| {
-        let before = force_path(path);
-        let mut sim = scene.build_on(&cloth, scene.material_on(&cloth)).expect("builds");
-        sim.set_spring_precision(precision);
-        for _ in 0..100 {
-            assert!(sim.step().finite, "diverged on {path:?}");
-        }
-        force_path(before);
-        bits(&sim)
-    };
-    let best = run(SpringPrecision::F32, VectorPath::Best);
-    for path in [VectorPath::Avx2, VectorPath::Baseline] {
-        assert!(
-            run(SpringPrecision::F32, path) == best,
-            "the mesh fast path on {path:?} differs from the best path"
-        );
-    }
-    assert!(
-        run(SpringPrecision::F64, VectorPath::Best) != best,
-        "the fast path gave the f64 path's bits"
-    );
+    same_bits_on_every_path("the Cusick disc at 300v", || {
+        scene.build_on(&cloth, scene.material_on(&cloth)).expect("builds")
+    });
 }
