@@ -803,7 +803,8 @@ nodes = {{ region = {{ u = [0.0, 0.25], v = [0.0, 1.0] }} }}
 
 /// `drape` recovers a cloth's own bending from a start 3× too soft: the
 /// level is the reference's own grid, so at the true bending its drape is
-/// the reference's bit for bit, and nothing else moves the shadow.
+/// the reference's bit for bit, and nothing else moves the shadow. It
+/// reports progress through every run, the reference's included.
 #[test]
 fn drape_recovers_a_known_bending_from_a_wrong_start() {
     let s = cantilever(31);
@@ -826,10 +827,36 @@ fn drape_recovers_a_known_bending_from_a_wrong_start() {
         start: Some(start),
         ..FitOptions::default()
     };
-    let est = p.estimate(Method::Drape, &options, &mut no_progress).unwrap();
+    let mut reports = Vec::new();
+    let est = p.estimate(Method::Drape, &options, &mut |q| reports.push(q)).unwrap();
     let Details::Drape(report) = &est.details else {
         panic!("drape reports a drape fit")
     };
+    // Progress every half second of every batch's simulated time: the
+    // reference's 3 s in six reports after the first, then six per level
+    // run, never backwards, within the total, the last at its run's end.
+    let per_run = 6;
+    let reference: Vec<u64> = reports.iter().filter(|q| q.stage == "drape: reference").map(|q| q.done).collect();
+    assert_eq!(reference, (0..=per_run).collect::<Vec<u64>>(), "{reports:?}");
+    let total = reports[0].total;
+    assert_eq!(total, (lodcloth::estimate::shadow::DRAPE_RUNS as u64 + 1) * per_run);
+    assert!(reports.windows(2).all(|w| w[0].done < w[1].done), "{reports:?}");
+    assert!(reports.iter().all(|q| q.total == total && q.done <= total));
+    let level = reports.iter().filter(|q| q.stage == "drape: level runs").count() as u64;
+    assert_eq!(level, report.runs.len() as u64 * per_run, "{reports:?}");
+    assert_eq!(reports.last().map(|q| q.done), Some((report.runs.len() as u64 + 1) * per_run));
+    // The reference's shadow is read once per recording: a second fit on it
+    // (from the truth: one run) has its stage done at once and aims at the
+    // same bits.
+    let mut again = Vec::new();
+    let second = p.estimate(Method::Drape, &FitOptions::default(), &mut |q| again.push(q)).unwrap();
+    let Details::Drape(second) = &second.details else {
+        panic!("drape reports a drape fit")
+    };
+    let reference: Vec<u64> = again.iter().filter(|q| q.stage == "drape: reference").map(|q| q.done).collect();
+    assert_eq!(reference, [0, per_run], "{again:?}");
+    assert_eq!(second.target.to_bits(), report.target.to_bits());
+    assert_eq!(second.runs.len(), 1, "{second:?}");
     // The start droops visibly more: its shadow is far outside the tolerance.
     let start_off = report.start_shadow / report.target - 1.0;
     assert!(

@@ -23,7 +23,7 @@
 //! from the last one before the first input instead of from rest: the same
 //! steps, so the same bits, without re-running the untouched part.
 
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock};
 
 use crate::sim::{Integrator, Material, Simulation, State, Topology};
 
@@ -102,6 +102,10 @@ pub struct Reference {
     /// Whole states every [`CHECKPOINT_SECONDS`] (in time order), to
     /// resume the run from.
     pub checkpoints: Vec<State>,
+    /// The `drape` fit's reading of this recording, `(end, pixel, shadow)`:
+    /// its mean shadow at a scene's end over its twins (`super::shadow`),
+    /// minutes of runs that every level of the reference would repeat.
+    pub(crate) drape_shadow: OnceLock<(f64, f64, f64)>,
 }
 
 /// Why a reference could not be recorded.
@@ -253,6 +257,7 @@ impl Reference {
             o_max,
             rest,
             checkpoints,
+            drape_shadow: OnceLock::new(),
         })
     }
 

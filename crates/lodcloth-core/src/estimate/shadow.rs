@@ -15,8 +15,8 @@
 //! The shadow is [`crate::drape::shadow_area`] (the union of the
 //! triangles' projections along y, gravity's axis in every shipped drape),
 //! to pixels of 1/1000 of the reference's rest extent. The reference's is
-//! read once: its run resumed from the recording's last checkpoint to the
-//! scene's end. The level's is a monotone function of `s` in the mean (a
+//! read once per recording, whichever level asks first: its run resumed
+//! from the recording's last checkpoint to the scene's end. The level's is a monotone function of `s` in the mean (a
 //! stiffer cloth spreads wider) with steps where the folds' count changes,
 //! so the factor is found by bracketing in log `s` (×1.5 a run) and then
 //! the Illinois variant of regula falsi, which keeps a bracket whatever
@@ -30,7 +30,8 @@
 //! mean over [`DRAPE_TWINS`] runs: the reference's recorded run and its
 //! twins from rest, the level's runs from rest, every twin but the first
 //! with each height jittered by [`DRAPE_JITTER`] (seeded 1, 2, …, as
-//! `drape_scan run --twins` makes them). The twins run in parallel. The
+//! `drape_scan run --twins` makes them). The twins run in parallel and
+//! meet every half second of simulated time to report progress. The
 //! factor makes the level's mean shadow the reference's within
 //! [`DRAPE_TOLERANCE`]. Pure: no I/O.
 
@@ -90,37 +91,84 @@ fn pixel(problem: &LodProblem) -> f64 {
     extent(0).max(extent(2)).max(extent(1)) / PIXELS_ACROSS
 }
 
-/// Step `sim` until the scene's end; its shadow then, or NaN if it
-/// diverged.
-fn shadow_at_end(sim: &mut Simulation, end: f64, pixel: f64, turns: &crate::turns::Turns) -> f64 {
+/// Simulated seconds between two progress reports of a batch of twins.
+const REPORT_EVERY: f64 = 0.5;
+
+/// Progress reports of one batch of twins run to `end`.
+fn reports(end: f64) -> u64 {
+    (end / REPORT_EVERY).ceil().max(1.0) as u64
+}
+
+/// Step `sim` until its clock reaches `until` (within half a step); false
+/// when it diverged.
+fn step_until(sim: &mut Simulation, until: f64, turns: &crate::turns::Turns) -> bool {
     let dt = sim.params().dt;
     let mut k = 0u64;
-    while sim.state().time < end - 0.5 * dt {
+    while sim.state().time < until - 0.5 * dt {
         sim.step();
         k += 1;
         if k.is_multiple_of(1000) {
             if sim.diverged() {
-                return f64::NAN;
+                return false;
             }
             turns.checkpoint();
         }
     }
-    if sim.diverged() {
-        return f64::NAN;
+    !sim.diverged()
+}
+
+/// Step every twin (None: refused) to `end` in parallel, meeting every
+/// [`REPORT_EVERY`] s of simulated time to `report(k)` the k-th of
+/// [`reports`]`(end)` (the steps are the same as in one go, and so are
+/// the bits); each twin's shadow then, NaN where it diverged or was refused.
+fn shadows_at_end(
+    sims: &mut [Option<Simulation>],
+    end: f64,
+    pixel: f64,
+    turns: &crate::turns::Turns,
+    report: &mut dyn FnMut(u64),
+) -> Vec<f64> {
+    let n = reports(end);
+    for k in 1..=n {
+        let until = if k == n { end } else { k as f64 * REPORT_EVERY };
+        sims.par_iter_mut().for_each(|twin| {
+            if let Some(sim) = twin {
+                if !step_until(sim, until, turns) {
+                    *twin = None;
+                }
+            }
+        });
+        report(k);
     }
-    shadow_area(&sim.topology().triangles, &sim.state().pos, pixel)
+    sims.iter()
+        .map(|twin| match twin {
+            Some(sim) => shadow_area(&sim.topology().triangles, &sim.state().pos, pixel),
+            None => f64::NAN,
+        })
+        .collect()
 }
 
 /// The reference's mean shadow at the scene's end: its recording resumed
 /// from the last checkpoint (or from rest) and stepped on, and its twins
-/// from rest.
-fn reference_shadow(problem: &LodProblem, end: f64, pixel: f64) -> Result<f64, EstimateError> {
+/// from rest. Read once per recording (and end and pixel): the other
+/// levels of the reference take it from there, with one report.
+fn reference_shadow(
+    problem: &LodProblem,
+    end: f64,
+    pixel: f64,
+    report: &mut dyn FnMut(u64),
+) -> Result<f64, EstimateError> {
+    if let Some(&(e, p, shadow)) = problem.reference.drape_shadow.get() {
+        if e == end && p == pixel {
+            report(reports(end));
+            return Ok(shadow);
+        }
+    }
     let sim_error = |source| EstimateError::Sim {
         level: problem.level,
         source,
     };
-    let shadows = (0..DRAPE_TWINS)
-        .into_par_iter()
+    let mut sims = (0..DRAPE_TWINS)
         .map(|twin| {
             let mut sim = problem.reference.scene_as_run(&problem.scene).build()?;
             if twin == 0 {
@@ -130,33 +178,35 @@ fn reference_shadow(problem: &LodProblem, end: f64, pixel: f64) -> Result<f64, E
             } else {
                 jitter_heights(&mut sim, twin, DRAPE_JITTER);
             }
-            Ok(shadow_at_end(&mut sim, end, pixel, problem.turns()))
+            Ok(Some(sim))
         })
-        .collect::<Result<Vec<f64>, EstimateError>>()?;
+        .collect::<Result<Vec<_>, EstimateError>>()?;
+    let shadows = shadows_at_end(&mut sims, end, pixel, problem.turns(), report);
     let shadow = shadows.iter().sum::<f64>() / shadows.len() as f64;
     if !shadow.is_finite() {
         return Err(EstimateError::Drape(format!(
             "the reference diverged before the scene's end ({end} s)"
         )));
     }
+    // Another level may have set it meanwhile: the same bits.
+    let _ = problem.reference.drape_shadow.set((end, pixel, shadow));
     Ok(shadow)
 }
 
 /// The level's mean shadow with `material` at the scene's end over its
 /// twins from rest; NaN when a twin diverged or the level is refused.
-fn level_shadow(problem: &LodProblem, material: Material, end: f64, pixel: f64) -> f64 {
-    let shadows: Vec<f64> = (0..DRAPE_TWINS)
-        .into_par_iter()
-        .map(|twin| match problem.simulation(material) {
-            Ok(mut sim) => {
+fn level_shadow(problem: &LodProblem, material: Material, end: f64, pixel: f64, report: &mut dyn FnMut(u64)) -> f64 {
+    let mut sims: Vec<Option<Simulation>> = (0..DRAPE_TWINS)
+        .map(|twin| {
+            problem.simulation(material).ok().map(|mut sim| {
                 if twin > 0 {
                     jitter_heights(&mut sim, twin, DRAPE_JITTER);
                 }
-                shadow_at_end(&mut sim, end, pixel, problem.turns())
-            }
-            Err(_) => f64::NAN,
+                sim
+            })
         })
         .collect();
+    let shadows = shadows_at_end(&mut sims, end, pixel, problem.turns(), report);
     shadows.iter().sum::<f64>() / shadows.len() as f64
 }
 
@@ -180,23 +230,34 @@ pub fn drape_fit(
         ));
     }
     let pixel = pixel(problem);
-    let total = DRAPE_RUNS as u64 + 1;
+    // Progress in batches' reports: the reference's, then the level runs'.
+    let per_run = reports(end);
+    let total = (DRAPE_RUNS as u64 + 1) * per_run;
     progress(Progress {
         stage: "drape: reference",
         done: 0,
         total,
     });
-    let target = reference_shadow(problem, end, pixel)?;
+    let target = reference_shadow(problem, end, pixel, &mut |k| {
+        progress(Progress {
+            stage: "drape: reference",
+            done: k,
+            total,
+        })
+    })?;
     let mut runs: Vec<(f64, f64)> = Vec::new();
     // The level's shadow against the target, in log: f(s) > 0 is too stiff.
     let run = |s: f64, runs: &mut Vec<(f64, f64)>, progress: &mut dyn FnMut(Progress)| {
-        let shadow = level_shadow(problem, start.kind_scaled(SpringKind::Bend, s, s), end, pixel);
-        runs.push((s, shadow));
-        progress(Progress {
-            stage: "drape: level runs",
-            done: runs.len() as u64 + 1,
-            total,
+        let before = (runs.len() as u64 + 1) * per_run;
+        let material = start.kind_scaled(SpringKind::Bend, s, s);
+        let shadow = level_shadow(problem, material, end, pixel, &mut |k| {
+            progress(Progress {
+                stage: "drape: level runs",
+                done: before + k,
+                total,
+            })
         });
+        runs.push((s, shadow));
         if shadow.is_finite() && shadow > 0.0 {
             (shadow / target).ln()
         } else {
