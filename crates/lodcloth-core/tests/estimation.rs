@@ -836,25 +836,39 @@ fn drape_recovers_a_known_bending_from_a_wrong_start() {
     // reference's 3 s in six reports after the first, then six per level
     // run, never backwards, within the total, the last at its run's end.
     let per_run = 6;
-    let reference: Vec<u64> = reports.iter().filter(|q| q.stage == "drape: reference").map(|q| q.done).collect();
-    assert_eq!(reference, (0..=per_run).collect::<Vec<u64>>(), "{reports:?}");
+    let reference_stage = |reports: &[lodcloth::estimate::Progress]| -> Vec<u64> {
+        reports
+            .iter()
+            .filter(|q| q.stage == "drape: reference")
+            .map(|q| q.done)
+            .collect()
+    };
+    assert_eq!(
+        reference_stage(&reports),
+        (0..=per_run).collect::<Vec<u64>>(),
+        "{reports:?}"
+    );
     let total = reports[0].total;
     assert_eq!(total, (lodcloth::estimate::shadow::DRAPE_RUNS as u64 + 1) * per_run);
     assert!(reports.windows(2).all(|w| w[0].done < w[1].done), "{reports:?}");
     assert!(reports.iter().all(|q| q.total == total && q.done <= total));
     let level = reports.iter().filter(|q| q.stage == "drape: level runs").count() as u64;
     assert_eq!(level, report.runs.len() as u64 * per_run, "{reports:?}");
-    assert_eq!(reports.last().map(|q| q.done), Some((report.runs.len() as u64 + 1) * per_run));
+    assert_eq!(
+        reports.last().map(|q| q.done),
+        Some((report.runs.len() as u64 + 1) * per_run)
+    );
     // The reference's shadow is read once per recording: a second fit on it
     // (from the truth: one run) has its stage done at once and aims at the
     // same bits.
     let mut again = Vec::new();
-    let second = p.estimate(Method::Drape, &FitOptions::default(), &mut |q| again.push(q)).unwrap();
+    let second = p
+        .estimate(Method::Drape, &FitOptions::default(), &mut |q| again.push(q))
+        .unwrap();
     let Details::Drape(second) = &second.details else {
         panic!("drape reports a drape fit")
     };
-    let reference: Vec<u64> = again.iter().filter(|q| q.stage == "drape: reference").map(|q| q.done).collect();
-    assert_eq!(reference, [0, per_run], "{again:?}");
+    assert_eq!(reference_stage(&again), [0, per_run], "{again:?}");
     assert_eq!(second.target.to_bits(), report.target.to_bits());
     assert_eq!(second.runs.len(), 1, "{second:?}");
     // The start droops visibly more: its shadow is far outside the tolerance.

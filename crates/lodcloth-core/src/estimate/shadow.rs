@@ -16,11 +16,11 @@
 //! triangles' projections along y, gravity's axis in every shipped drape),
 //! to pixels of 1/1000 of the reference's rest extent. The reference's is
 //! read once per recording, whichever level asks first: its run resumed
-//! from the recording's last checkpoint to the scene's end. The level's is a monotone function of `s` in the mean (a
-//! stiffer cloth spreads wider) with steps where the folds' count changes,
-//! so the factor is found by bracketing in log `s` (×1.5 a run) and then
-//! the Illinois variant of regula falsi, which keeps a bracket whatever
-//! the steps do. A run that diverges counts as too stiff.
+//! from the recording's last checkpoint to the scene's end. The level's is
+//! a monotone function of `s` in the mean (a stiffer cloth spreads wider)
+//! with steps where the folds' count changes, so the factor is found by
+//! bracketing in log `s` (×1.5 a run) and then the Illinois variant of
+//! regula falsi, which keeps a bracket whatever the steps do. A run that diverges counts as too stiff.
 //!
 //! One run is one draw of a drape whose folds form where rounding decides
 //! (on the Cusick disc the drape coefficient of one mesh spreads by 1–3 %,
