@@ -27,11 +27,34 @@ pub async fn within<T>(seconds: u64, what: &str, f: impl Future<Output = T>) -> 
     }
 }
 
+/// A free loopback port for a test daemon (or its HTTP or QUIC endpoint),
+/// below the kernel's ephemeral range. A daemon listens some time after
+/// this returns while the test's client starts connecting at once: with a
+/// port from the ephemeral range an outgoing connection (that client's own
+/// included) may be given it as its source port in between, and the daemon
+/// then cannot listen, or the client connects to itself (TCP's simultaneous
+/// open). Ports are handed out in turn from a start that differs between
+/// processes, each free for TCP and UDP when handed out.
 pub fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .and_then(|l| l.local_addr())
-        .map(|a| a.port())
-        .expect("a free loopback port")
+    use std::sync::atomic::{AtomicU32, Ordering};
+    static NEXT: AtomicU32 = AtomicU32::new(0);
+    let low = std::fs::read_to_string("/proc/sys/net/ipv4/ip_local_port_range")
+        .ok()
+        .and_then(|r| r.split_whitespace().next()?.parse::<u32>().ok())
+        .unwrap_or(32768);
+    let first = 10_000;
+    let span = low.saturating_sub(first).max(1000);
+    let start = std::process::id().wrapping_mul(7919);
+    for _ in 0..span {
+        let k = NEXT.fetch_add(1, Ordering::Relaxed);
+        let port = (first + start.wrapping_add(k) % span) as u16;
+        let free = std::net::TcpListener::bind(("127.0.0.1", port)).is_ok()
+            && std::net::UdpSocket::bind(("127.0.0.1", port)).is_ok();
+        if free {
+            return port;
+        }
+    }
+    panic!("no free loopback port between {first} and {}", first + span)
 }
 
 pub fn scene_path(name: &str) -> PathBuf {
@@ -125,9 +148,18 @@ impl Daemon {
     pub fn run(port: u16, text: &str, dir: tempfile::TempDir) -> Daemon {
         let config = ServiceConfig::from_toml(text, "test").expect("valid config");
         let (tx, rx) = oneshot::channel();
-        let task = tokio::spawn(lodcloth::service::run(config, async {
-            let _ = rx.await;
-        }));
+        // A daemon that stops on its own says why, or a test waiting for
+        // its replies would only time out.
+        let task = tokio::spawn(async move {
+            let result = lodcloth::service::run(config, async {
+                let _ = rx.await;
+            })
+            .await;
+            if let Err(e) = &result {
+                eprintln!("the test daemon on port {port} stopped: {e}");
+            }
+            result
+        });
         Daemon {
             port,
             stop: Some(tx),
