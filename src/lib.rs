@@ -4,8 +4,9 @@
 //! # Layout
 //! Two crates; dependencies point one way:
 //! `core ← engine ← service ← {view, foxglove_bridge, CLI}`, with `proto`
-//! converting at the service's edge and `experiments`/`output` beside the
-//! service, on the core alone.
+//! converting at the service's edge and `output` beside the service, on the
+//! core alone. The lab (`crates/lodcloth-lab`: the studies, their charts and
+//! notebook) depends on this crate, never the other way round.
 //!
 //! - The pure core, the `lodcloth-core` crate (`crates/lodcloth-core`),
 //!   re-exported here under the same names: [`sim`], [`scene`], [`lod`],
@@ -24,11 +25,10 @@
 //!   every wire ↔ domain conversion.
 //! - [`view`] and [`foxglove_bridge`] — clients of the bus: the browser view
 //!   and the Foxglove WebSocket bridge.
-//! - [`experiments`] — longer studies on the core (Table 1, Pareto fronts,
-//!   switch continuity, stability sweeps), returning values.
 //! - [`output`] — trajectory files, CSV reports, pictures (PNG render, SVG charts).
+//! - [`args`] — the command-line pieces the lab's binary shares.
 //! - `src/cli/` — the `lodcloth` command line: `serve` and its clients,
-//!   `simulate`, `experiment`, `points`, `inspect`.
+//!   `simulate`, `points`, `mesh`, `inspect`.
 //!
 //! `docs/architecture.md` walks through how a state and a switch request
 //! flow through these layers.
@@ -44,8 +44,8 @@ pub const VERSION: &str = concat!(env!("CARGO_PKG_VERSION"), " (", env!("LODCLOT
 /// The git revision alone (`unknown` when built without one).
 pub const REVISION: &str = env!("LODCLOTH_GIT_REVISION");
 
+pub mod args;
 pub mod engine;
-pub mod experiments;
 pub mod foxglove_bridge;
 pub mod output;
 pub mod proto;

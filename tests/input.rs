@@ -749,7 +749,7 @@ async fn a_recorded_session_replays_offline_to_the_recorded_states() {
         })
         .collect();
     let score = |scene: &Scene, reference| {
-        lodcloth::experiments::drag::replayed_error(scene, reference, (16, 16), &recorded, &replay.script, &mut |_| {})
+        lodcloth::estimate::score_session(scene, reference, (16, 16), &recorded, &replay.script, &mut |_| {})
             .expect("scored")
     };
     let itself = score(&scene, (16, 16));
@@ -769,29 +769,6 @@ async fn a_recorded_session_replays_offline_to_the_recorded_states() {
         "{}",
         fine.report.mean
     );
-    let touched_out = out.path().join("touched");
-    let cli = tokio::task::block_in_place(|| {
-        std::process::Command::new(env!("CARGO_BIN_EXE_lodcloth"))
-            .args([
-                "experiment",
-                "touched",
-                "--scene",
-                scene_path("paper-1-top-edge.toml").to_str().unwrap(),
-            ])
-            .args(["--recording", lct.to_str().unwrap(), "--reference", "24x24"])
-            .args(["--out", touched_out.to_str().unwrap()])
-            .output()
-            .expect("the lodcloth binary runs")
-    });
-    let text = String::from_utf8_lossy(&cli.stdout);
-    assert!(
-        cli.status.success() && text.contains(&format!("mean {:.3} %", 100.0 * fine.report.mean)),
-        "{text}{}",
-        String::from_utf8_lossy(&cli.stderr)
-    );
-    assert!(touched_out.join("touched.svg").exists());
-    let rows = std::fs::read_to_string(touched_out.join("touched.csv")).expect("the CSV");
-    assert_eq!(rows.lines().count(), fine.frames.len() + 1);
     d.shutdown().await.expect("clean exit");
 }
 

@@ -349,6 +349,37 @@ fn state_directories_and_the_http_address_come_from_the_environment_under_a_serv
     assert!(err.contains("--http: 'localhost' is not an address:port"), "{err}");
 }
 
+/// The product's binary offers what a user of the service runs; the
+/// studies are the lab's (`lodcloth-lab`), and a study's name is refused.
+#[test]
+fn the_product_lists_no_study() {
+    let help = stdout(&lodcloth(&["--help"], &[]));
+    let commands: Vec<&str> = help
+        .lines()
+        .skip_while(|l| !l.starts_with("Commands:"))
+        .skip(1)
+        .take_while(|l| !l.trim().is_empty())
+        .filter_map(|l| l.split_whitespace().next())
+        .collect();
+    for command in [
+        "serve", "switch", "input", "view", "simulate", "points", "mesh", "inspect",
+    ] {
+        assert!(commands.contains(&command), "{command} missing from {commands:?}");
+    }
+    for study in ["experiment", "stability"] {
+        assert!(
+            !commands.contains(&study),
+            "the product offers the study {study}: {commands:?}"
+        );
+        assert!(
+            !lodcloth(&[study, "--help"], &[]).status.success(),
+            "{study} still runs"
+        );
+    }
+    let points = stdout(&lodcloth(&["points", "--help"], &[]));
+    assert!(points.contains("simulate") && !points.contains("accuracy"), "{points}");
+}
+
 #[test]
 fn version_names_the_commit_and_completions_and_manual_pages_cover_every_subcommand() {
     let version = stdout(&lodcloth(&["--version"], &[]));
@@ -381,7 +412,7 @@ fn version_names_the_commit_and_completions_and_manual_pages_cover_every_subcomm
         "lodcloth.1",
         "lodcloth-serve.1",
         "lodcloth-switch.1",
-        "lodcloth-experiment.1",
+        "lodcloth-simulate.1",
     ] {
         let text = std::fs::read_to_string(out.join(page)).unwrap_or_else(|e| panic!("{page}: {e}"));
         assert!(

@@ -828,7 +828,7 @@ fn lsq_on_a_surface_recovers_the_reference_springs_and_bcd_gkd_run_on_the_local_
     // must give back the scene's stretch and bend coefficients.
     let dir = tempfile::tempdir().expect("temp dir");
     let scene = "name = \"s\"\ncloud = \"sphere\"\ncount = 400\ngravity = [0.0, 0.0, -9.81]\npin_below = -0.35\nduration = 0.5\nstretch = [50.0, 0.05]\nbend = [5.0, 0.005]\n[[pulls]]\npoint = \"top\"\noffset = [0.0, 0.0, 0.2]\n";
-    let preparer = surface_preparer(dir.path(), scene, "[400, 120]", "lsq");
+    let preparer = surface_preparer(dir.path(), scene, "[400, 120]", "same");
     let full = preparer
         .prepare(lodcloth::plan::Level::Points(400), lodcloth::estimate::Method::Lsq)
         .expect("lsq prepared");

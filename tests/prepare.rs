@@ -10,10 +10,34 @@ use std::sync::{mpsc, Arc};
 use std::time::{Duration, Instant};
 
 use lodcloth::estimate::Method;
-use lodcloth::plan::Level;
+use lodcloth::plan::{Level, Preparer};
+use lodcloth::service::config::ServiceConfig;
 use lodcloth::turns::{Courtesy, Turns};
 
-use crate::drag::preparer;
+/// Paper scene 1 (top edge pinned, pulled down 1.0–2.5 s) with a 24×24
+/// reference over its first 3 s, as the daemon tests run it.
+fn preparer() -> Preparer {
+    let scene = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/scenes/paper-1-top-edge.toml");
+    let text = format!(
+        r#"
+[estimation]
+reference_steps = 15000
+metric_stride = 25
+estimate_stride = 25
+precompute = false
+[[instances]]
+name = "prepare"
+scene = "{}"
+reference = "24x24"
+levels = ["8x8", "12x12", "16x16"]
+start = "8x8"
+method = "same"
+"#,
+        scene.display()
+    );
+    let config = ServiceConfig::from_toml(&text, "prepare test").expect("valid config");
+    Preparer::new(Arc::new(config.instances[0].clone()), config.estimation, None)
+}
 
 /// A background thread (`SCHED_IDLE`) starts recording the reference while
 /// every core is busy at normal priority (as the daemon's cores are with

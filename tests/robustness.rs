@@ -399,11 +399,11 @@ async fn a_client_vanishing_mid_request_disturbs_nothing() {
     let d = Daemon::start(("a", "b"));
     let c = client(&[d.endpoint()]).await;
     within(20, "info", wait_info(&c, "a")).await;
-    // A switch that needs an estimate (lsq at 12×12 is not prepared yet),
+    // A switch that needs an estimate (gkd at 12×12 is not prepared yet),
     // from a client that disappears while it is being estimated.
     let leaving = client(&[d.endpoint()]).await;
     let request = v1::SwitchRequest {
-        method: "lsq".into(),
+        method: "gkd".into(),
         ..to(Level::new(12, 12))
     };
     let pending = {

@@ -171,11 +171,11 @@ async fn an_at_once_switch_answers_before_its_estimate_which_follows_in_place() 
     let d = Daemon::start(("now", "now-fixed"));
     let c = client(&[d.endpoint()]).await;
     wait_info(&c, "now").await;
-    // `bcd` is not the configured method (`same`): nothing prepares it in
-    // the background, so 12x12 with bcd is unprepared when asked for.
+    // `gkd` is not the configured method (`same`): nothing prepares it in
+    // the background, so 12x12 with gkd is unprepared when asked for.
     let request = v1::SwitchRequest {
         target: Some(v1::switch_request::Target::Level(Level::new(12, 12).to_wire())),
-        method: "bcd".into(),
+        method: "gkd".into(),
         at_once: true,
     };
     let reply = within(30, "at-once switch", c.switch("now", &request, Duration::from_secs(30)))
@@ -186,7 +186,7 @@ async fn an_at_once_switch_answers_before_its_estimate_which_follows_in_place() 
     assert_eq!(reply.method, "same", "live with the scene's own coefficients first");
     assert_eq!(reply.predicted_error, None, "no prediction before the estimate");
     assert!(!reply.cached);
-    // The estimate follows in place: same level, method bcd, one more
+    // The estimate follows in place: same level, method gkd, one more
     // coefficient version, a prediction.
     let info = within(60, "the estimate in place", async {
         loop {
@@ -199,20 +199,20 @@ async fn an_at_once_switch_answers_before_its_estimate_which_follows_in_place() 
     })
     .await;
     assert_eq!(Level::from_wire(info.level.as_ref().unwrap()), Ok(Level::new(12, 12)));
-    assert_eq!(info.method, "bcd");
+    assert_eq!(info.method, "gkd");
     assert_eq!(info.coefficient_version, reply.coefficient_version + 1);
     assert!(info.o_max > 0.0, "the prepared level's normaliser is live");
     // Asked again, now prepared: an ordinary switch answers from the cache
     // (at_once changes nothing for a prepared level).
     let again = v1::SwitchRequest {
         target: Some(v1::switch_request::Target::Level(Level::new(12, 12).to_wire())),
-        method: "bcd".into(),
+        method: "gkd".into(),
         at_once: true,
     };
     let reply = within(30, "prepared switch", c.switch("now", &again, Duration::from_secs(30)))
         .await
         .expect("switch accepted");
-    assert!(!reply.refining && reply.cached && reply.method == "bcd");
+    assert!(!reply.refining && reply.cached && reply.method == "gkd");
     assert!(reply.predicted_error.is_some());
     d.shutdown().await.expect("clean exit");
 }
@@ -554,6 +554,20 @@ async fn bad_requests_get_errors_naming_the_problem_and_publishing_goes_on() {
             "method 'magic'",
         ),
         (
+            "a lab method",
+            c.switch(
+                "bad",
+                &v1::SwitchRequest {
+                    method: "bcd".into(),
+                    ..level(8, 8)
+                },
+                t,
+            )
+            .await,
+            "CODE_BAD_REQUEST",
+            "method 'bcd' is not one of same, gkd, fit, follow, drape (the daemon's methods; 'bcd' is the lab's)",
+        ),
+        (
             "a level unstable at the instance's fixed dt",
             c.switch("bad-fixed", &level(16, 16), t).await,
             "CODE_UNSTABLE",
@@ -725,6 +739,15 @@ spring_precision = "f16"
     ] {
         assert!(err.contains(needle), "missing '{needle}' in:\n{err}");
     }
+    // The lab's methods are not the daemon's: named with the daemon's.
+    let lab = text.replace("method = \"guess\"", "method = \"lsq\"");
+    let err = ServiceConfig::from_toml(&lab, "lab.toml")
+        .expect_err("rejected")
+        .to_string();
+    assert!(
+        err.contains("instances[0].method: 'lsq' is not one of same, gkd, fit, follow, drape (the daemon's methods; 'lsq' is the lab's)"),
+        "{err}"
+    );
     let unknown = ServiceConfig::from_toml("[engine]\nthreadz = 2\n", "typo.toml").expect_err("rejected");
     assert!(unknown.to_string().contains("threadz"), "{unknown}");
 }

@@ -6,9 +6,7 @@
 //!
 //! `cargo test --release --test sim` (one file: `--test sim points::`).
 
-mod drag;
 mod engine;
-mod generalise;
 mod lod;
 mod parse_fuzz;
 mod points;

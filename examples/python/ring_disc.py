@@ -9,14 +9,14 @@ neighbouring rings are stitched by the zipper of
 `lodcloth_core::mesh::generate` (the next triangle takes the next point of
 whichever ring is behind). The disc lies in the x–z plane at y = 0, centred
 on the y axis, triangles facing +y, no texture coordinates, as the Cusick
-specimen (config/meshes/cusick-specimen.obj). Used in docs/results.md,
-"Bending for the drape, or for the fall":
+specimen (config/meshes/cusick-specimen.obj). Used in the lab's notebook
+(crates/lodcloth-lab/NOTEBOOK.md), "Bending for the drape, or for the fall":
 
     python3 examples/python/ring_disc.py band.obj \
         10:10,20:10,30:10,40:10,50:10,60:10,70:10,80:10,90:5,95:5,100:5,110:10,120:10,130:10,140:10,150:10
 
 then a copy of config/scenes/cusick-drape.toml with `mesh` set to the file's
-absolute path, stepped by `cargo run --release --example drape_scan -- run
+absolute path, stepped by `cargo run --release -p lodcloth-lab --example drape_scan -- run
 COPY.toml --levels 100% --twins 4`.
 """
 

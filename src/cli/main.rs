@@ -4,7 +4,6 @@ use std::path::PathBuf;
 
 use anyhow::{bail, Context, Result};
 use clap::{CommandFactory, Parser, Subcommand};
-use indicatif::{ProgressBar, ProgressStyle};
 
 use lodcloth::output::Precision;
 use lodcloth::sim::Integrator;
@@ -21,11 +20,6 @@ struct Cli {
     log_json: bool,
     #[command(subcommand)]
     command: Command,
-}
-
-/// Command-line integrator names: the config files' names, `-` allowed for `_`.
-pub(crate) fn integrator_arg(name: &str) -> Result<Integrator, lodcloth::names::UnknownName> {
-    lodcloth::names::parse_arg(name)
 }
 
 #[derive(Subcommand)]
@@ -128,7 +122,7 @@ enum Command {
         #[arg(long)]
         ny: Option<usize>,
         /// Override the scene's integrator.
-        #[arg(long, value_parser = integrator_arg)]
+        #[arg(long, value_parser = lodcloth::args::integrator_arg)]
         integrator: Option<Integrator>,
         /// Override the scene's time step (s).
         #[arg(long)]
@@ -162,33 +156,8 @@ enum Command {
         #[arg(long, requires = "inputs")]
         episode: Option<u64>,
     },
-    /// Measure each integrator's stability threshold by bisection over dt and
-    /// stiffness/mass ratios; write CSV and an SVG chart of predicted vs measured.
-    Stability {
-        /// Scene whose material is used (default config/scenes/hanging.toml).
-        #[arg(long, default_value = "config/scenes/hanging.toml")]
-        scene: PathBuf,
-        /// Square grid sizes, comma separated.
-        #[arg(long, value_delimiter = ',', default_values_t = vec![8usize, 16])]
-        sizes: Vec<usize>,
-        /// Stiffness multipliers, comma separated.
-        #[arg(long, value_delimiter = ',', default_values_t = vec![0.25, 1.0, 4.0, 16.0])]
-        factors: Vec<f64>,
-        /// Steps per trial.
-        #[arg(long, default_value_t = 3000)]
-        steps: u32,
-        /// Bisection iterations per threshold.
-        #[arg(long, default_value_t = 14)]
-        bisections: u32,
-        /// Output directory.
-        #[arg(long, default_value = "out/stability")]
-        out: PathBuf,
-    },
-    /// Level-of-detail experiments: table1, pareto, lod-plan, switch-test.
-    #[command(subcommand)]
-    Experiment(experiment::Experiment),
     /// Point-sampled surfaces: generate, simulate (simplified, moved back to
-    /// every point), accuracy against simplification size.
+    /// every point).
     #[command(subcommand)]
     Points(points::Points),
     /// Cloth meshes: write a generated one (disc, sheet, skirt), or read a
@@ -216,7 +185,6 @@ enum Command {
     },
 }
 
-mod experiment;
 mod input;
 mod mesh;
 mod points;
@@ -298,15 +266,6 @@ fn main() -> Result<()> {
             inputs,
             episode,
         }),
-        Command::Stability {
-            scene,
-            sizes,
-            factors,
-            steps,
-            bisections,
-            out,
-        } => simulate::stability(&scene, sizes, factors, steps, bisections, &out),
-        Command::Experiment(e) => experiment::run(e),
         Command::Points(p) => points::run(p),
         Command::Mesh(m) => mesh::run(m),
         Command::Inspect { file } => simulate::inspect(&file),
@@ -333,15 +292,4 @@ fn man(out: Option<PathBuf>) -> Result<()> {
             .context("writing the manual page")?,
     }
     Ok(())
-}
-
-pub(crate) fn progress_bar(len: u64, what: &str) -> ProgressBar {
-    let bar = ProgressBar::new(len);
-    bar.set_style(
-        ProgressStyle::with_template("{msg} [{bar:40}] {pos}/{len} ({eta} left)")
-            .expect("valid template")
-            .progress_chars("=> "),
-    );
-    bar.set_message(what.to_string());
-    bar
 }

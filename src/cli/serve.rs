@@ -664,7 +664,7 @@ pub fn record_mcap(c: Connect, instance: String, seconds: f64, path: PathBuf) ->
             .create(std::io::BufWriter::new(file))
             .with_context(|| format!("starting the MCAP file {}", path.display()))?;
         let options = relay_options(Some(instance.clone()), f64::INFINITY)?;
-        let bar = crate::progress_bar((seconds * 10.0).ceil() as u64, "recording (0.1 s)");
+        let bar = lodcloth::args::progress_bar((seconds * 10.0).ceil() as u64, "recording (0.1 s)");
         let started = Instant::now();
         let opened = RelayChannels::open(&ctx, std::slice::from_ref(&instance))?;
         let counts = relay(

@@ -5,7 +5,7 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use super::runner::Runner;
-use super::{Coefficients, Command, ControlOutcome, Snapshot};
+use super::{Coefficients, Command, ControlOutcome, RestoreError, Snapshot};
 use crate::plan::Prepared;
 use crate::points::cloud::CloudMap;
 use crate::sim::{Simulation, State};
@@ -25,14 +25,13 @@ impl Runner {
                 let _ = reply.send(outcome);
             }
             Command::Pause { paused, reply } => {
-                if !paused && self.halted.is_some() {
+                if !paused && self.divergence.halted().is_some() {
                     // Resuming a halted instance starts its scene over.
-                    self.halted = None;
-                    self.consecutive_divergences = 0;
+                    self.divergence.forgive();
                     self.restart();
                 }
-                self.paused = paused;
-                self.reanchor(Instant::now());
+                self.pacing.set_paused(paused);
+                self.pacing.reanchor(Instant::now());
                 self.update_status();
                 let _ = reply.send(ControlOutcome {
                     paused,
@@ -40,12 +39,11 @@ impl Runner {
                 });
             }
             Command::Reset { reply } => {
-                self.halted = None;
-                self.consecutive_divergences = 0;
+                self.divergence.forgive();
                 self.restart();
-                self.reanchor(Instant::now());
+                self.pacing.reanchor(Instant::now());
                 let _ = reply.send(ControlOutcome {
-                    paused: self.paused,
+                    paused: self.pacing.paused(),
                     frame: self.frames,
                 });
             }
@@ -53,14 +51,14 @@ impl Runner {
                 let _ = reply.send(self.input(&input));
             }
             Command::Snapshot { reply } => {
-                let snapshot = (!self.held && self.halted.is_none()).then(|| {
+                let snapshot = (!self.pacing.held() && self.divergence.halted().is_none()).then(|| {
                     Box::new(Snapshot {
                         level: self.level,
                         method: self.method,
                         coefficient_version: self.coefficient_version,
                         frame: self.frames,
                         episode: self.episode,
-                        paused: self.paused,
+                        paused: self.pacing.paused(),
                         state: self.sim.state().clone(),
                         coefficients: Some(Coefficients {
                             material: self.material,
@@ -78,12 +76,14 @@ impl Runner {
                 reply,
             } => {
                 let outcome = match saved {
-                    Some(saved) if self.held => self.restore(prepared, sim.map(|s| *s), cloud.map(|c| *c), *saved),
-                    Some(_) => Err("the instance is already running".into()),
+                    Some(saved) if self.pacing.held() => {
+                        self.restore(prepared, sim.map(|s| *s), cloud.map(|c| *c), *saved)
+                    }
+                    Some(_) => Err(RestoreError::Running),
                     None => Ok(()),
                 };
-                self.held = false;
-                self.reanchor(Instant::now());
+                self.pacing.release();
+                self.pacing.reanchor(Instant::now());
                 self.update_status();
                 let _ = reply.send(outcome);
             }
@@ -116,18 +116,21 @@ impl Runner {
         sim: Option<Simulation>,
         cloud: Option<CloudMap>,
         saved: Snapshot,
-    ) -> Result<(), String> {
+    ) -> Result<(), RestoreError> {
         let level = match (&prepared, &sim) {
             (Some(p), _) => p.level,
             (None, Some(_)) => saved.level,
             (None, None) => self.level,
         };
         if saved.level != level {
-            return Err(format!("the snapshot is at {}, the simulation at {level}", saved.level));
+            return Err(RestoreError::OtherLevel {
+                saved: saved.level,
+                level,
+            });
         }
         match (prepared, sim) {
             (Some(prepared), Some(mut sim)) => {
-                sim.set_state(saved.state).map_err(|e| e.to_string())?;
+                sim.set_state(saved.state).map_err(RestoreError::State)?;
                 self.sim = sim;
                 if cloud.is_some() {
                     self.cloud = cloud;
@@ -136,34 +139,31 @@ impl Runner {
             }
             (None, Some(mut sim)) => {
                 let Some(saved_with) = saved.coefficients else {
-                    return Err("a restore without a prepared level needs the snapshot's coefficients".into());
+                    return Err(RestoreError::NoCoefficients);
                 };
                 if sim.params().material != saved_with.material || sim.params().dt != saved_with.dt {
-                    return Err("the simulation was not built with the snapshot's coefficients".into());
+                    return Err(RestoreError::OtherCoefficients);
                 }
-                sim.set_state(saved.state).map_err(|e| e.to_string())?;
+                sim.set_state(saved.state).map_err(RestoreError::State)?;
                 self.sim = sim;
                 self.method = saved.method;
                 self.material = saved_with.material;
                 self.predicted_error = None;
-                self.o_max = None;
-                self.shadow = None;
+                self.live.drop_reference();
             }
-            (None, None) => self.sim.set_state(saved.state).map_err(|e| e.to_string())?,
-            (Some(_), None) => return Err("a restore needs both the prepared level and its simulation".into()),
+            (None, None) => self.sim.set_state(saved.state).map_err(RestoreError::State)?,
+            (Some(_), None) => return Err(RestoreError::NoSimulation),
         }
-        if let Some(touch) = self.touch.as_mut() {
-            // Inputs are not saved: a resumed instance starts untouched.
-            touch.reset(&mut self.sim).map_err(|e| e.to_string())?;
-        }
+        // Inputs are not saved: a resumed instance starts untouched.
+        self.inputs.reset(&mut self.sim).map_err(RestoreError::Inputs)?;
+        // Clears the live error too.
         self.forget_episode_inputs();
         self.level = level;
         self.coefficient_version = saved.coefficient_version;
         self.frames = saved.frame;
         self.episode = saved.episode;
-        self.paused = saved.paused;
-        self.checkpoint.clone_from(self.sim.state());
-        self.live_error = None;
+        self.pacing.set_paused(saved.paused);
+        self.divergence.checkpoint_at(self.sim.state());
         Ok(())
     }
 
@@ -173,15 +173,13 @@ impl Runner {
         if let Err(e) = self.sim.set_state(rest) {
             tracing::error!(instance = %self.name, "reset failed: {e}");
         }
-        if let Some(touch) = self.touch.as_mut() {
-            if let Err(e) = touch.reset(&mut self.sim) {
-                tracing::error!(instance = %self.name, "clearing the inputs failed: {e}");
-            }
+        if let Err(e) = self.inputs.reset(&mut self.sim) {
+            tracing::error!(instance = %self.name, "clearing the inputs failed: {e}");
         }
+        // Clears the live error too.
         self.forget_episode_inputs();
         self.episode += 1;
-        self.live_error = None;
-        self.checkpoint.clone_from(self.sim.state());
+        self.divergence.checkpoint_at(self.sim.state());
         self.update_status();
     }
 }

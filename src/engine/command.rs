@@ -4,7 +4,7 @@ use std::sync::Arc;
 
 use tokio::sync::oneshot;
 
-use super::{ControlOutcome, Snapshot, SwitchOutcome};
+use super::{ControlOutcome, RestoreError, Snapshot, SwitchError, SwitchOutcome};
 use crate::plan::{Level, Prepared};
 use crate::points::cloud::CloudMap;
 use crate::sim::Simulation;
@@ -29,7 +29,7 @@ pub enum Command {
         /// twin (`lod::settler`, built off the stepping thread too; made
         /// there when missing).
         settler: Option<Box<Simulation>>,
-        reply: oneshot::Sender<Result<SwitchOutcome, String>>,
+        reply: oneshot::Sender<Result<SwitchOutcome, SwitchError>>,
     },
     Pause {
         paused: bool,
@@ -59,7 +59,7 @@ pub enum Command {
         sim: Option<Box<Simulation>>,
         cloud: Option<Box<CloudMap>>,
         saved: Option<Box<Snapshot>>,
-        reply: oneshot::Sender<Result<(), String>>,
+        reply: oneshot::Sender<Result<(), RestoreError>>,
     },
     /// Give an instance resumed from its snapshot's coefficients its
     /// prepared level (predicted error, error normaliser, shadow reference),

@@ -26,8 +26,10 @@
 mod apply;
 mod command;
 mod divergence;
+mod error;
 mod frame;
 mod input;
+mod live;
 mod publish;
 mod replica;
 mod runner;
@@ -51,6 +53,7 @@ use runner::Runner;
 
 pub use command::Command;
 pub use divergence::MAX_CONSECUTIVE_DIVERGENCES;
+pub use error::{RestoreError, Stopped, SwitchError};
 pub use frame::{
     AppliedInput, Coefficients, ControlOutcome, InputOutcome, MetricsFrame, Snapshot, StateFrame, Status, SwitchOutcome,
 };
@@ -126,8 +129,8 @@ pub struct InstanceHandle {
 impl InstanceHandle {
     /// Queue a command and wake the instance's thread. Err when the engine
     /// has stopped.
-    pub fn send(&self, command: Command) -> Result<(), &'static str> {
-        self.commands.send(command).map_err(|_| "the engine has stopped")?;
+    pub fn send(&self, command: Command) -> Result<(), Stopped> {
+        self.commands.send(command).map_err(|_| Stopped)?;
         self.thread.unpark();
         Ok(())
     }
@@ -377,7 +380,10 @@ fn worker(
             r.poll_commands();
             r.advance(now, &*own);
             r.publish(Instant::now());
-            wake = wake.min(r.next_due()).min(r.next_publish).min(r.next_metrics);
+            wake = wake
+                .min(r.next_due())
+                .min(r.publishing.next_publish())
+                .min(r.publishing.next_metrics());
         }
         let asked = wake.max(Instant::now());
         match &serves {
@@ -393,7 +399,7 @@ fn worker(
         }
         if Instant::now().saturating_duration_since(asked) > STALL {
             for r in &mut runners {
-                r.stalls += 1;
+                r.pacing.stalled();
             }
         }
     }

@@ -1,26 +1,26 @@
-//! One instance on its stepping thread: its state, pacing to the wall
-//! clock, and the step itself. Commands, switches, divergence and
-//! publishing are the other stages of the same `impl`, one file each.
+//! One instance on its stepping thread: what it runs, pacing to the wall
+//! clock ([`Pacing`]), and the step itself. Commands, switches, inputs,
+//! the live error, divergence and publishing are the other stages of the
+//! same `impl`, one file each; each stage's state is its own struct
+//! ([`Inputs`], [`LiveError`], [`Divergence`], [`Publishing`]), changed
+//! through its methods.
 
 use std::sync::mpsc::{Receiver, TryRecvError};
-use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use tokio::sync::watch;
-
-use super::divergence::{CHECKPOINT_INTERVAL, CLEAN_INTERVAL, DIVERGED_STRAIN};
-use super::replica::Replica;
-use super::shadow::Shadow;
-use super::{
-    lock, AppliedInput, Command, EngineSettings, HandleParts, InstanceSetup, MetricsFrame, StateFrame, Status,
-};
+use super::divergence::{is_diverged, Divergence};
+use super::input::Inputs;
+use super::live::LiveError;
+use super::publish::Publishing;
+use super::{Command, EngineSettings, HandleParts, InstanceSetup, Status};
 use crate::estimate::Method;
 use crate::plan::Level;
 use crate::points::cloud::CloudMap;
-use crate::sim::{Material, Pair, Simulation, State, StepReport};
-use crate::touch::{Input, Touch};
+use crate::sim::{Material, Pair, Simulation};
 
-/// One instance on its stepping thread.
+/// One instance on its stepping thread: the simulation and what it runs
+/// (level, method, coefficients), and the stages that act on it, each
+/// owning its own state.
 pub(super) struct Runner {
     pub(super) name: String,
     pub(super) sim: Simulation,
@@ -30,79 +30,129 @@ pub(super) struct Runner {
     pub(super) material: Material,
     pub(super) predicted_error: Option<f64>,
     pub(super) coefficient_version: u32,
-    pub(super) shadow: Option<Shadow>,
-    pub(super) shadow_wanted: bool,
-    pub(super) live_error: Option<f64>,
-    /// Simulated time `live_error` is of (behind the cloth's while a
-    /// touched episode's replica catches up).
-    pub(super) live_error_time: Option<f64>,
-    /// A touched episode's reference, replaying its inputs.
-    pub(super) replica: Option<Replica>,
-    /// The replica of this episode failed (or could not follow a rollback):
-    /// no live error until the next episode.
-    pub(super) replica_failed: bool,
-    /// Inputs that took effect in this episode, (time, input) in order:
-    /// what a replica starting late replays.
-    pub(super) episode_inputs: Vec<(f64, Input)>,
-    /// Inputs applied since the instance started (clients' and the idle
-    /// rule's): the last one's `AppliedInput::seq`.
-    pub(super) applied_seq: u64,
-    /// The reference's largest displacement, once calibrated.
-    pub(super) o_max: Option<f64>,
+    /// Steps taken (a restore sets it to the snapshot's).
+    pub(super) frames: u64,
+    /// Times the scene started over (a restore sets it to the snapshot's).
+    pub(super) episode: u64,
+    /// Scene duration (s): the scene starts over there when `looping`.
     pub(super) duration: f64,
     pub(super) looping: bool,
-    pub(super) commands: Receiver<Command>,
-    pub(super) settings: EngineSettings,
-    // Pacing: step `steps_since_origin` is due at origin + steps·dt.
-    pub(super) origin: Instant,
-    pub(super) steps_since_origin: u64,
-    pub(super) paused: bool,
-    pub(super) frames: u64,
-    pub(super) episode: u64,
-    pub(super) overruns: u64,
-    /// Passes of its thread that woke more than [`super::STALL`] late.
-    pub(super) stalls: u64,
-    pub(super) lag_resets: u64,
-    pub(super) divergences: u64,
-    // Divergence recovery: a finite state at most CHECKPOINT_INTERVAL of
-    // simulated time old, rolled back to when a step diverges.
-    pub(super) checkpoint: State,
-    pub(super) rollbacks: u64,
-    /// Divergences since the last CLEAN_INTERVAL of clean stepping.
-    pub(super) consecutive_divergences: u32,
-    pub(super) last_divergence_time: f64,
-    pub(super) halted: Option<Arc<str>>,
-    /// Waiting for a [`Command::Restore`]: no steps, no states.
-    pub(super) held: bool,
-    pub(super) last: Option<StepReport>,
-    // Metrics window.
-    pub(super) window_start: Instant,
-    pub(super) window_sim: f64,
-    pub(super) window_steps: u64,
-    pub(super) window_busy: Duration,
-    pub(super) next_publish: Instant,
-    pub(super) publish_every: Duration,
-    pub(super) next_metrics: Instant,
-    pub(super) metrics_every: Duration,
-    pub(super) states: watch::Sender<Option<Arc<StateFrame>>>,
-    pub(super) metrics: watch::Sender<Option<Arc<MetricsFrame>>>,
-    pub(super) transitions: tokio::sync::mpsc::UnboundedSender<Arc<StateFrame>>,
-    /// Every input that took effect, for the service to publish.
-    pub(super) applied: tokio::sync::mpsc::UnboundedSender<AppliedInput>,
-    pub(super) status: Arc<Mutex<Status>>,
-    /// Live input (grid cloths only).
-    pub(super) touch: Option<Touch>,
-    /// Inputs applied so far.
-    pub(super) inputs: u64,
-    /// When the last input arrived.
-    pub(super) last_input: Instant,
-    /// See [`InstanceSetup::input_idle`].
-    pub(super) input_idle: Duration,
-    /// An input acted in this episode: the recorded reference no longer
-    /// describes the cloth, so there is no live error until the next one.
-    pub(super) touched_episode: bool,
     /// See [`InstanceSetup::switch_settle`].
     pub(super) switch_settle: Option<f64>,
+    pub(super) commands: Receiver<Command>,
+    pub(super) pacing: Pacing,
+    pub(super) live: LiveError,
+    pub(super) inputs: Inputs,
+    pub(super) divergence: Divergence,
+    pub(super) publishing: Publishing,
+}
+
+/// Pacing to the wall clock: step `steps_since_origin` is due at
+/// origin + steps·dt; what could not keep up is counted.
+pub(super) struct Pacing {
+    origin: Instant,
+    steps_since_origin: u64,
+    paused: bool,
+    /// Waiting for a [`Command::Restore`]: no steps, no states.
+    held: bool,
+    overruns: u64,
+    /// Passes of its thread that woke more than [`super::STALL`] late.
+    stalls: u64,
+    lag_resets: u64,
+    /// See [`EngineSettings::max_catch_up`].
+    max_catch_up: f64,
+    /// See [`EngineSettings::max_lag`].
+    max_lag: f64,
+}
+
+impl Pacing {
+    fn new(now: Instant, held: bool, settings: &EngineSettings) -> Pacing {
+        Pacing {
+            origin: now,
+            steps_since_origin: 0,
+            paused: false,
+            held,
+            overruns: 0,
+            stalls: 0,
+            lag_resets: 0,
+            max_catch_up: settings.max_catch_up,
+            max_lag: settings.max_lag,
+        }
+    }
+
+    pub(super) fn paused(&self) -> bool {
+        self.paused
+    }
+
+    pub(super) fn set_paused(&mut self, paused: bool) {
+        self.paused = paused;
+    }
+
+    pub(super) fn held(&self) -> bool {
+        self.held
+    }
+
+    /// The [`Command::Restore`] came: stepping may start.
+    pub(super) fn release(&mut self) {
+        self.held = false;
+    }
+
+    /// Paused or held: no steps are due.
+    fn stopped(&self) -> bool {
+        self.paused || self.held
+    }
+
+    pub(super) fn overruns(&self) -> u64 {
+        self.overruns
+    }
+
+    pub(super) fn stalls(&self) -> u64 {
+        self.stalls
+    }
+
+    pub(super) fn lag_resets(&self) -> u64 {
+        self.lag_resets
+    }
+
+    /// The thread's pass came more than [`super::STALL`] late.
+    pub(super) fn stalled(&mut self) {
+        self.stalls += 1;
+    }
+
+    /// Count steps from `now`: what was not taken by then is never due.
+    pub(super) fn reanchor(&mut self, now: Instant) {
+        self.origin = now;
+        self.steps_since_origin = 0;
+    }
+
+    /// When the next step of `dt` is due; `None` while stopped.
+    fn next_step(&self, dt: f64) -> Option<Instant> {
+        (!self.stopped()).then(|| self.origin + Duration::from_secs_f64((self.steps_since_origin + 1) as f64 * dt))
+    }
+
+    /// Steps of `dt` to take at `now`: the backlog dropped past `max_lag`
+    /// (a lag reset), at most `max_catch_up` of it (an overrun when that is
+    /// not all of it).
+    fn steps_due(&mut self, now: Instant, dt: f64, name: &str) -> u64 {
+        let elapsed = now.saturating_duration_since(self.origin).as_secs_f64();
+        let mut due = ((elapsed / dt) as u64).saturating_sub(self.steps_since_origin);
+        if due as f64 * dt > self.max_lag {
+            self.lag_resets += 1;
+            tracing::warn!(instance = %name, behind_s = due as f64 * dt, "fell behind real time; dropping the backlog");
+            self.reanchor(now);
+            due = 1;
+        }
+        let n = due.min(catch_up_steps(self.max_catch_up, dt));
+        if due > n {
+            self.overruns += 1;
+        }
+        n
+    }
+
+    /// A pass took the `n` steps it found due.
+    fn stepped(&mut self, n: u64) {
+        self.steps_since_origin += n;
+    }
 }
 
 impl Runner {
@@ -112,12 +162,8 @@ impl Runner {
         settings: EngineSettings,
     ) -> (Runner, HandleParts) {
         let now = Instant::now();
-        let (states_tx, states_rx) = watch::channel(None);
-        let (metrics_tx, metrics_rx) = watch::channel(None);
-        let (trans_tx, trans_rx) = tokio::sync::mpsc::unbounded_channel();
-        let (applied_tx, applied_rx) = tokio::sync::mpsc::unbounded_channel();
         let material = setup.sim.params().material;
-        let status = Arc::new(Mutex::new(Status {
+        let status = Status {
             level: setup.level,
             method: setup.method,
             material,
@@ -132,73 +178,34 @@ impl Runner {
             o_max: None,
             simulation_points: setup.cloud.as_ref().map(|c| c.kept.clone()),
             cloud_points: setup.cloud.as_ref().map_or(0, |c| c.cloud_points()),
-        }));
-        let checkpoint = setup.sim.state().clone();
+        };
+        let (publishing, parts) = Publishing::new(
+            setup.name.clone(),
+            status,
+            now,
+            Duration::from_secs_f64(1.0 / setup.publish_hz),
+            Duration::from_secs_f64(1.0 / settings.metrics_hz),
+        );
         let runner = Runner {
-            name: setup.name.clone(),
+            name: setup.name,
             level: setup.level,
             method: setup.method,
             material,
             predicted_error: None,
             coefficient_version: 1,
-            shadow: None,
-            shadow_wanted: setup.shadow,
-            live_error: None,
-            live_error_time: None,
-            replica: None,
-            replica_failed: false,
-            episode_inputs: Vec::new(),
-            applied_seq: 0,
-            o_max: None,
-            duration: setup.duration,
-            looping: setup.looping,
-            sim: setup.sim,
-            cloud: setup.cloud,
-            commands,
-            settings,
-            origin: now,
-            steps_since_origin: 0,
-            paused: false,
             frames: 0,
             episode: 0,
-            overruns: 0,
-            stalls: 0,
-            lag_resets: 0,
-            divergences: 0,
-            checkpoint,
-            rollbacks: 0,
-            consecutive_divergences: 0,
-            last_divergence_time: f64::NEG_INFINITY,
-            halted: None,
-            held: setup.hold,
-            last: None,
-            window_start: now,
-            window_sim: 0.0,
-            window_steps: 0,
-            window_busy: Duration::ZERO,
-            next_publish: now,
-            publish_every: Duration::from_secs_f64(1.0 / setup.publish_hz),
-            next_metrics: now,
-            metrics_every: Duration::from_secs_f64(1.0 / settings.metrics_hz),
-            states: states_tx,
-            metrics: metrics_tx,
-            transitions: trans_tx,
-            applied: applied_tx,
-            status: status.clone(),
-            touch: setup.touch,
-            inputs: 0,
-            last_input: now,
-            input_idle: Duration::from_secs_f64(setup.input_idle),
-            touched_episode: false,
+            duration: setup.duration,
+            looping: setup.looping,
             switch_settle: setup.switch_settle,
-        };
-        let parts = HandleParts {
-            name: setup.name,
-            states: states_rx,
-            metrics: metrics_rx,
-            transitions: trans_rx,
-            applied: applied_rx,
-            status,
+            commands,
+            pacing: Pacing::new(now, setup.hold, &settings),
+            live: LiveError::new(setup.shadow, settings.replay_class),
+            inputs: Inputs::new(setup.touch, now, Duration::from_secs_f64(setup.input_idle)),
+            divergence: Divergence::new(setup.sim.state().clone()),
+            publishing,
+            sim: setup.sim,
+            cloud: setup.cloud,
         };
         (runner, parts)
     }
@@ -209,15 +216,10 @@ impl Runner {
 
     /// When the next step is due.
     pub(super) fn next_due(&self) -> Instant {
-        if self.paused || self.held {
-            return self.next_metrics;
+        match self.pacing.next_step(self.dt()) {
+            Some(due) => due,
+            None => self.publishing.next_metrics(),
         }
-        self.origin + Duration::from_secs_f64((self.steps_since_origin + 1) as f64 * self.dt())
-    }
-
-    pub(super) fn reanchor(&mut self, now: Instant) {
-        self.origin = now;
-        self.steps_since_origin = 0;
     }
 
     /// Apply queued commands.
@@ -230,59 +232,27 @@ impl Runner {
         }
     }
 
-    pub(super) fn update_status(&self) {
-        let mut s = lock(&self.status);
-        s.level = self.level;
-        s.method = self.method;
-        s.material = self.material;
-        s.dt = self.dt();
-        s.coefficient_version = self.coefficient_version;
-        s.predicted_error = self.predicted_error;
-        s.paused = self.paused;
-        s.halted = self.halted.clone();
-        if !Arc::ptr_eq(&s.topology, self.sim.topology()) {
-            s.topology = self.sim.topology().clone();
-            s.pinned = self.sim.loads().pins.iter().map(|p| p.node).collect();
-            s.simulation_points = self.cloud.as_ref().map(|c| c.kept.clone());
-        }
-        s.frame = self.frames;
-        s.o_max = self.o_max;
-    }
-
     /// Take the steps due at `now`.
     pub(super) fn advance(&mut self, now: Instant, pair: &dyn Pair) {
-        if self.paused || self.held {
-            self.reanchor(now);
+        if self.pacing.stopped() {
+            self.pacing.reanchor(now);
             return;
         }
         self.let_go_if_idle(now);
         let dt = self.dt();
-        let elapsed = now.saturating_duration_since(self.origin).as_secs_f64();
-        let mut due = ((elapsed / dt) as u64).saturating_sub(self.steps_since_origin);
-        if due as f64 * dt > self.settings.max_lag {
-            self.lag_resets += 1;
-            tracing::warn!(instance = %self.name, behind_s = due as f64 * dt, "fell behind real time; dropping the backlog");
-            self.reanchor(now);
-            due = 1;
-        }
-        let n = due.min(catch_up_steps(self.settings.max_catch_up, dt));
-        if due > n {
-            self.overruns += 1;
-        }
+        let n = self.pacing.steps_due(now, dt, &self.name);
         if n == 0 {
             return;
         }
         let t0 = Instant::now();
         for k in 0..n {
             self.step_once(pair, k + 1 == n);
-            if self.paused {
+            if self.pacing.paused() {
                 break;
             }
         }
-        self.window_busy += t0.elapsed();
-        self.window_steps += n;
-        self.window_sim += n as f64 * dt;
-        self.steps_since_origin += n;
+        self.publishing.count_steps(t0.elapsed(), n, n as f64 * dt);
+        self.pacing.stepped(n);
     }
 
     /// One step. `last`: the tick's last, whose report the metrics show. The
@@ -291,7 +261,7 @@ impl Runner {
     /// the strain on the tick's last step and before a checkpoint is taken,
     /// so no checkpoint holds a state that was not checked whole.
     pub(super) fn step_once(&mut self, pair: &dyn Pair, last: bool) {
-        let checkpoint_due = self.sim.state().time + self.dt() >= self.checkpoint.time + CHECKPOINT_INTERVAL;
+        let checkpoint_due = self.divergence.checkpoint_due(self.sim.state().time + self.dt());
         let full = last || checkpoint_due;
         let report = if full {
             self.sim.step_on(pair)
@@ -299,21 +269,13 @@ impl Runner {
             self.sim.step_on_lean(pair)
         };
         self.frames += 1;
-        // Non-finite, or finite but absurd (springs at 11× their rest
-        // length: positions soon overflow f32 on the wire).
-        if !report.finite || (full && report.max_strain_overall() > DIVERGED_STRAIN) {
+        if is_diverged(&report, full) {
             self.diverged(report.time);
             return;
         }
         if full {
-            self.last = Some(report);
-            if report.time >= self.checkpoint.time + CHECKPOINT_INTERVAL {
-                // In place: no allocation once the buffers have their size.
-                self.checkpoint.clone_from(self.sim.state());
-                if report.time >= self.last_divergence_time + CLEAN_INTERVAL {
-                    self.consecutive_divergences = 0;
-                }
-            }
+            self.publishing.show(report);
+            self.divergence.checkpoint_if_due(report.time, self.sim.state());
         }
         self.after_step(report.time);
     }
@@ -322,22 +284,14 @@ impl Runner {
     /// time `t`: the live error against the reference when due, and the
     /// loop back to the start.
     fn after_step(&mut self, t: f64) {
-        if let Some(sh) = self.shadow.as_mut() {
-            // Once per reference metric frame interval, compare with the
-            // reference interpolated linearly to this step's time (frame f
-            // of the recording is at time (f + 1)·interval); in a touched
-            // episode, hand the state to the replica instead and take the
-            // newest error it has returned.
-            if sh.due(t) {
-                if !self.touched_episode {
-                    self.live_error = sh.error_at(t, &self.sim.state().pos, self.cloud.as_mut());
-                    self.live_error_time = self.live_error.map(|_| t);
-                } else if let (Some(replica), Some(problem)) = (self.replica.as_mut(), sh.problem()) {
-                    replica.compare(t, problem, &self.sim.state().pos);
-                    self.poll_replica();
-                }
-            }
-        }
+        let touched_episode = self.inputs.touched_episode();
+        self.live.compare(
+            &self.name,
+            t,
+            touched_episode,
+            &self.sim.state().pos,
+            self.cloud.as_mut(),
+        );
         if self.looping && t >= self.duration && !self.touched() {
             self.restart();
         }
@@ -392,22 +346,19 @@ mod tests {
     #[test]
     fn a_pass_catches_up_a_stall_in_simulated_time() {
         let mut r = runner();
-        let t0 = r.origin;
+        let t0 = r.pacing.origin;
         let at = |ms: u64| t0 + Duration::from_millis(ms);
         r.advance(at(40), &Serial);
-        assert_eq!((r.steps_since_origin, r.overruns), (due(40), 0), "a 40 ms stall");
+        let p = |r: &Runner| (r.pacing.steps_since_origin, r.pacing.overruns, r.pacing.lag_resets);
+        r.advance(at(40), &Serial);
+        assert_eq!(p(&r), (due(40), 0, 0), "a 40 ms stall");
         r.advance(at(190), &Serial);
-        assert_eq!(r.overruns, 1, "150 ms behind is more than 0.1 s");
-        assert_eq!(r.steps_since_origin, due(40) + due(100), "0.1 s caught up");
+        assert_eq!(p(&r).1, 1, "150 ms behind is more than 0.1 s");
+        assert_eq!(p(&r).0, due(40) + due(100), "0.1 s caught up");
         r.advance(at(190), &Serial);
-        assert_eq!(
-            (r.steps_since_origin, r.overruns),
-            (due(190), 1),
-            "the rest in the next pass"
-        );
-        assert_eq!(r.lag_resets, 0);
+        assert_eq!(p(&r), (due(190), 1, 0), "the rest in the next pass");
         r.advance(at(500), &Serial);
-        assert_eq!((r.lag_resets, r.steps_since_origin), (1, 1), "310 ms behind: dropped");
+        assert_eq!((p(&r).2, p(&r).0), (1, 1), "310 ms behind: dropped");
         assert_eq!(r.sim.state().step, due(190) + 1, "every step taken was kept");
     }
 }

@@ -5,8 +5,7 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use super::runner::Runner;
-use super::shadow::Shadow;
-use super::SwitchOutcome;
+use super::{SwitchError, SwitchOutcome};
 use crate::estimate::Method;
 use crate::lod::transfer_state;
 use crate::plan::{Level, Prepared};
@@ -21,10 +20,7 @@ impl Runner {
         self.method = prepared.method;
         self.material = prepared.material;
         self.predicted_error = Some(prepared.predicted_error);
-        self.o_max = Some(prepared.o_max);
-        self.shadow = self
-            .shadow_wanted
-            .then(|| Shadow::new(prepared.clone(), self.sim.topology().n_nodes));
+        self.live.adopt(prepared, self.sim.topology().n_nodes);
         self.sync_replica();
     }
 
@@ -35,12 +31,12 @@ impl Runner {
         mut sim: Simulation,
         cloud: Option<CloudMap>,
         settler: Option<Simulation>,
-    ) -> Result<SwitchOutcome, String> {
-        if prepared.as_ref().is_some_and(|p| p.level != level) {
-            return Err(format!(
-                "prepared for {}, asked for {level}",
-                prepared.map_or(level, |p| p.level)
-            ));
+    ) -> Result<SwitchOutcome, SwitchError> {
+        if let Some(p) = prepared.as_ref().filter(|p| p.level != level) {
+            return Err(SwitchError::PreparedForAnother {
+                prepared: p.level,
+                asked: level,
+            });
         }
         let previous = self.level;
         let old_topology = self.sim.topology().clone();
@@ -53,14 +49,14 @@ impl Runner {
                     self.sim.state().clone()
                 } else {
                     resampled = true;
-                    transfer_state(&old_topology, self.sim.state(), sim.topology()).map_err(|e| e.to_string())?
+                    transfer_state(&old_topology, self.sim.state(), sim.topology()).map_err(SwitchError::Transfer)?
                 }
             }
-            _ => return Err("a switch between a cloth and a surface level".into()),
+            _ => return Err(SwitchError::KindChange),
         };
-        sim.set_state(state).map_err(|e| e.to_string())?;
+        sim.set_state(state).map_err(SwitchError::State)?;
         // Only down: a coarser level reads more in a finer shape than it
-        // holds (docs/results.md, "Settling what a level cannot hold").
+        // holds (the lab's NOTEBOOK.md, "Settling what a level cannot hold").
         let coarser = resampled && sim.topology().n_nodes < old_topology.n_nodes;
         if let Some(h) = self.switch_settle.filter(|_| coarser) {
             // Before the old level is let go: a refusal keeps it running.
@@ -68,12 +64,11 @@ impl Runner {
                 Some(mut twin) => crate::lod::settle_with(&mut sim, &mut twin),
                 None => crate::lod::settle(&mut sim, h),
             }
-            .map_err(|e| e.to_string())?;
+            .map_err(SwitchError::Settle)?;
         }
         self.sim = sim;
         self.carry_inputs();
-        self.checkpoint = self.sim.state().clone();
-        self.consecutive_divergences = 0;
+        self.divergence.new_level(self.sim.state());
         if cloud.is_some() {
             self.cloud = cloud;
         }
@@ -86,20 +81,15 @@ impl Runner {
                 self.method = Method::Same;
                 self.material = self.sim.params().material;
                 self.predicted_error = None;
-                self.o_max = None;
-                self.shadow = None;
+                self.live.drop_reference();
                 self.sync_replica();
             }
         }
-        self.live_error = None;
-        self.live_error_time = None;
-        self.reanchor(Instant::now());
+        self.live.clear();
+        self.pacing.reanchor(Instant::now());
         self.update_status();
         let after = self.snapshot(true);
-        let _ = self.transitions.send(Arc::new(before));
-        let after = Arc::new(after);
-        let _ = self.transitions.send(after.clone());
-        self.states.send_replace(Some(after));
+        self.publishing.transition(before, after);
         Ok(SwitchOutcome {
             previous,
             level: self.level,

@@ -5,7 +5,7 @@ use crate::sim::vec3::{cross, dot};
 
 /// Orthographic camera of every cloth picture: azimuth 35° about y,
 /// elevation 20°. Returns (right, up, depth) per point.
-pub(super) fn project(points: &[[f64; 3]]) -> Vec<(f64, f64, f64)> {
+pub fn project(points: &[[f64; 3]]) -> Vec<(f64, f64, f64)> {
     let (az, el) = (35f64.to_radians(), 20f64.to_radians());
     let forward = [-el.cos() * az.sin(), -el.sin(), -el.cos() * az.cos()];
     let right = [az.cos(), 0.0, -az.sin()];
@@ -18,7 +18,7 @@ pub(super) fn project(points: &[[f64; 3]]) -> Vec<(f64, f64, f64)> {
 
 /// Centre and side of a square that holds every finite projected point
 /// (10 % margin); `None` when there is none.
-pub(super) fn frame(projected: &[Vec<(f64, f64, f64)>]) -> Option<(f64, f64, f64)> {
+pub fn frame(projected: &[Vec<(f64, f64, f64)>]) -> Option<(f64, f64, f64)> {
     let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
     for &(x, y, _) in projected.iter().flatten() {
         if x.is_finite() && y.is_finite() {
@@ -32,7 +32,7 @@ pub(super) fn frame(projected: &[Vec<(f64, f64, f64)>]) -> Option<(f64, f64, f64
 }
 
 /// `a` scaled to unit length (zero stays zero).
-pub(super) fn normalize(a: [f64; 3]) -> [f64; 3] {
+pub fn normalize(a: [f64; 3]) -> [f64; 3] {
     let l = dot(a, a).sqrt();
     if l > 0.0 {
         a.map(|x| x / l)

@@ -139,8 +139,8 @@ pub fn line_chart_svg_legend(
 }
 
 /// Colours for series, in order: Tableau's ten (matplotlib's `tab10`), so
-/// a chart repeats a colour only past ten series (six until 2026-12-05,
-/// when a drape chart's seventh series took the first one's blue).
+/// a chart repeats a colour only past ten series (the drape charts draw
+/// seven and more).
 pub const PALETTE: [RGBColor; 10] = [
     RGBColor(31, 119, 180),
     RGBColor(255, 127, 14),

@@ -1,11 +1,11 @@
 //! Files a run leaves behind: the binary trajectory (written and read back),
-//! the inputs a recording holds (to replay), CSV tables (and the per-step report), PNG renders of a cloth or a cloud, SVG charts
-//! and error maps. One file per format; they share the camera.
+//! the inputs a recording holds (to replay), CSV tables (and the per-step
+//! report), PNG renders of a cloth or a cloud, and SVG charts. One file per
+//! format; the pictures share the camera (public for the lab's error maps).
 
-mod camera;
+pub mod camera;
 mod chart;
 mod csv_table;
-mod error_map;
 mod render;
 mod replay;
 mod report;
@@ -15,7 +15,6 @@ use std::path::Path;
 
 pub use chart::{line_chart_svg, line_chart_svg_legend, Series, PALETTE};
 pub use csv_table::CsvTable;
-pub use error_map::{error_map_svg, heat_color, ClothPanel};
 pub use render::{render_png, render_points_png};
 pub use replay::{recorded_inputs, Replay};
 pub use report::{report_csv_row, REPORT_CSV_HEADER};

@@ -9,11 +9,105 @@ use tokio::sync::oneshot;
 
 use super::persist::resume;
 use super::{client_priority, lower_priority, turns, Context, Instance, CLIENT_POOL};
-use crate::engine::{Command, InstanceHandle, Snapshot, SwitchOutcome};
+use crate::engine::{Command, InstanceHandle, Snapshot, Stopped, SwitchError, SwitchOutcome};
 use crate::estimate::Method;
 use crate::plan::{InstanceKind, Level, PrepareError, Prepared, Preparer};
 use crate::points::cloud::CloudMap;
-use crate::sim::Simulation;
+use crate::sim::{SimError, Simulation};
+
+/// Why a level the service had prepared is not ready.
+#[derive(Debug, thiserror::Error)]
+pub(super) enum Unprepared {
+    /// The preparer refused the level or failed to make it.
+    #[error(transparent)]
+    Level(#[from] PrepareError),
+    /// The preparation ended without an answer.
+    #[error("preparing level {level} with {method}: {source}")]
+    Interrupted {
+        level: Level,
+        method: Method,
+        source: Interruption,
+    },
+}
+
+/// How a preparation ended without an answer.
+#[derive(Debug, thiserror::Error)]
+pub(super) enum Interruption {
+    /// Its thread could not be started.
+    #[error("cannot start a thread: {0}")]
+    NoThread(#[source] std::io::Error),
+    /// Its thread ended without sending a result (it panicked).
+    #[error("the preparation thread stopped")]
+    ThreadStopped,
+    /// The task that waited for it panicked or was cancelled.
+    #[error("the preparation stopped: {0}")]
+    Joined(#[source] tokio::task::JoinError),
+}
+
+/// Why the engine did not take a level over: the instance runs on as it
+/// was.
+#[derive(Debug, thiserror::Error)]
+pub(super) enum Handover {
+    /// The engine refused the switch.
+    #[error(transparent)]
+    Refused(#[from] SwitchError),
+    /// The engine's threads had stopped: the switch was not queued.
+    #[error(transparent)]
+    Stopped(#[from] Stopped),
+    /// The engine stopped with the switch queued.
+    #[error("the engine stopped before the switch")]
+    Unanswered,
+    /// No answer within [`SWITCH_WAIT`].
+    #[error("the engine did not apply the switch within 30 s")]
+    TimedOut,
+    /// The thread making a switch down's settling twin gave no answer.
+    #[error(transparent)]
+    SettlerThread(ThreadError),
+    /// The settling twin of a switch down could not be made.
+    #[error("settling the switch: {0}")]
+    Settler(#[source] SimError),
+}
+
+/// Why a switch did not go live (`handlers::switch` gives each its wire
+/// code).
+#[derive(Debug, thiserror::Error)]
+pub(super) enum SwitchFailed {
+    /// The level was not prepared.
+    #[error(transparent)]
+    Unprepared(#[from] Unprepared),
+    /// An at-once switch's level, with the scene's own coefficients, was
+    /// not built or not taken over.
+    #[error("preparing level {level} with {}: {source}", Method::Same)]
+    AtOnce { level: Level, source: AtOnceFailure },
+    /// The engine did not take the prepared level over.
+    #[error(transparent)]
+    Handover(#[from] Handover),
+}
+
+/// What failed in an at-once switch once its level was allowed.
+#[derive(Debug, thiserror::Error)]
+pub(super) enum AtOnceFailure {
+    /// The thread building the level gave no answer.
+    #[error("building the level: {0}")]
+    Build(#[source] ThreadError),
+    /// The engine did not take the level over.
+    #[error(transparent)]
+    Handover(#[from] Handover),
+}
+
+/// A thread the service ran work on that gave no answer.
+#[derive(Debug, thiserror::Error)]
+pub(super) enum ThreadError {
+    /// It could not be started.
+    #[error("cannot start a thread: {0}")]
+    Start(#[source] std::io::Error),
+    /// It ended without sending a result (it panicked).
+    #[error("the thread stopped")]
+    Stopped,
+}
+
+/// How long a switch waits for the engine to apply it.
+const SWITCH_WAIT: Duration = Duration::from_secs(30);
 
 /// A prepared level with what the stepping thread needs to take it over.
 pub(super) struct Ready {
@@ -41,7 +135,7 @@ pub(super) async fn prepare(
     preparer: Arc<Preparer>,
     level: Level,
     method: Method,
-) -> Result<Ready, PrepareError> {
+) -> Result<Ready, Unprepared> {
     on_thread(waiting, preparer, level, method, move |p| p.prepare(level, method)).await
 }
 
@@ -55,7 +149,7 @@ pub(super) async fn prepare_first(
     preparer: Arc<Preparer>,
     level: Level,
     method: Method,
-) -> Result<(Ready, bool), PrepareError> {
+) -> Result<(Ready, bool), Unprepared> {
     on_thread(Waiting::Client, preparer, level, method, move |p| {
         let surface = matches!(p.plan().kind, InstanceKind::Surface(_));
         if surface || p.quick_methods().contains(&method) {
@@ -92,7 +186,7 @@ async fn on_thread(
     level: Level,
     method: Method,
     work: impl FnOnce(&Preparer) -> Result<Arc<Prepared>, PrepareError> + Send + 'static,
-) -> Result<Ready, PrepareError> {
+) -> Result<Ready, Unprepared> {
     let (tx, rx) = oneshot::channel();
     let spawned = std::thread::Builder::new()
         .name("lodcloth-prepare".into())
@@ -133,9 +227,9 @@ async fn on_thread(
             };
             let _ = tx.send(result);
         });
-    let failed = |message: String| PrepareError::Failed { level, method, message };
-    spawned.map_err(|e| failed(format!("cannot start a thread: {e}")))?;
-    rx.await.map_err(|_| failed("the preparation thread stopped".into()))?
+    let interrupted = |source| Unprepared::Interrupted { level, method, source };
+    spawned.map_err(|e| interrupted(Interruption::NoThread(e)))?;
+    Ok(rx.await.map_err(|_| interrupted(Interruption::ThreadStopped))??)
 }
 
 /// At start-up: resume the instances that have a snapshot, give every
@@ -191,7 +285,7 @@ pub(super) async fn apply_in_place(
     method: Method,
     version: u32,
     live_error: Option<f64>,
-    prepared: Result<Ready, PrepareError>,
+    prepared: Result<Ready, Unprepared>,
 ) -> Option<u32> {
     let name = &inst.handle.name;
     let _guard = inst.switching.lock().await;
@@ -245,7 +339,7 @@ pub(super) async fn switch_to(
     handle: &InstanceHandle,
     ready: Ready,
     settle: Option<f64>,
-) -> Result<SwitchOutcome, String> {
+) -> Result<SwitchOutcome, Handover> {
     let level = ready.prepared.level;
     send_switch(handle, level, Some(ready.prepared), ready.sim, ready.cloud, settle).await
 }
@@ -254,7 +348,7 @@ pub(super) async fn switch_to(
 /// for ([`client_priority`], background preparation held while it runs).
 pub(super) async fn on_client_thread<T: Send + 'static>(
     work: impl FnOnce() -> T + Send + 'static,
-) -> Result<T, String> {
+) -> Result<T, ThreadError> {
     let (tx, rx) = oneshot::channel();
     std::thread::Builder::new()
         .name("lodcloth-prepare".into())
@@ -263,8 +357,8 @@ pub(super) async fn on_client_thread<T: Send + 'static>(
             let _claim = turns::client_work();
             let _ = tx.send(work());
         })
-        .map_err(|e| format!("cannot start a thread: {e}"))?;
-    rx.await.map_err(|_| "the thread stopped".to_string())
+        .map_err(ThreadError::Start)?;
+    rx.await.map_err(|_| ThreadError::Stopped)
 }
 
 /// An at-once switch: `level` built with the scene's own coefficients
@@ -276,22 +370,16 @@ pub(super) async fn switch_at_once(
     handle: &InstanceHandle,
     preparer: Arc<Preparer>,
     level: Level,
-) -> Result<SwitchOutcome, PrepareError> {
+) -> Result<SwitchOutcome, SwitchFailed> {
     let settle = preparer.plan().switch_settle;
+    let at_once = |source| SwitchFailed::AtOnce { level, source };
     let start = on_client_thread(move || preparer.quick(level))
         .await
-        .map_err(|e| PrepareError::Failed {
-            level,
-            method: Method::Same,
-            message: format!("building the level: {e}"),
-        })??;
+        .map_err(|e| at_once(AtOnceFailure::Build(e)))?
+        .map_err(Unprepared::Level)?;
     send_switch(handle, level, None, start.sim, start.cloud, settle)
         .await
-        .map_err(|message| PrepareError::Failed {
-            level,
-            method: Method::Same,
-            message,
-        })
+        .map_err(|e| at_once(AtOnceFailure::Handover(e)))
 }
 
 async fn send_switch(
@@ -301,7 +389,7 @@ async fn send_switch(
     sim: Simulation,
     cloud: Option<CloudMap>,
     settle: Option<f64>,
-) -> Result<SwitchOutcome, String> {
+) -> Result<SwitchOutcome, Handover> {
     // A switch down with `switch_settle` settles the carried shape; its
     // twin's stability estimate alone takes ~30 ms on the skirt's 915v
     // level, which the stepping thread should not wait for.
@@ -311,26 +399,25 @@ async fn send_switch(
             let base = sim.clone();
             Some(Box::new(
                 on_client_thread(move || crate::lod::settler(&base, h))
-                    .await?
-                    .map_err(|e| format!("settling the switch: {e}"))?,
+                    .await
+                    .map_err(Handover::SettlerThread)?
+                    .map_err(Handover::Settler)?,
             ))
         }
         None => None,
     };
     let (tx, rx) = oneshot::channel();
-    handle
-        .send(Command::Switch {
-            level,
-            prepared,
-            sim: Box::new(sim),
-            cloud: cloud.map(Box::new),
-            settler,
-            reply: tx,
-        })
-        .map_err(str::to_string)?;
-    match tokio::time::timeout(Duration::from_secs(30), rx).await {
-        Ok(Ok(outcome)) => outcome,
-        Ok(Err(_)) => Err("the engine stopped before the switch".into()),
-        Err(_) => Err("the engine did not apply the switch within 30 s".into()),
+    handle.send(Command::Switch {
+        level,
+        prepared,
+        sim: Box::new(sim),
+        cloud: cloud.map(Box::new),
+        settler,
+        reply: tx,
+    })?;
+    match tokio::time::timeout(SWITCH_WAIT, rx).await {
+        Ok(Ok(outcome)) => Ok(outcome?),
+        Ok(Err(_)) => Err(Handover::Unanswered),
+        Err(_) => Err(Handover::TimedOut),
     }
 }

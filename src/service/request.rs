@@ -7,7 +7,7 @@
 use prost::Message;
 
 use super::keys;
-use crate::estimate::Method;
+use crate::estimate::{Method, Served};
 use crate::names;
 use crate::plan::InstancePlan;
 use crate::plan::Level;
@@ -117,7 +117,7 @@ pub fn switch_plan(config: &InstancePlan, req: &v1::SwitchRequest) -> Result<Swi
         config.method
     } else {
         // The name comes from the network: escaped before it is echoed.
-        names::parse::<Method>(&req.method).map_err(|e| {
+        Served::parse(&req.method).map_err(|e| {
             let given = e.given.escape_debug().to_string();
             Refusal::bad(format!("method {}", names::UnknownName { given, ..e }))
         })?

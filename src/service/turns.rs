@@ -7,7 +7,7 @@
 //! almost nothing, so on a 2-core Zen 3 it stayed on the busiest stepping
 //! thread's core while the `SCHED_IDLE` background had the other one: a
 //! switch's reference was recorded at 420–660 steps/s beside the
-//! background's 1,000 (docs/results.md, cold start). Held here, the
+//! background's 1,000 (docs/results.md, "Real time during a cold start"). Held here, the
 //! background leaves its core idle, and an idle core takes the waiting
 //! client thread.
 //!

@@ -196,7 +196,7 @@ pub fn ring_profile(rest: &[[f64; 3]], pos: &[f64], axis: [f64; 2], rings: usize
 /// a normal draw of standard deviation `jitter` (m), seeded by `seed`.
 /// Where a symmetric drape breaks into folds is decided by rounding, so one
 /// run is one draw of its drape coefficient; runs from a few such twins
-/// give its spread (results.md, "One run is one draw of the drape").
+/// give its spread (the lab's NOTEBOOK.md, "One run is one draw of the drape").
 pub fn jitter_heights(sim: &mut crate::sim::Simulation, seed: u64, jitter: f64) {
     let mut rng = crate::points::generate::SplitMix(seed);
     let mut state = sim.state().clone();

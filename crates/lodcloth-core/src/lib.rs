@@ -9,8 +9,11 @@
 //!
 //! # Layout
 //! Dependencies point one way: `plan → {cache, estimate, points} → {lod,
-//! scene} → sim`, with `hash` and `atomic` below everything that writes or
-//! checks files.
+//! scene} → mesh → sim`, with `hash` and `atomic` below everything that
+//! writes or checks files. `sim` knows no mesh: a mesh level's topology
+//! carries its nodes' material coordinates and reference vertices as plain
+//! data ([`sim::MeshNodes`]), from which `mesh` reads the level's rest
+//! surface ([`mesh::RestSurface`]) for live input and pin sets.
 //!
 //! - [`sim`] — the mass-spring cloth: topology (springs by type in a fixed
 //!   order), state (flat arrays), forces (Sung 2018 eq. 1), integrators
@@ -21,7 +24,7 @@
 //!   any resolution.
 //! - [`touch`] — live input (grabs, wind, pin moves, impulses) in material
 //!   coordinates, resolved onto a simulation at any level (`touch → {scene,
-//!   sim}`).
+//!   mesh, sim}`).
 //! - [`level`] — a level of detail: a grid, a point count or a mesh's
 //!   vertex count, as written in configs and on the command line.
 //! - [`lod`] — barycentric correlation between resolutions, state transfer.
@@ -29,7 +32,7 @@
 //!   reference recording and the error metric (Sung 2018 eq. 9).
 //! - [`mesh`] — triangle-mesh cloths: OBJ, PLY and glTF files, springs on
 //!   and across edges, level chains by quadric simplification, closest points
-//!   on a rest surface.
+//!   on a rest surface, material points and patches on a level.
 //! - [`points`] — point-sampled surfaces: I/O, normals, simplification,
 //!   springs on tangent planes, MLS transfer back to every point.
 //! - [`cache`] — on-disk cache of estimated coefficients, one checksummed

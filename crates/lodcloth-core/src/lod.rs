@@ -300,7 +300,7 @@ pub struct Settled {
 /// millimetres (the skirt's 915 v level 2.7 mm rms at 1/60 s), so 1e-4
 /// leaves a fraction of a micrometre unsolved; at the solver's default
 /// 1e-8 the skirt's settling took 383 CG iterations and 11.9 ms on the
-/// stepping thread. Measured on the metric and the cost: docs/results.md,
+/// stepping thread. Measured on the metric and the cost: the lab's NOTEBOOK.md,
 /// "Settling what a level cannot hold".
 pub const SETTLE_TOLERANCE: f64 = 1e-4;
 

@@ -17,7 +17,7 @@
 use crate::scene::{patch_weights, Scene, Selector};
 use std::sync::Arc;
 
-use crate::mesh::Simplified;
+use crate::mesh::RestSurface;
 use crate::sim::{Grab, GridShape, PinShift, Profile, SimError, Simulation, Topology, Wind};
 
 /// A part of the cloth: the square of half-side `radius` metres about the
@@ -183,8 +183,8 @@ impl Patch {
 
     /// Nodes and weights of this patch on a mesh level: the rest surface
     /// within `radius` of the material point ([`crate::mesh::patch_weights`]).
-    pub fn mesh_weights(&self, level: &Simplified) -> (Vec<u32>, Vec<f64>) {
-        crate::mesh::patch_weights(&level.mesh, self.u, self.v, self.radius)
+    pub fn mesh_weights(&self, level: RestSurface<'_>) -> (Vec<u32>, Vec<f64>) {
+        crate::mesh::patch_weights(level, self.u, self.v, self.radius)
             .into_iter()
             .unzip()
     }
@@ -192,7 +192,7 @@ impl Patch {
     /// Nodes and weights of this patch on a cloth of `topology`: a grid's
     /// or a mesh level's; `None` for anything else (a point surface).
     pub fn on(&self, topology: &Topology) -> Option<(Vec<u32>, Vec<f64>)> {
-        match (topology.grid, &topology.mesh) {
+        match (topology.grid, RestSurface::of(topology)) {
             (Some(shape), _) => Some(self.weights(&shape)),
             (None, Some(level)) => Some(self.mesh_weights(level)),
             (None, None) => None,
@@ -202,7 +202,7 @@ impl Patch {
     fn weights_on(&self, cloth: &Cloth) -> (Vec<u32>, Vec<f64>) {
         match cloth {
             Cloth::Grid(shape) => self.weights(shape),
-            Cloth::Mesh(level) => self.mesh_weights(level),
+            Cloth::Mesh(level) => self.mesh_weights(mesh_level(level)),
         }
     }
 }
@@ -611,23 +611,29 @@ impl Touch {
     }
 }
 
-/// What input resolves on: a grid's shape or a mesh level.
+/// What input resolves on: a grid's shape or a mesh level's topology
+/// (one with its mesh nodes: [`cloth`] makes no other).
 enum Cloth {
     Grid(GridShape),
-    Mesh(Arc<Simplified>),
+    Mesh(Arc<Topology>),
 }
 
 fn cloth(sim: &Simulation) -> Result<Cloth, TouchError> {
     let topology = sim.topology();
     match (topology.grid, &topology.mesh) {
         (Some(shape), _) => Ok(Cloth::Grid(shape)),
-        (None, Some(level)) => Ok(Cloth::Mesh(level.clone())),
+        (None, Some(_)) => Ok(Cloth::Mesh(topology.clone())),
         (None, None) => Err(TouchError::Field {
             field: "instance",
             value: f64::NAN,
             reason: "live input acts on grid and mesh cloths; this instance is neither".into(),
         }),
     }
+}
+
+/// The rest surface of a [`Cloth::Mesh`] level.
+fn mesh_level(topology: &Topology) -> RestSurface<'_> {
+    RestSurface::of(topology).expect("cloth() makes Cloth::Mesh only of a topology with mesh nodes")
 }
 
 fn resolve_grab(g: &GrabSpec, cloth: &Cloth) -> Grab {
@@ -645,7 +651,7 @@ fn resolve_grab(g: &GrabSpec, cloth: &Cloth) -> Grab {
 fn pins_of(set: &Selector, cloth: &Cloth, sim: &Simulation) -> Vec<usize> {
     let nodes = match cloth {
         Cloth::Grid(shape) => crate::scene::select_nodes(set, shape),
-        Cloth::Mesh(level) => crate::scene::select_mesh(set, level),
+        Cloth::Mesh(level) => crate::scene::select_mesh(set, mesh_level(level)),
     };
     sim.loads()
         .pins

@@ -849,7 +849,7 @@ fn drape_recovers_a_known_bending_from_a_wrong_start() {
         "{reports:?}"
     );
     let total = reports[0].total;
-    assert_eq!(total, (lodcloth::estimate::shadow::DRAPE_RUNS as u64 + 1) * per_run);
+    assert_eq!(total, (lodcloth::estimate::drape::DRAPE_RUNS as u64 + 1) * per_run);
     assert!(reports.windows(2).all(|w| w[0].done < w[1].done), "{reports:?}");
     assert!(reports.iter().all(|q| q.total == total && q.done <= total));
     let level = reports.iter().filter(|q| q.stage == "drape: level runs").count() as u64;
@@ -874,12 +874,12 @@ fn drape_recovers_a_known_bending_from_a_wrong_start() {
     // The start droops visibly more: its shadow is far outside the tolerance.
     let start_off = report.start_shadow / report.target - 1.0;
     assert!(
-        start_off < -10.0 * lodcloth::estimate::shadow::DRAPE_TOLERANCE,
+        start_off < -10.0 * lodcloth::estimate::drape::DRAPE_TOLERANCE,
         "the soft start's shadow is only {:.3}% off the reference's",
         100.0 * start_off
     );
     assert!(report.converged, "{report:?}");
-    assert!((report.shadow / report.target - 1.0).abs() <= lodcloth::estimate::shadow::DRAPE_TOLERANCE);
+    assert!((report.shadow / report.target - 1.0).abs() <= lodcloth::estimate::drape::DRAPE_TOLERANCE);
     // Every class but the bend class is the start's; the bend class is the
     // truth's within 10 % (the shadow's tolerance, read through its slope).
     for class in SpringClass::ALL {

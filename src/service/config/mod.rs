@@ -8,7 +8,7 @@ use std::sync::Arc;
 
 use super::security;
 use crate::engine::EngineSettings;
-use crate::estimate::{Method, RecordSpec};
+use crate::estimate::{RecordSpec, Served};
 use crate::names;
 use crate::plan::{EstimationPlan, InstanceKind, InstancePlan, Level};
 use crate::points::scene::SurfaceScene;
@@ -422,7 +422,7 @@ fn instance(p: &mut Problems, all: &[RawInstance], i: usize, default_publish_hz:
     if all[..i].iter().any(|o| o.name == r.name) {
         p.push(format!("{at}.name: '{}' is used by an earlier instance", r.name));
     }
-    let method = names::parse::<Method>(&r.method)
+    let method = Served::parse(&r.method)
         .map_err(|e| p.push(format!("{at}.method: {e}")))
         .ok();
     let integrator = r.integrator.as_deref().and_then(|name| {

@@ -154,7 +154,8 @@ pub struct RawEngine {
     /// further behind counts as an overrun.
     #[serde(default = "default_max_catch_up")]
     pub max_catch_up: f64,
-    /// Replaced by `max_catch_up` (2026-12-03): named in the error.
+    /// Replaced by `max_catch_up`: a config that still sets it is refused,
+    /// naming its replacement.
     #[serde(default)]
     pub max_substeps: Option<serde::de::IgnoredAny>,
     /// An instance that falls this far behind real time (s) drops the
@@ -281,7 +282,7 @@ fn default_fit_iterations() -> u32 {
 }
 /// Under issue 21's 10 s for a first switch with the at-once fallback's
 /// build on top; on a Zen 4 the quick best alone took 6.5–9.5 s at a cold
-/// start, on a Zen 3 18–54 s (docs/results.md, cold start).
+/// start, on a Zen 3 18–54 s (docs/results.md, "Real time during a cold start").
 fn default_switch_budget() -> f64 {
     5.0
 }
@@ -309,7 +310,8 @@ pub struct RawInstance {
     pub levels: Vec<Level>,
     /// Level at start-up (must be in `levels`).
     pub start: Level,
-    /// Estimation method: same, bcd, gkd, lsq or fit (default gkd).
+    /// Estimation method: same, gkd, fit, follow or drape (default gkd;
+    /// docs/model.md, "Choosing an estimation method").
     #[serde(default = "default_method")]
     pub method: String,
     /// Integrator (default: the scene's).

@@ -37,7 +37,7 @@ pub(in crate::service) async fn answer_control(ctx: Arc<Context>, q: Query) {
         Action::Reset | Action::Unspecified => Command::Reset { reply: tx },
     };
     if let Err(e) = inst.handle.send(command) {
-        return reply_error(&ctx, &q, Code::Unavailable, e).await;
+        return reply_error(&ctx, &q, Code::Unavailable, e.to_string()).await;
     }
     match tokio::time::timeout(Duration::from_secs(5), rx).await {
         Ok(Ok(o)) => {

@@ -45,7 +45,7 @@ pub(in crate::service) fn submit_input(ctx: &Context, q: &Query) -> Result<Submi
     let (tx, rx) = oneshot::channel();
     inst.handle
         .send(Command::Input { input, reply: tx })
-        .map_err(|e| Refusal::new(Code::Unavailable, e))?;
+        .map_err(|e| Refusal::new(Code::Unavailable, e.to_string()))?;
     Ok(Submitted {
         instance: inst.clone(),
         reply: rx,

@@ -16,8 +16,8 @@ use crate::plan::{Level, PrepareError, Prepared};
 use crate::proto::v1::error::Code;
 use crate::proto::{self, schema, v1, WireLevel};
 use crate::service::prepare::{
-    apply_in_place, estimate_in_place, on_client_thread, prepare, prepare_first, switch_at_once, switch_to, Ready,
-    Waiting,
+    apply_in_place, estimate_in_place, on_client_thread, prepare, prepare_first, switch_at_once, switch_to,
+    Interruption, Ready, SwitchFailed, Unprepared, Waiting,
 };
 use crate::service::request::{self, SwitchTarget};
 use crate::service::{keys, Context, Instance, MAX_PENDING_SWITCHES};
@@ -94,7 +94,7 @@ pub(in crate::service) async fn answer_switch(ctx: Arc<Context>, q: Query) {
                 ));
                 return reply_switched(&ctx, &q, inst, &o, arrived, false, true).await;
             }
-            Err(e) => return reply_error(&ctx, &q, prepare_code(&e), e.to_string()).await,
+            Err(e) => return refuse_switch(&ctx, &q, e).await,
         }
     }
     // A level whose estimate is slow to make (`fit`) goes live with the
@@ -130,13 +130,13 @@ pub(in crate::service) async fn answer_switch(ctx: Arc<Context>, q: Query) {
                     ));
                     reply_switched(&ctx, &q, inst, &o, arrived, false, true).await
                 }
-                Err(e) => reply_error(&ctx, &q, prepare_code(&e), e.to_string()).await,
+                Err(e) => refuse_switch(&ctx, &q, e).await,
             };
         }
     };
-    let (ready, provisional) = match first.map_err(|e| joined_error(level, method, &e)).and_then(|r| r) {
+    let (ready, provisional) = match first.map_err(|e| joined_error(level, method, e)).and_then(|r| r) {
         Ok(p) => p,
-        Err(e) => return reply_error(&ctx, &q, prepare_code(&e), e.to_string()).await,
+        Err(e) => return refuse_switch(&ctx, &q, e.into()).await,
     };
     let cached = !provisional && (was_ready || ready.prepared.cached);
     let live_error = ready.prepared.predicted_error;
@@ -156,16 +156,24 @@ pub(in crate::service) async fn answer_switch(ctx: Arc<Context>, q: Query) {
             }
             reply_switched(&ctx, &q, inst, &o, arrived, cached, provisional).await
         }
-        Err(e) => reply_error(&ctx, &q, Code::Unavailable, e).await,
+        Err(e) => refuse_switch(&ctx, &q, e.into()).await,
     }
 }
 
-/// The wire code of a preparation that failed.
-fn prepare_code(e: &PrepareError) -> Code {
+/// Refuse a switch that did not go live, with its wire code.
+async fn refuse_switch(ctx: &Context, q: &Query, e: SwitchFailed) {
+    reply_error(ctx, q, switch_code(&e), e.to_string()).await
+}
+
+/// The wire code of a switch that did not go live. A level the engine did
+/// not take over is unavailable, except in an at-once switch, which reports
+/// it as the level's preparation failing.
+fn switch_code(e: &SwitchFailed) -> Code {
     match e {
-        PrepareError::Unstable { .. } => Code::Unstable,
-        PrepareError::NotAllowed { .. } => Code::LevelNotAllowed,
-        _ => Code::EstimationFailed,
+        SwitchFailed::Unprepared(Unprepared::Level(PrepareError::Unstable { .. })) => Code::Unstable,
+        SwitchFailed::Unprepared(Unprepared::Level(PrepareError::NotAllowed { .. })) => Code::LevelNotAllowed,
+        SwitchFailed::Unprepared(_) | SwitchFailed::AtOnce { .. } => Code::EstimationFailed,
+        SwitchFailed::Handover(_) => Code::Unavailable,
     }
 }
 
@@ -232,12 +240,12 @@ async fn follow(
     level: Level,
     method: Method,
     version: u32,
-    first: tokio::task::JoinHandle<Result<(Ready, bool), PrepareError>>,
+    first: tokio::task::JoinHandle<Result<(Ready, bool), Unprepared>>,
 ) {
     let Some(inst) = ctx.instances.get(&name) else {
         return;
     };
-    let (ready, provisional) = match first.await.map_err(|e| joined_error(level, method, &e)).and_then(|r| r) {
+    let (ready, provisional) = match first.await.map_err(|e| joined_error(level, method, e)).and_then(|r| r) {
         Ok(p) => p,
         Err(e) => {
             tracing::error!(instance = %name, %level, %method, "preparing the level a switch went live at: {e}");
@@ -254,11 +262,11 @@ async fn follow(
 }
 
 /// A preparation's task that panicked or was cancelled, as its error.
-fn joined_error(level: Level, method: Method, e: &tokio::task::JoinError) -> PrepareError {
-    PrepareError::Failed {
+fn joined_error(level: Level, method: Method, e: tokio::task::JoinError) -> Unprepared {
+    Unprepared::Interrupted {
         level,
         method,
-        message: format!("the preparation stopped: {e}"),
+        source: Interruption::Joined(e),
     }
 }
 

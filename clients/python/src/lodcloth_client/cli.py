@@ -102,7 +102,7 @@ def parser() -> argparse.ArgumentParser:
     target.add_argument(
         "--max-error", type=_positive, help="cheapest level with at most this relative error (0.05 = 5 %%)"
     )
-    s.add_argument("--method", help="estimation method (same, bcd, gkd, lsq, fit, shape, follow, drape); default: the instance's")
+    s.add_argument("--method", help="estimation method (same, gkd, fit, follow, drape); default: the instance's")
     s.add_argument(
         "--at-once",
         action="store_true",

@@ -270,8 +270,8 @@ def switch_request(
 ) -> "v1.SwitchRequest":
     """A ``SwitchRequest`` for exactly one target: a ``level`` (see
     :func:`parse_level`) or ``max_error`` (relative, 0.05 = 5 %: the
-    cheapest allowed level predicted within it). ``method`` (same, bcd,
-    gkd, lsq, fit, shape, follow, drape) defaults to the instance's. ``at_once``: an unprepared
+    cheapest allowed level predicted within it). ``method`` (same, gkd,
+    fit, follow, drape) defaults to the instance's. ``at_once``: an unprepared
     level goes live with the scene's own coefficients and the estimate
     follows in place (the reply says ``refining``); level targets only."""
     if (level is None) == (max_error is None):

@@ -97,7 +97,7 @@ pub enum FitTarget {
     /// a different field node by node but the same distribution, so this
     /// target reads the material (how far the cloth sags and spreads)
     /// where the eq. 9 residuals read mostly where the folds went
-    /// (results.md, "A fit on the shape").
+    /// (the lab's NOTEBOOK.md, "A fit on the shape").
     Shape,
     /// `(p_ref − p_sim)/O_max` as for `Positions`, the level restarted from
     /// the reference every `guard_window` (and settled when the problem
@@ -192,8 +192,8 @@ pub struct FitOptions {
     /// or when the linearised model predicts less for the next step. 1 %:
     /// the guard asks a fit for 1 % below `same` in all, and smaller steps
     /// made up much of Table 1's longest fits (60–52 nodes a side, 60–100 s)
-    /// for held-out changes within the chaos floor. Broyden-updated Jacobians between finite-difference ones were
-    /// tried (2026-11-25) and cost more runs, not fewer: on this chaotic
+    /// for held-out changes within the chaos floor. Broyden-updated Jacobians
+    /// between finite-difference ones cost more runs, not fewer: on this chaotic
     /// objective their steps failed often and each failure paid for a
     /// fresh Jacobian anyway (paper-1 at 52×52: 96 runs against 63).
     pub tolerance: f64,

@@ -43,7 +43,7 @@
 //!
 //! # Readings of the lost equations ([`Reading`])
 //! The prose admits other readings; each is selectable and
-//! `lodcloth experiment readings` scores them all against the paper's
+//! `lodcloth-lab readings` scores them all against the paper's
 //! Table 1 trend (docs/readings.md). The default, `reference_lsq`, is the
 //! one closest to it. Three choices, each with the reading above first:
 //! - **shares** from the *type totals* `|F_t,j|` (springs of a type on
@@ -394,7 +394,7 @@ pub enum Reading {
 
 impl Reading {
     /// The reading BCD and GKD use unless told otherwise: the one closest
-    /// to the paper's Table 1 trend (`lodcloth experiment readings`,
+    /// to the paper's Table 1 trend (`lodcloth-lab readings`,
     /// docs/readings.md: the paper's order same > BCD > GKD at 3 of its 6
     /// levels, each half of it at 4, BCD/same and GKD/BCD nearest its
     /// ratios; the first reading, kept as `totals_ratios`, at none).

@@ -28,13 +28,13 @@
 //! operator itself: its modes in a band made as stiff as the reference's
 //! ([`LodProblem::with_bending`] scores a level with it).
 
+pub mod drape;
 pub mod fit;
 pub mod inverse;
 pub mod metric;
-pub mod modal;
 pub mod reference;
 pub mod replayed;
-pub mod shadow;
+pub mod session;
 pub mod touched;
 
 use std::fmt;
@@ -46,6 +46,7 @@ pub use inverse::{Distribution, InverseEstimate, LsqEstimate, Reading, Rejection
 pub use metric::{ErrorAccumulator, ErrorReport};
 pub use reference::{RecordSpec, Reference, ReferenceError, Sample, CHECKPOINT_SECONDS};
 pub use replayed::{ReplayError, ReplayedReference};
+pub use session::{score_session, SessionScore, SessionScoreError};
 pub use touched::{eased_drag, probes, record_touched, Probe, TouchedError, TouchedReference, TouchedScore, PROBES};
 
 use crate::level::Level;
@@ -109,7 +110,7 @@ pub enum Method {
     Follow,
     /// `same` with its bend class (K and C) scaled so that the level,
     /// draped from rest over the scene's duration, casts the reference's
-    /// shadow at the end ([`shadow::drape_fit`]): the settled drape a Cusick
+    /// shadow at the end ([`drape::drape_fit`]): the settled drape a Cusick
     /// tester measures, which the motion-reading methods do not aim at.
     Drape,
 }
@@ -146,6 +147,48 @@ impl Method {
     /// Parse a [`Method::name`] (see [`crate::names`]).
     pub fn from_name(name: &str) -> Option<Method> {
         crate::names::parse(name).ok()
+    }
+}
+
+/// An estimation method the daemon offers a user, in its config and in
+/// switch requests (docs/model.md, "Choosing an estimation method"). The
+/// others stay in the lab: `same_spring`, `bcd` and `lsq` reproduce the
+/// paper's and a global reading of it, `shape` explored the drape before
+/// `drape` met it. The daemon still runs BCD itself, as a quick stand-in at
+/// a first switch.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Served(pub Method);
+
+impl Served {
+    /// Every served method, cheapest first.
+    pub const ALL: [Served; 5] = [
+        Served(Method::Same),
+        Served(Method::Gkd),
+        Served(Method::Fit),
+        Served(Method::Follow),
+        Served(Method::Drape),
+    ];
+
+    /// `name` as a served method; a lab method is refused with the served
+    /// names and a word on where the lab's are.
+    pub fn parse(name: &str) -> Result<Method, crate::names::UnknownName> {
+        crate::names::parse::<Served>(name).map(|s| s.0).map_err(|e| {
+            if Method::from_name(name).is_some() {
+                crate::names::UnknownName {
+                    choices: format!("{} (the daemon's methods; '{name}' is the lab's)", e.choices),
+                    ..e
+                }
+            } else {
+                e
+            }
+        })
+    }
+}
+
+impl crate::names::Named for Served {
+    const ALL: &'static [Served] = &Served::ALL;
+    fn name(self) -> &'static str {
+        self.0.name()
     }
 }
 
@@ -372,7 +415,7 @@ impl LodProblem {
     }
 
     /// The same level with `more` bending stencils after its own (a
-    /// mode-selective correction, [`modal::stiffening`]), scored and
+    /// mode-selective correction such as the lab's modal stiffening), scored and
     /// estimated like any level; the same nodes, springs and correlation.
     pub fn with_bending(&self, more: &Bending) -> LodProblem {
         let mut topology = Topology::clone(&self.topology);
@@ -660,7 +703,7 @@ impl LodProblem {
             }
             Method::Drape => {
                 let start = options.start.unwrap_or(same);
-                Details::Drape(shadow::drape_fit(self, &start, progress)?)
+                Details::Drape(drape::drape_fit(self, &start, progress)?)
             }
         };
         let material = match &details {
@@ -705,5 +748,5 @@ pub enum Details {
     /// The fit.
     Fit(FitReport),
     /// The drape fit.
-    Drape(shadow::DrapeReport),
+    Drape(drape::DrapeReport),
 }

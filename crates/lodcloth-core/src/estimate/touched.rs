@@ -46,6 +46,7 @@
 //! Pure: no I/O, no clock. The daemon runs it in the background after a
 //! level is live; it is never on a switch's path.
 
+use crate::mesh::RestSurface;
 use crate::scene::Scene;
 use crate::sim::{Material, Simulation, Topology};
 use crate::touch::{Input, Patch, Script, Touch, TouchError, SOFTEN_AT_SWITCH};
@@ -131,9 +132,9 @@ pub fn probes(scene: &Scene, reference: &Reference) -> Result<Vec<Probe>, Touche
         .scene_as_run(scene)
         .build()
         .map_err(|e| TouchedError::Build(e.to_string()))?;
-    let layout = match (reference.topology.grid, &reference.topology.mesh) {
+    let layout = match (reference.topology.grid, RestSurface::of(&reference.topology)) {
         (Some(shape), _) => grid_layout(scene, reference, &shape, &sim),
-        (None, Some(mesh)) => mesh_layout(scene, &mesh.mesh, &sim),
+        (None, Some(mesh)) => mesh_layout(scene, mesh, &sim),
         (None, None) => return Err(TouchedError::Build("the reference is neither a grid nor a mesh".into())),
     }?;
 
@@ -302,8 +303,8 @@ fn grid_layout(
 /// surface's normal and, across it, the way towards (½, v) (or against
 /// the surface's u direction where that way is not defined); the cloth's
 /// size √A; a round hand of radius 5 % of √A.
-fn mesh_layout(scene: &Scene, mesh: &crate::mesh::TriMesh, sim: &Simulation) -> Result<Layout, TouchedError> {
-    let rest = &mesh.positions;
+fn mesh_layout(scene: &Scene, mesh: RestSurface<'_>, sim: &Simulation) -> Result<Layout, TouchedError> {
+    let rest = mesh.positions;
     let located = |(u, v): (f64, f64)| crate::mesh::material_point(mesh, u, v);
     let rest_at = |c: (f64, f64)| {
         let (nodes, w) = located(c);

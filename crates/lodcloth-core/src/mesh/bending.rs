@@ -81,7 +81,7 @@
 //! rows to read quadratics exactly (0.72 there; the cylinder within
 //! 2.3 %). Their levels drape 13–19 % below the reference instead of
 //! 19–26 %, so the scenes keep the vertex rule until a rule closes the
-//! gap (docs/results.md, "Why a level leaves the reference's shape").
+//! gap (the lab's NOTEBOOK.md, "Mesh cloths and the Cusick drape").
 
 use super::TriMesh;
 use crate::sim::vec3::{cross, dot, norm, normalize, sub, tangent_basis};

@@ -13,8 +13,12 @@
 //! - `generate.rs` — sheets, discs and skirts made in code, OBJ text.
 //! - `locate.rs` — closest points on a rest surface: the barycentric
 //!   correlation of any vertex set with a mesh's triangles.
-//! - `patch.rs` — material points and patches on a level, where live
-//!   input acts ([`patch_weights`]).
+//! - `surface.rs` — a level's rest surface in material terms
+//!   ([`RestSurface`]), read from a [`Simplified`] or from a simulation's
+//!   [`Topology`](crate::sim::Topology), which carries the level's
+//!   [`MeshNodes`](crate::sim::MeshNodes) for it.
+//! - `patch.rs` — material points and patches on a level's rest surface,
+//!   where live input acts ([`patch_weights`]).
 
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -26,6 +30,7 @@ mod locate;
 mod patch;
 mod simplify;
 mod springs;
+mod surface;
 
 pub use bending::{bending_stencils, bending_stencils_by, delaunay_flips, Stencils};
 pub use io::load;
@@ -33,6 +38,7 @@ pub use locate::{locate, SurfaceIndex};
 pub use patch::{material_point, patch_weights};
 pub use simplify::{simplify, simplify_held, Simplified, CHAIN_VERSION, VERTEX_TOLERANCE};
 pub use springs::{mesh_material, mesh_topology, plate_topology};
+pub use surface::RestSurface;
 
 /// A triangle mesh as a cloth: one vertex per material point (vertices that
 /// share a position are one vertex, so UV seams do not tear the cloth).
@@ -244,26 +250,36 @@ impl TriMesh {
     /// Every edge once, `(a, b)` with `a < b`, with the triangles on either
     /// side (one for a border edge), in a deterministic order.
     pub fn edges(&self) -> Vec<((u32, u32), Vec<usize>)> {
-        let mut map: BTreeMap<(u32, u32), Vec<usize>> = BTreeMap::new();
-        for (t, tri) in self.triangles.iter().enumerate() {
-            for e in 0..3 {
-                map.entry(edge_key(tri[e], tri[(e + 1) % 3])).or_default().push(t);
-            }
-        }
-        map.into_iter().collect()
+        edges_of(&self.triangles)
     }
 
     /// Whether each vertex lies on the mesh's border (an edge with one triangle).
     pub fn border(&self) -> Vec<bool> {
-        let mut border = vec![false; self.vertices()];
-        for ((a, b), ts) in self.edges() {
-            if ts.len() == 1 {
-                border[a as usize] = true;
-                border[b as usize] = true;
-            }
-        }
-        border
+        border_of(self.vertices(), &self.triangles)
     }
+}
+
+/// [`TriMesh::edges`] of `triangles`.
+fn edges_of(triangles: &[[u32; 3]]) -> Vec<((u32, u32), Vec<usize>)> {
+    let mut map: BTreeMap<(u32, u32), Vec<usize>> = BTreeMap::new();
+    for (t, tri) in triangles.iter().enumerate() {
+        for e in 0..3 {
+            map.entry(edge_key(tri[e], tri[(e + 1) % 3])).or_default().push(t);
+        }
+    }
+    map.into_iter().collect()
+}
+
+/// [`TriMesh::border`] of `vertices` vertices joined by `triangles`.
+fn border_of(vertices: usize, triangles: &[[u32; 3]]) -> Vec<bool> {
+    let mut border = vec![false; vertices];
+    for ((a, b), ts) in edges_of(triangles) {
+        if ts.len() == 1 {
+            border[a as usize] = true;
+            border[b as usize] = true;
+        }
+    }
+    border
 }
 
 /// An undirected edge as `(min, max)`.

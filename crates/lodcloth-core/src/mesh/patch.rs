@@ -19,7 +19,7 @@
 //! and acts at the same material point on every level (to the subdivision's
 //! resolution, a twelfth of the radius).
 
-use super::{SurfaceIndex, TriMesh};
+use super::{RestSurface, SurfaceIndex};
 use crate::sim::vec3::{cross, dot, norm, sub};
 
 /// Subdivision cells per radius: a triangle is cut so its pieces are at
@@ -28,26 +28,26 @@ const CELLS_PER_RADIUS: f64 = 12.0;
 /// Most pieces per triangle side (a triangle far larger than the patch).
 const MAX_DIVISIONS: usize = 256;
 
-/// The triangle of `mesh` holding material point (u, v) (its closest one,
+/// The triangle of `level` holding material point (u, v) (its closest one,
 /// when (u, v) lies outside the material) and the point's barycentric
 /// weights on it.
-pub fn material_point(mesh: &TriMesh, u: f64, v: f64) -> ([u32; 3], [f64; 3]) {
-    let plane: Vec<[f64; 3]> = mesh.uv.iter().map(|&[a, b]| [a, b, 0.0]).collect();
-    let hit = SurfaceIndex::new(&plane, &mesh.triangles).closest([u, v, 0.0]);
+pub fn material_point(level: RestSurface<'_>, u: f64, v: f64) -> ([u32; 3], [f64; 3]) {
+    let plane: Vec<[f64; 3]> = level.uv.iter().map(|&[a, b]| [a, b, 0.0]).collect();
+    let hit = SurfaceIndex::new(&plane, level.triangles).closest([u, v, 0.0]);
     (hit.nodes, hit.weights)
 }
 
-/// Nodes of `mesh` and weights summing to 1 for the patch of radius
+/// Nodes of `level` and weights summing to 1 for the patch of radius
 /// `radius` metres about material point (u, v) (see the module docs); a
 /// radius of 0, or one smaller than the patch's pieces can resolve, is the
 /// point's own barycentric weights.
-pub fn patch_weights(mesh: &TriMesh, u: f64, v: f64, radius: f64) -> Vec<(u32, f64)> {
-    let (nodes, weights) = material_point(mesh, u, v);
+pub fn patch_weights(level: RestSurface<'_>, u: f64, v: f64, radius: f64) -> Vec<(u32, f64)> {
+    let (nodes, weights) = material_point(level, u, v);
     let point_weights = || merge(nodes.iter().copied().zip(weights).filter(|&(_, w)| w > 0.0));
     if radius <= 0.0 {
         return point_weights();
     }
-    let rest = &mesh.positions;
+    let rest = level.positions;
     let centre = (0..3).fold([0.0; 3], |c, k| {
         let p = rest[nodes[k] as usize];
         [
@@ -57,9 +57,9 @@ pub fn patch_weights(mesh: &TriMesh, u: f64, v: f64, radius: f64) -> Vec<(u32, f
         ]
     });
     let r2 = radius * radius;
-    let mut acc = vec![0.0; mesh.vertices()];
+    let mut acc = vec![0.0; level.vertices()];
     let mut total = 0.0;
-    for tri in &mesh.triangles {
+    for tri in level.triangles {
         let [a, b, c] = tri.map(|k| rest[k as usize]);
         // Skip triangles whose bounding box is beyond the radius.
         let far = (0..3).any(|d| {

@@ -53,7 +53,7 @@
 //!   103 held, 290 → 404 free). Its outline keeps close points inside:
 //!   two of the 40 % level's outline vertices have a neighbour in the
 //!   clamp 20–25 mm away, against 14 (up to 24 mm) before
-//!   (docs/results.md, "Mesh cloths", "A level's vertices where the cloth
+//!   (docs/results.md, "Mesh cloths"; the lab's NOTEBOOK.md, "A level's vertices where the cloth
 //!   moves").
 //!
 //! meshoptimizer targets an index count; the vertex count it leaves depends

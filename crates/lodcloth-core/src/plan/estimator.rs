@@ -127,8 +127,9 @@ impl Estimator {
     /// The cache key of `method` on `problem` with `fit`'s settings.
     fn key(&self, problem: &LodProblem, method: Method, fit: &FitOptions) -> CacheKey {
         let train = fit.train_range(problem.frames());
-        // A level served with another integrator than its reference ran
-        // (keys before 2026-12-05 had the level's for both).
+        // A level served with another integrator than its reference ran:
+        // the key names both, so an estimate made against a reference of
+        // another integrator is never taken for this one.
         let reference_integrator = if problem.reference.integrator == problem.integrator {
             String::new()
         } else {

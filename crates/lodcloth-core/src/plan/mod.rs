@@ -15,5 +15,5 @@ pub use estimator::{
     default_problem, level_dt, notes, progress_every, record_reference, stable_problem, Estimated, Estimator, PlanError,
 };
 pub use instance::{EstimationPlan, InstanceKind, InstancePlan};
-pub use prepare::{allowed, Basis, PrepareError, Prepared, Preparer, Start};
+pub use prepare::{allowed, Basis, PrepareError, PrepareFailure, Prepared, Preparer, Start};
 pub use touched::TouchedPrediction;

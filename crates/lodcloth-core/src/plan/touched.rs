@@ -11,7 +11,7 @@ use std::time::Instant;
 
 use super::prepare::lock;
 use super::{Basis, Level, PrepareError, Prepared, Preparer};
-use crate::estimate::{probes, record_touched, Method, TouchedReference, TouchedScore};
+use crate::estimate::{probes, record_touched, Method, TouchedError, TouchedReference, TouchedScore};
 
 /// A level's error under the standard drags.
 #[derive(Debug, Clone)]
@@ -56,10 +56,10 @@ impl Preparer {
         if let Some(p) = self.touched_prediction(key.0, key.1) {
             return Ok(Some(p));
         }
-        let failed = |message: String| PrepareError::Failed {
+        let failed = |e: TouchedError| PrepareError::Failed {
             level: prepared.level,
             method: prepared.method,
-            message: format!("under the standard drags: {message}"),
+            source: Box::new(e.into()),
         };
         let references = {
             let mut slot = lock(&self.touched.references);
@@ -67,12 +67,12 @@ impl Preparer {
                 Some(r) => r.clone(),
                 None => {
                     let started = Instant::now();
-                    let drags = probes(&problem.scene, &problem.reference).map_err(|e| failed(e.to_string()))?;
+                    let drags = probes(&problem.scene, &problem.reference).map_err(failed)?;
                     let recorded = drags
                         .iter()
                         .map(|p| record_touched(&problem.scene, &problem.reference, p, stop))
                         .collect::<Result<Vec<_>, _>>()
-                        .map_err(|e| failed(e.to_string()))?;
+                        .map_err(failed)?;
                     tracing::info!(
                         instance = %self.plan().name,
                         drags = recorded.len(),
@@ -90,7 +90,7 @@ impl Preparer {
             .iter()
             .map(|r| problem.score_touched(prepared.material, r, stop))
             .collect::<Result<Vec<_>, _>>()
-            .map_err(|e| failed(e.to_string()))?;
+            .map_err(failed)?;
         let error = scores.iter().map(|s| s.report.mean).fold(0.0, f64::max);
         let prediction = Arc::new(TouchedPrediction {
             error,

@@ -4,7 +4,7 @@
 
 use super::selector::{region_load, select, select_mesh, Selector};
 use super::{MassConvention, Scene, SceneError};
-use crate::mesh::Simplified;
+use crate::mesh::{RestSurface, Simplified};
 use crate::sim::{GridShape, Loads, NodeLoad, Pin, Simulation, Topology};
 
 impl Scene {
@@ -27,16 +27,24 @@ impl Scene {
         select(selector, shape)
     }
 
-    /// Pins and loads resolved for `topology` (a grid of this scene).
+    /// Pins and loads resolved for `topology`: a grid of this scene, or one
+    /// of its mesh levels, whose rest surface the topology carries
+    /// ([`RestSurface::of`]).
     pub fn loads(&self, topology: &Topology) -> Result<Loads, SceneError> {
-        self.loads_on(topology, None)
+        self.loads_at(topology, RestSurface::of(topology))
+    }
+
+    /// [`Scene::loads`] given the mesh level `topology` was made of (`None`
+    /// for a grid).
+    pub fn loads_on(&self, topology: &Topology, mesh: Option<&Simplified>) -> Result<Loads, SceneError> {
+        self.loads_at(topology, mesh.map(Simplified::rest_surface))
     }
 
     /// Pins and loads resolved for `topology`: a grid of this scene, or
-    /// (with `mesh`) one of its mesh levels.
-    pub fn loads_on(&self, topology: &Topology, mesh: Option<&Simplified>) -> Result<Loads, SceneError> {
+    /// (with `mesh`, its rest surface) one of its mesh levels.
+    fn loads_at(&self, topology: &Topology, mesh: Option<RestSurface<'_>>) -> Result<Loads, SceneError> {
         let (label, shape) = match mesh {
-            Some(m) => (format!("{} vertices", m.mesh.vertices()), None),
+            Some(m) => (format!("{} vertices", m.vertices()), None),
             None => {
                 let shape = topology.grid.expect("scene topologies are grids or mesh levels");
                 (format!("{}×{}", shape.nx, shape.ny), Some(shape))

@@ -18,7 +18,7 @@ use std::sync::Arc;
 
 use super::{Scene, SceneError};
 use crate::level::Level;
-use crate::mesh::{self, Simplified, TriMesh};
+use crate::mesh::{self, RestSurface, Simplified, TriMesh};
 use crate::sim::{Material, Membrane, SimParams, Simulation, SpringCoeffs, State, Topology};
 
 /// A scene's mesh cloth: the file as read, its material and what every
@@ -70,15 +70,17 @@ impl Scene {
         membrane: Membrane,
         bending: Option<SpringCoeffs>,
     ) {
-        let identity = Simplified {
-            source: (0..reference.vertices() as u32).collect(),
-            mesh: reference.clone(),
-            error: 0.0,
+        let identity: Vec<u32> = (0..reference.vertices() as u32).collect();
+        let surface = RestSurface {
+            positions: &reference.positions,
+            uv: &reference.uv,
+            source: &identity,
+            triangles: &reference.triangles,
         };
         let pins: Vec<Vec<u32>> = self
             .pins
             .iter()
-            .map(|(sel, _, _)| super::selector::select_mesh(sel, &identity))
+            .map(|(sel, _, _)| super::selector::select_mesh(sel, surface))
             .collect();
         let (pinned, locked) = pin_outlines(&reference, &pins);
         let topology = topology_of(&reference, bending, &pinned);
@@ -133,7 +135,7 @@ impl Scene {
                 let simplified = Arc::new(simplified);
                 let pinned: Vec<bool> = simplified.source.iter().map(|&k| m.pinned[k as usize]).collect();
                 let topology = Topology {
-                    mesh: Some(simplified.clone()),
+                    mesh: Some(Arc::new(simplified.mesh_nodes())),
                     ..level_topology(&simplified.mesh, m.bending, &pinned)
                         .map_err(|e| invalid(format!("level {level}: {e}")))?
                 };

@@ -6,7 +6,7 @@
 //! scene's pins and forces mean the same part of the cloth at every level of
 //! detail.
 
-use crate::mesh::Simplified;
+use crate::mesh::RestSurface;
 use crate::sim::GridShape;
 
 /// Which nodes a selector means, independent of resolution.
@@ -114,14 +114,13 @@ fn in_ellipse(uv: (f64, f64), center: [f64; 2], radii: [f64; 2]) -> bool {
 }
 
 /// Vertices `selector` picks on a mesh level (sorted, unique), by the
-/// material coordinates (u, v) of [`crate::mesh::TriMesh::uv`]: a region
+/// material coordinates (u, v) of [`RestSurface::uv`]: a region
 /// tests each vertex; `Points` map to the nearest vertex; a side is the
 /// border vertices on that side of the material square (within 1e-6), a
 /// corner those on both; `Vertices` are the reference vertices the level
 /// kept (pinned ones are kept at every level).
-pub fn select_mesh(selector: &Selector, level: &Simplified) -> Vec<u32> {
-    let mesh = &level.mesh;
-    let n = mesh.vertices() as u32;
+pub fn select_mesh(selector: &Selector, level: RestSurface<'_>) -> Vec<u32> {
+    let n = level.vertices() as u32;
     const SIDE: f64 = 1e-6;
     let on = |e: Edge, uv: [f64; 2]| match e {
         Edge::Top => uv[1] <= SIDE,
@@ -132,11 +131,11 @@ pub fn select_mesh(selector: &Selector, level: &Simplified) -> Vec<u32> {
     let mut out: Vec<u32> = match selector {
         Selector::All => (0..n).collect(),
         Selector::Edge(_) | Selector::Corner(..) => {
-            let border = mesh.border();
+            let border = level.border();
             (0..n)
                 .filter(|&k| border[k as usize])
                 .filter(|&k| {
-                    let uv = mesh.uv[k as usize];
+                    let uv = level.uv[k as usize];
                     match selector {
                         Selector::Edge(e) => on(*e, uv),
                         Selector::Corner(a, b) => on(*a, uv) && on(*b, uv),
@@ -149,14 +148,14 @@ pub fn select_mesh(selector: &Selector, level: &Simplified) -> Vec<u32> {
             let eps = 1e-9;
             (0..n)
                 .filter(|&k| {
-                    let [uu, vv] = mesh.uv[k as usize];
+                    let [uu, vv] = level.uv[k as usize];
                     uu >= u[0] - eps && uu <= u[1] + eps && vv >= v[0] - eps && vv <= v[1] + eps
                 })
                 .collect()
         }
         Selector::Ellipse { center, radii } => (0..n)
             .filter(|&k| {
-                let [uu, vv] = mesh.uv[k as usize];
+                let [uu, vv] = level.uv[k as usize];
                 in_ellipse((uu, vv), *center, *radii)
             })
             .collect(),
@@ -165,7 +164,7 @@ pub fn select_mesh(selector: &Selector, level: &Simplified) -> Vec<u32> {
             .filter_map(|&(pu, pv)| {
                 (0..n).min_by(|&a, &b| {
                     let d = |k: u32| {
-                        let [uu, vv] = mesh.uv[k as usize];
+                        let [uu, vv] = level.uv[k as usize];
                         (uu - pu).powi(2) + (vv - pv).powi(2)
                     };
                     d(a).total_cmp(&d(b))

@@ -3,7 +3,7 @@
 //! A bend spring across an edge shortens by about L·θ²/8 when its two
 //! triangles fold by θ, so its energy is quartic in the fold and the folding
 //! energy per area of a mesh goes as K·κ⁴·h⁴: it has no continuum limit, and
-//! two meshes of one fabric fold differently (results.md, "What the Cusick
+//! two meshes of one fabric fold differently (the lab's NOTEBOOK.md, "What the Cusick
 //! error is made of"). A plate's bending energy is quadratic in curvature,
 //! `½·D·∫ (κ₁ + κ₂)² − 2(1 − ν)·κ₁κ₂ dA` with the bending rigidity D (N·m).
 //!

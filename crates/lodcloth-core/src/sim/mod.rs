@@ -49,7 +49,7 @@ pub use simd::{active_isa_name, force_path, VectorPath};
 pub use stability::{amplification, dt_limit, modal_estimate, ModalEstimate};
 pub use state::State;
 pub use strain::StrainOutcome;
-pub use topology::{GridShape, Orientation, Padded, Run, SpringGroup, Topology};
+pub use topology::{GridShape, MeshNodes, Orientation, Padded, Run, SpringGroup, Topology};
 
 use implicit::ImplicitInputs;
 use model::{colour, Mixed, Model, Workspace};

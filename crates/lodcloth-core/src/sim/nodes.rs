@@ -2,7 +2,7 @@
 //! and RK4 updates, the f32 copies the kernel reads, and the report's sums.
 //!
 //! A 64×64 step with f32 springs spent about a third of its time in these
-//! passes (profiled on the AVX2 path, 2026-12-02): the update read the
+//! passes when each was its own loop (profiled on the AVX2 path): the update read the
 //! accelerations and wrote x and v, a second pass read x and v again to
 //! round them for the kernel, and a third read them again for the report.
 //! Each pass streams arrays of 32 KiB per component through L2 (the state,
@@ -12,7 +12,8 @@
 //! springs and no other force it also turns the kernel's f32 forces into
 //! accelerations there ([`Forces`]), instead of a pass that wrote them to
 //! an f64 array for the update to read back (cachegrind with a Zen 3-sized
-//! L2: 8.1 k → 4.1 k misses per 64² step; docs/results.md). RK4's passes
+//! L2: 8.1 k → 4.1 k misses per 64² step; the lab's NOTEBOOK.md, "Speed of
+//! a step"). RK4's passes
 //! do the same with each of its four evaluations ([`StageForces`]).
 
 use super::par::halves_mut;
@@ -207,7 +208,7 @@ fn update<const RK4: bool>(piece: Piece, dt: f64, g: [f64; 3]) -> Sums {
 /// masses and the report's 32 partial sums at once: more than an AVX2
 /// core's 16 vector registers, so the pass spilled (322 instructions a
 /// block of 8 nodes on the AVX2 path, 50 of them to and from the stack;
-/// `perf annotate`, 2026-12-04). A component at a time holds a third of
+/// `perf annotate`). A component at a time holds a third of
 /// it. A chunk is short enough that its |v|² (built up over the
 /// components, [`sum_component`]) stays in L1, and long enough that the
 /// next component's loads come long after this one's stores: the
@@ -244,7 +245,7 @@ fn blocks<const COPY: bool, const RK4: bool, const FORCES: bool>(
     // (lane 0) inside the loop, the compiler vectorised lane 0's sums apart
     // from the others' and the whole pass split into odd pieces (1 + 4 + 2
     // + 1 lanes on AVX2): the 64² step was slower than node by node
-    // (docs/results.md, "The node pass by component").
+    // (the lab's NOTEBOOK.md, "Speed of a step").
     while k + CHUNK <= n {
         chunk::<COPY, RK4, FORCES>(&mut piece, k, &mut t, dt, g, sums);
         k += CHUNK;
@@ -437,7 +438,8 @@ pub(super) fn rk4_stage(
 /// copies alone (`forces`: f32 springs and no other force, so the same for
 /// the next stage of this step) no f64 stage position. About 4 % of an f32 RK4
 /// step on an AVX-512 Zen 4, 1 % (noise) on its AVX2 path; a fifth fewer
-/// misses of a Zen 3-sized L2 under cachegrind (docs/results.md).
+/// misses of a Zen 3-sized L2 under cachegrind (the lab's NOTEBOOK.md, "Speed
+/// of a step").
 #[inline(always)]
 fn stage_pass<const FIRST: bool>(
     read: [&[f64]; 3],

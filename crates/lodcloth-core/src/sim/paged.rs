@@ -20,7 +20,7 @@
 //! advance could not do that: on a Zen 4, with the state's positions,
 //! velocities and the node masses in the same two sets as the f32
 //! velocities, the 64×64 f32 step's node pass took 4.8 ns a node against
-//! 2.0 at 60×60 (`perf record` of `peer_step --size`, 2026-12-04).
+//! 2.0 at 60×60 (`perf record` of `peer_step --size`).
 //! [`Paged::window_away_from`] places a window for each evaluation instead
 //! (the force buffer, whose evaluations read the state or a stage).
 

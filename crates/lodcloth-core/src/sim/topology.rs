@@ -1,5 +1,7 @@
 //! Which nodes are connected by which springs, in a fixed order, plus the rest
-//! shape and the triangles used for rendering, wind and barycentric mapping.
+//! shape and the triangles used for rendering, wind and barycentric mapping,
+//! and where the nodes are in the cloth's material ([`GridShape`] on a grid,
+//! [`MeshNodes`] on a mesh level).
 //!
 //! Springs are stored per group (one spring kind and, on a grid, one stencil
 //! direction) as flat arrays `a`, `b`, `rest`. On a regular grid every group is
@@ -128,6 +130,23 @@ impl GridShape {
     }
 }
 
+/// Where a mesh level's nodes are in its cloth, as [`GridShape`] says it of
+/// a grid's: stored per node because a level's vertices are whichever
+/// reference vertices its simplification kept.
+///
+/// The simulation never reads it. A [`Topology`] carries it so that whatever
+/// holds a simulation (live input, pin moves, the touched-error probes) can
+/// name points of the cloth at any level without knowing how the level was
+/// made; the `mesh` module, above this one, makes it and answers queries on
+/// the rest surface it describes.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MeshNodes {
+    /// Material coordinates (u, v) ∈ \[0,1\]² of every node.
+    pub uv: Vec<[f64; 2]>,
+    /// The reference-mesh vertex each node is, increasing.
+    pub source: Vec<u32>,
+}
+
 /// How the rest shape of a grid lies in space (y is up).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Orientation {
@@ -155,10 +174,10 @@ pub struct Topology {
     pub triangles: Vec<[u32; 3]>,
     /// Present for rectangular grids.
     pub grid: Option<GridShape>,
-    /// Present for a mesh cloth's levels: the level's mesh (material
-    /// coordinates, groups) and the reference vertex each node is, so live
-    /// input and pin sets resolve on it as they do on a grid.
-    pub mesh: Option<std::sync::Arc<crate::mesh::Simplified>>,
+    /// Present for a mesh cloth's levels: each node's material coordinates
+    /// and the reference vertex it is, so live input and pin sets resolve
+    /// on the level as they do on a grid.
+    pub mesh: Option<std::sync::Arc<MeshNodes>>,
     /// Linear bending stencils (a mesh cloth with a bending rigidity; empty
     /// otherwise). The material's bend class coefficients are their D and
     /// C ([`super::bending`]).
@@ -241,7 +260,8 @@ impl Topology {
 
     /// Each node's material coordinates (u, v) ∈ \[0,1\]², where live input
     /// names points: a grid's column and row fractions, a mesh level's
-    /// from its mesh. `None` for a cloth that is neither (a point surface).
+    /// from its [`MeshNodes`]. `None` for a cloth that is neither (a point
+    /// surface).
     pub fn material_uv(&self) -> Option<Vec<[f64; 2]>> {
         match (&self.grid, &self.mesh) {
             (Some(shape), _) => Some(
@@ -252,7 +272,7 @@ impl Topology {
                     })
                     .collect(),
             ),
-            (None, Some(level)) => Some(level.mesh.uv.clone()),
+            (None, Some(nodes)) => Some(nodes.uv.clone()),
             (None, None) => None,
         }
     }

@@ -23,53 +23,10 @@ use crate::turns::Turns;
 
 use crate::points::cloud::CloudMap;
 
+mod error;
 mod surface;
 
-/// Why a level could not be prepared.
-#[derive(Debug, Clone, thiserror::Error)]
-pub enum PrepareError {
-    /// The level is not one the instance may run.
-    #[error("level {level} is not one of the allowed levels {allowed}")]
-    NotAllowed {
-        /// The level asked for.
-        level: Level,
-        /// The allowed levels, as [`allowed`] writes them.
-        allowed: String,
-    },
-    /// The level's coefficients are predicted unstable at the dt it must run.
-    #[error(
-        "level {level} with {method} coefficients is unstable at dt = {dt:e} s (predicted limit {limit:e} s); \
-         choose another level or method, or lower the instance's dt"
-    )]
-    Unstable {
-        /// The level asked for.
-        level: Level,
-        /// The method whose coefficients are unstable.
-        method: Method,
-        /// The time step it would run at (s).
-        dt: f64,
-        /// The predicted stability limit (s).
-        limit: f64,
-    },
-    /// Estimation or building the level failed.
-    #[error("preparing level {level} with {method}: {message}")]
-    Failed {
-        /// The level asked for.
-        level: Level,
-        /// The method asked for.
-        method: Method,
-        /// What failed.
-        message: String,
-    },
-    /// The instance's reference run could not be recorded.
-    #[error("recording the reference of {scene}: {message}")]
-    Reference {
-        /// The scene's name.
-        scene: String,
-        /// What failed.
-        message: String,
-    },
-}
+pub use error::{PrepareError, PrepareFailure};
 
 /// A level ready to switch to.
 #[derive(Debug)]
@@ -114,14 +71,14 @@ pub enum Basis {
 impl Prepared {
     /// A simulation of this level at rest.
     pub fn simulation(&self) -> Result<Simulation, PrepareError> {
-        let failed = |message: String| PrepareError::Failed {
+        let failed = |source: PrepareFailure| PrepareError::Failed {
             level: self.level,
             method: self.method,
-            message,
+            source: Box::new(source),
         };
         match &self.basis {
-            Basis::Cloth(problem) => problem.simulation(self.material).map_err(|e| failed(e.to_string())),
-            Basis::Surface { model, .. } => surface_fit::restart(model).map_err(|e| failed(e.to_string())),
+            Basis::Cloth(problem) => problem.simulation(self.material).map_err(|e| failed(e.into())),
+            Basis::Surface { model, .. } => surface_fit::restart(model).map_err(|e| failed(e.into())),
         }
     }
 
@@ -327,7 +284,7 @@ impl Preparer {
             }
             (Err(e), None) => Err(PrepareError::Reference {
                 scene: scene.name.clone(),
-                message: e.to_string(),
+                source: Box::new(e.into()),
             }),
         }
     }
@@ -336,9 +293,8 @@ impl Preparer {
     /// The reference runs the scene as written (its own integrator and
     /// dt): it is the truth the levels are estimated and scored against,
     /// and an integrator chosen to serve a level cheaply may not be stable
-    /// at the scene's dt (symplectic Euler at the Cusick scene's 1e-4 s,
-    /// beyond its 6.2e-5 s limit, failed every preparation until
-    /// 2026-12-05).
+    /// at the scene's dt (symplectic Euler at the Cusick scene's 1e-4 s is
+    /// beyond its 6.2e-5 s limit).
     fn cloth_scene(scene: &Scene, plan: &InstancePlan) -> Scene {
         let mut scene = scene.clone();
         scene.params.integrator = plan.integrator;
@@ -420,7 +376,7 @@ impl Preparer {
     /// one run each, side by side). On a cloth `same` and BCD: GKD costs
     /// more (its kernel sums, 1.6 s against BCD's 0.1 s at 40×40 of a 64²
     /// reference) and least squares a run too, and over Table 1
-    /// (docs/results.md) neither is ahead of both on average at any level
+    /// (docs/table1.csv) neither is ahead of both on average at any level
     /// (GKD 3.1–12 %, lsq over 100 %, against `same` 1.3–3.1 % and BCD
     /// 2.1–6.1 %). On a surface `same` (its inverse fits need another
     /// all-points recording).
@@ -481,7 +437,7 @@ impl Preparer {
         let failed = |e: PlanError| PrepareError::Failed {
             level,
             method,
-            message: e.to_string(),
+            source: Box::new(e.into()),
         };
         let mass = MassConvention::Lumped;
         let integrator = self.plan.integrator;
@@ -592,10 +548,10 @@ impl Preparer {
     /// takes milliseconds; a surface is simplified first.
     pub fn quick(&self, level: Level) -> Result<Start, PrepareError> {
         self.check_allowed(level)?;
-        let failed = |message: String| PrepareError::Failed {
+        let failed = |source: PrepareFailure| PrepareError::Failed {
             level,
             method: Method::Same,
-            message,
+            source: Box::new(source),
         };
         match (&self.plan.kind, level) {
             (InstanceKind::Cloth(scene), Level::Grid { .. } | Level::Vertices(_)) => {
@@ -610,7 +566,7 @@ impl Preparer {
             (InstanceKind::Surface(scene), Level::Points(n)) => {
                 let model = scene
                     .model(n, self.plan.integrator, None, &mut |_, _| {})
-                    .map_err(|e| failed(e.to_string()))?;
+                    .map_err(|e| failed(e.into()))?;
                 let cloud = CloudMap::of(&model);
                 let dt = model.sim.params().dt;
                 Ok(Start {
@@ -639,10 +595,10 @@ impl Preparer {
         let (InstanceKind::Cloth(scene), Level::Grid { .. } | Level::Vertices(_)) = (&self.plan.kind, level) else {
             return None;
         };
-        let failed = |message: String| PrepareError::Failed {
+        let failed = |source: PrepareFailure| PrepareError::Failed {
             level,
             method: Method::Same,
-            message,
+            source: Box::new(source),
         };
         if let Err(e) = self.check_allowed(level) {
             return Some(Err(e));
@@ -679,13 +635,11 @@ impl Preparer {
         level: Level,
         material: Option<Material>,
         dt: Option<f64>,
-    ) -> Result<(Simulation, f64), String> {
-        let cloth = scene.cloth_level(level).map_err(|e| e.to_string())?;
+    ) -> Result<(Simulation, f64), PrepareFailure> {
+        let cloth = scene.cloth_level(level)?;
         let topology = cloth.topology.clone();
         let masses: Vec<f64> = topology.node_areas.iter().map(|a| a * scene.areal_density).collect();
-        let loads = scene
-            .loads_on(&topology, cloth.mesh.as_deref())
-            .map_err(|e| e.to_string())?;
+        let loads = scene.loads_on(&topology, cloth.mesh.as_deref())?;
         let material = material.unwrap_or_else(|| scene.material_on(&cloth));
         let interval = scene.params.dt * self.estimation.spec.metric_stride as f64;
         let params = crate::sim::SimParams {
@@ -701,7 +655,6 @@ impl Preparer {
                 State::at_rest(&topology),
                 check,
             )
-            .map_err(|e| e.to_string())
         };
         let dt = match dt {
             Some(dt) => dt,
@@ -732,10 +685,10 @@ fn once<T>(
     Ok(r)
 }
 
-fn reference_failed(scene: &SurfaceScene, message: String) -> PrepareError {
+fn reference_failed(scene: &SurfaceScene, source: PrepareFailure) -> PrepareError {
     PrepareError::Reference {
         scene: scene.name.clone(),
-        message,
+        source: Box::new(source),
     }
 }
 

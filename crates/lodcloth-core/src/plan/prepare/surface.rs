@@ -5,7 +5,7 @@
 use std::sync::Arc;
 use std::time::Instant;
 
-use super::{once, reference_failed, Basis, Level, PrepareError, Prepared, Preparer};
+use super::{once, reference_failed, Basis, Level, PrepareError, PrepareFailure, Prepared, Preparer};
 use crate::cache::{CacheEntry, CacheError, CacheKey, Provenance};
 use crate::estimate::inverse::{self, Distribution};
 use crate::estimate::{no_progress, Method, RecordSpec, Reference};
@@ -23,7 +23,7 @@ impl Preparer {
             let started = Instant::now();
             let mut model = self.all_points(scene)?;
             let reference = SurfaceReference::record(&mut model, scene.frames(), scene.interval())
-                .map_err(|e| reference_failed(scene, e.to_string()))?;
+                .map_err(|e| reference_failed(scene, e.into()))?;
             tracing::info!(
                 instance = %self.plan.name,
                 points = scene.points(),
@@ -40,7 +40,7 @@ impl Preparer {
     pub(super) fn all_points(&self, scene: &SurfaceScene) -> Result<PointModel, PrepareError> {
         scene
             .model(scene.points(), self.plan.integrator, None, &mut |_, _| {})
-            .map_err(|e| reference_failed(scene, e.to_string()))
+            .map_err(|e| reference_failed(scene, e.into()))
     }
 
     /// A surface level: simplify to `points`, take the scene's coefficients
@@ -54,28 +54,28 @@ impl Preparer {
         method: Method,
     ) -> Result<Prepared, PrepareError> {
         let started = Instant::now();
-        let failed = |message: String| PrepareError::Failed { level, method, message };
+        let failed = |source: PrepareFailure| PrepareError::Failed {
+            level,
+            method,
+            source: Box::new(source),
+        };
         let reference = self.surface_reference(scene)?;
         let mut model = scene
             .model(points, self.plan.integrator, None, &mut |_, _| {})
-            .map_err(|e| failed(e.to_string()))?;
+            .map_err(|e| failed(e.into()))?;
         let frames = reference.frames.len();
         let (material, seconds, cached) = match method {
             // A surface has no grid directions: both "same"s are its springs.
             Method::Same | Method::SameSpring => (model.sim.params().material, 0.0, false),
             Method::Fit => self.surface_fit(scene, &mut model, &reference, points)?,
-            Method::Shape | Method::Follow | Method::Drape => {
-                return Err(failed(format!(
-                    "`{method}` fits a cloth level's coefficients; a point-sampled surface's are fitted by `fit`"
-                )))
-            }
+            Method::Shape | Method::Follow | Method::Drape => return Err(failed(PrepareFailure::ClothOnly(method))),
             Method::Bcd | Method::Gkd | Method::Lsq => {
                 let estimated = self.surface_inverse(scene, &model, points, method)?;
                 // The estimated springs may be stiffer than the scene's:
                 // rebuild the level with its own stable dt.
                 model = scene
                     .model(points, self.plan.integrator, Some(&estimated.0), &mut |_, _| {})
-                    .map_err(|e| failed(e.to_string()))?;
+                    .map_err(|e| failed(e.into()))?;
                 estimated
             }
         };
@@ -87,11 +87,11 @@ impl Preparer {
                 dt,
                 limit,
             },
-            e => failed(e.to_string()),
+            e => failed(e.into()),
         })?;
         let limit = model.sim.dt_limit();
-        let fresh = surface_fit::restart(&model).map_err(|e| failed(e.to_string()))?;
-        let score = surface_fit::score(&mut model, fresh, &reference, 0..frames).map_err(|e| failed(e.to_string()))?;
+        let fresh = surface_fit::restart(&model).map_err(|e| failed(e.into()))?;
+        let score = surface_fit::score(&mut model, fresh, &reference, 0..frames).map_err(|e| failed(e.into()))?;
         if !score.finite {
             return Err(PrepareError::Unstable {
                 level,
@@ -137,10 +137,10 @@ impl Preparer {
         points: usize,
     ) -> Result<(Material, f64, bool), PrepareError> {
         let level = Level::Points(points);
-        let failed = |message: String| PrepareError::Failed {
+        let failed = |source: PrepareFailure| PrepareError::Failed {
             level,
             method: Method::Fit,
-            message,
+            source: Box::new(source),
         };
         let options = SurfaceFitOptions {
             train: 0..reference.frames.len(),
@@ -150,7 +150,7 @@ impl Preparer {
         let dt = model.sim.params().dt;
         let mut fit = || -> Result<(Material, f64), PrepareError> {
             let t = Instant::now();
-            let f = surface_fit::fit(model, reference, &options, &mut |_| {}).map_err(|e| failed(e.to_string()))?;
+            let f = surface_fit::fit(model, reference, &options, &mut |_| {}).map_err(|e| failed(e.into()))?;
             tracing::info!(
                 instance = %self.plan.name,
                 %level,
@@ -182,7 +182,11 @@ impl Preparer {
         method: Method,
     ) -> Result<(Material, f64, bool), PrepareError> {
         let level = Level::Points(points);
-        let failed = |message: String| PrepareError::Failed { level, method, message };
+        let failed = |source: PrepareFailure| PrepareError::Failed {
+            level,
+            method,
+            source: Box::new(source),
+        };
         let integrator = model.sim.params().integrator.name().to_string();
         let dt = model.sim.params().dt;
         let mut estimate = || -> Result<(Material, f64), PrepareError> {
@@ -220,7 +224,7 @@ impl Preparer {
                 .iter()
                 .any(|s| !(s.k.is_finite() && s.k >= 0.0 && s.c.is_finite()))
             {
-                return Err(failed(format!("the estimate is not usable: {material:?}")));
+                return Err(failed(PrepareFailure::Unusable(material)));
             }
             Ok((material, t.elapsed().as_secs_f64()))
         };
@@ -245,8 +249,8 @@ impl Preparer {
                 estimate_stride: per_frame.max(2),
                 difference_span: 1,
             };
-            let reference = Reference::record(model.sim, spec, &mut |_, _| {})
-                .map_err(|e| reference_failed(scene, e.to_string()))?;
+            let reference =
+                Reference::record(model.sim, spec, &mut |_, _| {}).map_err(|e| reference_failed(scene, e.into()))?;
             tracing::info!(
                 instance = %self.plan.name,
                 samples = reference.samples.len(),

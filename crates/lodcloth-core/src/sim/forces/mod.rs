@@ -12,12 +12,10 @@
 //! `dispatch_paths_are_bit_identical` test).
 //!
 //! Performance notes (64×64 grid, ~24k springs, one AVX-512 core):
-//! - L and 1/L come from one `sqrt` and one division. Until 2026-12-03 1/L
-//!   was a Newton iteration of multiplies and FMAs (8-wide f64 `vsqrtpd` +
-//!   `vdivpd` had bounded an earlier, slower kernel); on a Zen 4 the
-//!   iteration's dozen instructions cost 12–15 % more per spring than the
-//!   divider, which runs beside the FMA pipes (docs/results.md, "A square
-//!   root and a division").
+//! - L and 1/L come from one `sqrt` and one division, not a Newton
+//!   iteration of multiplies and FMAs: on a Zen 4 the iteration's dozen
+//!   instructions cost 12–15 % more per spring than the divider, which
+//!   runs beside the FMA pipes.
 //! - The ends of a run that do not fill a block of `L` are one more
 //!   block overlapping the previous one, with the already-counted lanes
 //!   masked out, not a scalar loop (a 64-node row has 63 or 62 springs).
@@ -26,7 +24,7 @@
 //!   24 of AVX2's 16 registers and went through the stack. Keep the lane
 //!   arithmetic one loop: split into several short loops, LLVM unrolls
 //!   them at 8 lanes and its SLP vectoriser made scalar code of the f64
-//!   block (docs/results.md, "The AVX2 kernel's spills").
+//!   block (the lab's NOTEBOOK.md, "The AVX2 kernel's spills").
 //! - Horizontal neighbours (offsets 1 and 2) add +F and −F to overlapping
 //!   node ranges; the kernel nets them in registers (`run_carry`) and writes
 //!   each force once, instead of going through a scratch buffer.

@@ -116,8 +116,8 @@ impl RestView for f32 {
 /// adjustment (the usual case) its compare and select drop out of the
 /// inner loop, and without the figures (`stats` false: an RK4 stage, a lean
 /// step) so do the extension and strain sums, which on AVX2 also take four
-/// of the sixteen vector registers (f32 step 9 % fewer instructions,
-/// docs/results.md).
+/// of the sixteen vector registers (f32 step 9 % fewer instructions; the
+/// lab's NOTEBOOK.md, "The AVX2 kernel's spills").
 pub trait KernelReal: RestView {
     /// Every spring, on the calling thread.
     fn whole(
