@@ -4,29 +4,9 @@
 //! length and the cylinder's direction, where the bend springs' energy
 //! depends on the edge length (no continuum limit).
 
+use crate::plate::{area, flipped, fold_energy, rayleigh, spectrum, wrapped};
 use lodcloth::mesh::{self, generate, TriMesh};
 use lodcloth::sim::{Membrane, Moduli, SpringKind};
-
-/// `mesh` (flat in x–z) wrapped onto a cylinder of radius `r` whose axis
-/// lies in the plane at `angle` from z: arc length across the axis is kept.
-fn wrapped(mesh: &TriMesh, r: f64, angle: f64) -> Vec<[f64; 3]> {
-    let (c, s) = (angle.cos(), angle.sin());
-    mesh.positions
-        .iter()
-        .map(|p| {
-            let across = p[0] * c - p[2] * s;
-            let along = p[0] * s + p[2] * c;
-            let a = across / r;
-            let (x, y) = (r * a.sin(), r * (1.0 - a.cos()));
-            [x * c + along * s, p[1] + y, -x * s + along * c]
-        })
-        .collect()
-}
-
-/// The mesh's area.
-fn area(mesh: &TriMesh) -> f64 {
-    mesh.vertex_areas().iter().sum()
-}
 
 /// A membrane of stretch springs alone: stretch `k` (N/m) both ways, its
 /// damping `c` (N·s/m), no shear or bend share.
@@ -112,50 +92,6 @@ fn cylinders_bend_with_the_plates_energy_on_irregular_meshes() {
     );
 }
 
-/// `mesh` with every `every`-th interior edge flipped (in edge order; where
-/// its two triangles make a convex quad and neither was flipped already),
-/// its vertices kept: the same points, an irregular connectivity.
-fn flipped(mesh: &TriMesh, every: usize) -> TriMesh {
-    let mut out = mesh.clone();
-    let p = &mesh.positions;
-    let mut touched = vec![false; mesh.triangles.len()];
-    let turn = |a: u32, b: u32, c: u32| {
-        let (a, b, c) = (p[a as usize], p[b as usize], p[c as usize]);
-        (b[2] - a[2]) * (c[0] - a[0]) - (b[0] - a[0]) * (c[2] - a[2])
-    };
-    let interior = mesh.edges().into_iter().filter(|(_, ts)| ts.len() == 2);
-    for (k, ((a, b), ts)) in interior.enumerate() {
-        let (t1, t2) = (ts[0], ts[1]);
-        if k % every != 0 || touched[t1] || touched[t2] {
-            continue;
-        }
-        let apex = |t: usize| {
-            mesh.triangles[t]
-                .into_iter()
-                .find(|&v| v != a && v != b)
-                .expect("an apex")
-        };
-        let (c, d) = (apex(t1), apex(t2));
-        // Convex: c and d on opposite sides of a–b, a and b on opposite sides of c–d.
-        if turn(a, b, c) * turn(a, b, d) >= 0.0 || turn(c, d, a) * turn(c, d, b) >= 0.0 {
-            continue;
-        }
-        let up = turn(mesh.triangles[t1][0], mesh.triangles[t1][1], mesh.triangles[t1][2]).signum();
-        let oriented = |t: [u32; 3]| {
-            if turn(t[0], t[1], t[2]).signum() == up {
-                t
-            } else {
-                [t[0], t[2], t[1]]
-            }
-        };
-        out.triangles[t1] = oriented([a, d, c]);
-        out.triangles[t2] = oriented([b, c, d]);
-        touched[t1] = true;
-        touched[t2] = true;
-    }
-    out
-}
-
 /// A fold a few edges wide stores as much bending energy on an irregular
 /// connectivity as on a regular one over the same points. The regular
 /// 10 mm disc (valence 6 inside) against the same disc with one interior
@@ -200,11 +136,12 @@ fn a_short_fold_stores_as_much_on_an_irregular_connectivity_as_on_a_regular_one(
         short > 100,
         "only {short} interior vertices with fewer than six neighbours"
     );
-    let energy = |m: &TriMesh, k: f64, deg: f64| fold_energy(m, mesh::Stencils::Vertex, k, deg);
+    let stencils = |m: &TriMesh| mesh::bending_stencils(m, &[]).expect("a flat mesh");
+    let (on_regular, on_irregular) = (stencils(&regular), stencils(&irregular));
     for edges in [3.0, 4.0] {
         let k = 2.0 * std::f64::consts::PI / (edges * 0.01);
         for deg in [0.0, 30.0, 60.0, 90.0] {
-            let ratio = energy(&irregular, k, deg) / energy(&regular, k, deg);
+            let ratio = fold_energy(&irregular, &on_irregular, k, deg) / fold_energy(&regular, &on_regular, k, deg);
             println!(
                 "fold {edges} edges wide at {deg}°: the flipped disc stores {ratio:.3} of the regular one's energy"
             );
@@ -540,196 +477,6 @@ fn a_mesh_scenes_pinned_region_clamps_its_stencils_at_every_level() {
     );
 }
 
-/// `Σ_s |W_s·x|²` (twice the energy for D = 1) of `m`'s stencils made by
-/// `how`, on `m` bent by `y = a·sin(k·s + φ)` along the direction `deg`
-/// from x, a = 1 mm, summed over the phases φ = 0, π/4, π/2, 3π/4: the
-/// plate's is `2·a²·k⁴·A` (module docs).
-fn fold_energy(m: &TriMesh, how: mesh::Stencils, k: f64, deg: f64) -> f64 {
-    let stencils = mesh::bending_stencils_by(m, &[], how).expect("a flat mesh");
-    let (c, s) = (deg.to_radians().cos(), deg.to_radians().sin());
-    [0.0, 0.25, 0.5, 0.75]
-        .iter()
-        .map(|phase| {
-            let points: Vec<[f64; 3]> = m
-                .positions
-                .iter()
-                .map(|p| {
-                    [
-                        p[0],
-                        p[1] + 1e-3 * (k * (p[0] * c + p[2] * s) + phase * std::f64::consts::PI).sin(),
-                        p[2],
-                    ]
-                })
-                .collect();
-            stencils.energy_of(&points)
-        })
-        .sum::<f64>()
-}
-
-/// The share of the plate's energy that `m`'s stencils made by `how` read
-/// of the folds of [`fold_energy`], over the rows whose points all lie
-/// within `inside` of the centre (away from the rim, whose one-sided fits
-/// read short folds differently): those rows' reading of the sines over
-/// `2·a²·k⁴` times the area they stand for, which is their reading of
-/// `y = ½·u²` (every rule reproduces a quadratic exactly).
-fn fold_share(m: &TriMesh, how: mesh::Stencils, k: f64, deg: f64, inside: f64) -> f64 {
-    let stencils = mesh::bending_stencils_by(m, &[], how).expect("a flat mesh");
-    let p = &m.positions;
-    let rows: Vec<usize> = (0..stencils.len())
-        .filter(|&r| {
-            let (nodes, _) = stencils.row(r);
-            nodes
-                .iter()
-                .all(|&j| p[j as usize][0].hypot(p[j as usize][2]) <= inside)
-        })
-        .collect();
-    let read = |points: &[[f64; 3]]| {
-        rows.iter()
-            .map(|&r| {
-                let (nodes, weights) = stencils.row(r);
-                let mut v = [0.0; 3];
-                for (&j, &w) in nodes.iter().zip(weights) {
-                    for d in 0..3 {
-                        v[d] += w * points[j as usize][d];
-                    }
-                }
-                v[0] * v[0] + v[1] * v[1] + v[2] * v[2]
-            })
-            .sum::<f64>()
-    };
-    let quadratic: Vec<[f64; 3]> = p.iter().map(|q| [q[0], q[1] + 0.5 * q[0] * q[0], q[2]]).collect();
-    let area = read(&quadratic);
-    let (c, s) = (deg.to_radians().cos(), deg.to_radians().sin());
-    let sines: f64 = [0.0, 0.25, 0.5, 0.75]
-        .iter()
-        .map(|phase| {
-            let points: Vec<[f64; 3]> = p
-                .iter()
-                .map(|q| {
-                    let y = 1e-3 * (k * (q[0] * c + q[2] * s) + phase * std::f64::consts::PI).sin();
-                    [q[0], q[1] + y, q[2]]
-                })
-                .collect();
-            read(&points)
-        })
-        .sum();
-    sines / (2.0 * 1e-6 * k.powi(4) * area)
-}
-
-/// The two other stencil rules (mesh/bending.rs, `Stencils`), measured
-/// against the plate on the regular 10 mm disc and the same disc with one
-/// interior edge in 20 flipped, over the rows 3 edges or more from the rim
-/// ([`fold_share`]). A fold a few edges wide is where the scenes' own rule
-/// (a quadratic over the ring) reads far less than the plate: 0.42–0.48
-/// of it at three edges wide, 0.61–0.66 at four, 0.80–0.83 at six. Both
-/// other rules read more: triangle patches 0.52–0.85 on the regular disc
-/// (more on the flipped one), quartics over the nearest points 0.48–0.96,
-/// the same on both discs to 0.1 % (the nearest points do not depend on
-/// the edges). Fails with the ring quadratics in the quartics' place
-/// (0.92–0.96 of the regular disc on the flipped one). Triangle patches
-/// store a cylinder's energy within 1 % on the disc and its levels.
-#[test]
-fn triangle_patches_and_quartics_read_what_the_ring_quadratics_miss() {
-    let regular = generate::disc(0.15, 0.0, 0.01);
-    let irregular = flipped(&regular, 20);
-    for edges in [3.0, 4.0, 6.0] {
-        let k = 2.0 * std::f64::consts::PI / (edges * 0.01);
-        for deg in [0.0, 30.0, 60.0, 90.0] {
-            let share = |m: &TriMesh, how| fold_share(m, how, k, deg, 0.12);
-            let vertex = share(&regular, mesh::Stencils::Vertex);
-            let triangle = [
-                share(&regular, mesh::Stencils::Triangle),
-                share(&irregular, mesh::Stencils::Triangle),
-            ];
-            let quartic = [
-                share(&regular, mesh::Stencils::Quartic),
-                share(&irregular, mesh::Stencils::Quartic),
-            ];
-            println!(
-                "fold {edges} edges wide at {deg}°, share of the plate's energy: ring quadratics {vertex:.3} \
-                 (regular disc); triangle patches {:.3} / {:.3} (regular / flipped); quartics {:.3} / {:.3}",
-                triangle[0], triangle[1], quartic[0], quartic[1]
-            );
-            assert!(
-                triangle[0] > vertex && quartic[0] > vertex + 0.05,
-                "a regular disc's triangle patches read {:.3} and quartics {:.3}, its ring quadratics {vertex:.3}",
-                triangle[0],
-                quartic[0]
-            );
-            let ratio = quartic[1] / quartic[0];
-            assert!(
-                (ratio - 1.0).abs() < 0.01,
-                "the flipped disc's quartics read {ratio:.3} of the regular one's"
-            );
-        }
-    }
-    let shipped = generate::disc(0.15, 0.0, 0.0075);
-    let locked = vec![false; shipped.vertices()];
-    let (r, kappa) = (0.25, 4.0);
-    for m in [
-        shipped.clone(),
-        mesh::simplify(&shipped, 504, &locked, "disc").expect("simplifies").mesh,
-        mesh::simplify(&shipped, 189, &locked, "disc").expect("simplifies").mesh,
-    ] {
-        let stencils = mesh::bending_stencils_by(&m, &[], mesh::Stencils::Triangle).expect("a flat mesh");
-        for deg in [0.0f64, 45.0, 90.0] {
-            let ratio = 0.5 * stencils.energy_of(&wrapped(&m, r, deg.to_radians())) / (0.5 * kappa * kappa * area(&m));
-            println!(
-                "{} v, cylinder at {deg}°: triangle patches store {ratio:.4} of the plate",
-                m.vertices()
-            );
-            assert!((ratio - 1.0).abs() < 0.01, "triangle patches: {ratio:.4} of the plate");
-        }
-    }
-}
-
-/// The bending operator's vertical modes on a flat mesh: `W z = λ M z`
-/// (W the stencils' quadratic form, M the lumped areas), the eigenvalues
-/// ascending after the three affine ones, and the mode shapes `z` per
-/// vertex.
-fn spectrum(m: &TriMesh, count: usize) -> (Vec<f64>, Vec<Vec<f64>>) {
-    let (values, shapes, _) = spectrum_by(m, count, mesh::Stencils::Vertex);
-    (values, shapes)
-}
-
-/// [`spectrum`] of the stencils `how` makes, with the largest eigenvalue
-/// (the stiffest mode: the stable step goes as its inverse square root).
-fn spectrum_by(m: &TriMesh, count: usize, how: mesh::Stencils) -> (Vec<f64>, Vec<Vec<f64>>, f64) {
-    let stencils = mesh::bending_stencils_by(m, &[], how).expect("a flat mesh");
-    let (n, areas) = (m.vertices(), m.vertex_areas());
-    let mut form = nalgebra::DMatrix::<f64>::zeros(n, n);
-    for s in 0..stencils.len() {
-        let (nodes, weights) = stencils.row(s);
-        for (&i, &wi) in nodes.iter().zip(weights) {
-            for (&j, &wj) in nodes.iter().zip(weights) {
-                form[(i as usize, j as usize)] += wi * wj / (areas[i as usize] * areas[j as usize]).sqrt();
-            }
-        }
-    }
-    let eigen = form.symmetric_eigen();
-    let mut order: Vec<usize> = (0..n).collect();
-    order.sort_by(|&i, &j| eigen.eigenvalues[i].total_cmp(&eigen.eigenvalues[j]));
-    let top = eigen.eigenvalues[order[n - 1]];
-    let affine = order.iter().filter(|&&i| eigen.eigenvalues[i] < 1e-9 * top).count();
-    assert_eq!(
-        affine, 3,
-        "{n} v: {affine} modes free of bending energy, not the 3 affine ones"
-    );
-    let picked = &order[3..3 + count];
-    let shapes = picked
-        .iter()
-        .map(|&j| (0..n).map(|i| eigen.eigenvectors[(i, j)] / areas[i].sqrt()).collect())
-        .collect();
-    (picked.iter().map(|&j| eigen.eigenvalues[j]).collect(), shapes, top)
-}
-
-/// `zᵀWz / zᵀMz` of a vertical field `z` on `m`, bent by `stencils`.
-fn rayleigh(m: &TriMesh, stencils: &lodcloth::sim::Bending, z: &[f64]) -> f64 {
-    let points: Vec<[f64; 3]> = m.positions.iter().zip(z).map(|(p, &h)| [p[0], h, p[2]]).collect();
-    let mass: f64 = m.vertex_areas().iter().zip(z).map(|(a, h)| a * h * h).sum();
-    stencils.energy_of(&points) / mass
-}
-
 /// The bending operator's softest modes converge: on regular discs of
 /// 10 mm and 7.5 mm edges (721 and 1,261 vertices) its 12 lowest
 /// eigenvalues past the affine ones (a free disc's long folds, 16–40 /m)
@@ -779,96 +526,4 @@ fn the_softest_bending_modes_converge_and_read_the_same_on_a_simplified_level() 
             "mode {j}: the disc's mode reads {read:.3} of its λ on the level"
         );
     }
-}
-
-/// The mixed finite element Hessian (`Stencils::Mixed`) keeps a simplified
-/// level's folds about as stiff as a regular mesh's of its size. Against
-/// the 7.5 mm disc (1,261 v), the 100 softest modes past the affine ones
-/// (wavenumbers 16–119 /m; a Cusick drape holds 38 % of its bending energy
-/// in modes 51–100) of its meshoptimizer level of 504 vertices have
-/// eigenvalues 0.70–1.12 of the disc's, 0.79 on average over modes
-/// 51–100, where a regular 10 mm disc (721 v) has 0.91 and the vertex
-/// rule's level 0.54 (printed). Its stiffest mode stays within the disc's
-/// (the stable step kept). Failed without the Delaunay flips: on
-/// meshoptimizer's slivers the hat functions' gradients blow up and the
-/// level's stiffest eigenvalue was 5,007× the disc's (wavenumber 2,889
-/// against 343 /m; `drape_scan spectrum` read the disc's modes at 10–170×
-/// their eigenvalues there). But the mixed Hessian is not consistent on
-/// an irregular mesh (a piecewise-linear shape's edges cut the chords of a
-/// bend unevenly): a uniform cylinder bend stores 0.985 of the plate's
-/// energy on the disc and 1.11 on the level (printed), where the vertex
-/// rule's quadratics read it within 0.3 %. `Stencils::MixedExact`
-/// recombines each vertex's rows to read quadratics exactly: the cylinder
-/// within 3 % on both meshes (asserted; 0.985 and 0.977, the rest at the
-/// border), and its level's modes 51–100 at 0.71 of the disc's, still
-/// above the vertex rule's 0.54 by more than 0.1 (asserted).
-#[test]
-fn the_mixed_hessian_keeps_a_simplified_levels_folds_as_stiff_as_a_regular_meshes() {
-    let count = 100;
-    let fine = generate::disc(0.15, 0.0, 0.0075);
-    let locked = vec![false; fine.vertices()];
-    let level = mesh::simplify(&fine, 504, &locked, "disc").expect("simplifies").mesh;
-    let band = |level: &[f64], fine: &[f64]| {
-        let r: Vec<f64> = level.iter().zip(fine).map(|(l, f)| l / f).collect();
-        let folds = r[50..].iter().sum::<f64>() / 50.0;
-        (r, folds)
-    };
-    let (vertex_fine, _, _) = spectrum_by(&fine, count, mesh::Stencils::Vertex);
-    let (vertex_level, _, _) = spectrum_by(&level, count, mesh::Stencils::Vertex);
-    let (_, vertex_folds) = band(&vertex_level, &vertex_fine);
-    let (mixed_fine, _, fine_top) = spectrum_by(&fine, count, mesh::Stencils::Mixed);
-    let (mixed_level, _, level_top) = spectrum_by(&level, count, mesh::Stencils::Mixed);
-    let (ratios, folds) = band(&mixed_level, &mixed_fine);
-    println!(
-        "{} v level against the 7.5 mm disc, modes 51–100 (wavenumbers {:.0}–{:.0} /m): \
-         mixed {folds:.3}, vertex rule {vertex_folds:.3}; mixed modes 1–100 {:.3}–{:.3}; \
-         stiffest mode {:.3} of the disc's",
-        level.vertices(),
-        mixed_fine[50].powf(0.25),
-        mixed_fine[count - 1].powf(0.25),
-        ratios.iter().cloned().fold(f64::INFINITY, f64::min),
-        ratios.iter().cloned().fold(0.0, f64::max),
-        level_top / fine_top
-    );
-    let (exact_fine, _, _) = spectrum_by(&fine, count, mesh::Stencils::MixedExact);
-    let (exact_level, _, _) = spectrum_by(&level, count, mesh::Stencils::MixedExact);
-    let (_, exact_folds) = band(&exact_level, &exact_fine);
-    println!("made exact on quadratics: modes 51–100 {exact_folds:.3}");
-    assert!(
-        exact_folds > vertex_folds + 0.1,
-        "modes 51–100: the exact mixed rule's level at {exact_folds:.3}, the vertex rule's at {vertex_folds:.3}"
-    );
-    for how in [mesh::Stencils::Mixed, mesh::Stencils::MixedExact] {
-        for (name, m) in [("disc", &fine), ("level", &level)] {
-            let stencils = mesh::bending_stencils_by(m, &[], how).expect("a flat mesh");
-            let (r, kappa) = (0.25, 4.0);
-            for deg in [0.0f64, 20.0, 45.0, 75.0, 90.0] {
-                let ratio =
-                    0.5 * stencils.energy_of(&wrapped(m, r, deg.to_radians())) / (0.5 * kappa * kappa * area(m));
-                println!("{how:?}, {name}: cylinder at {deg}°: {ratio:.4} of the plate's energy");
-                if how == mesh::Stencils::MixedExact {
-                    assert!(
-                        (ratio - 1.0).abs() < 0.03,
-                        "{name}, axis at {deg}°: the exact mixed rule stores {ratio:.4} of ½κ²A"
-                    );
-                }
-            }
-        }
-    }
-    for (j, r) in ratios.iter().enumerate() {
-        assert!(
-            (0.65..1.2).contains(r),
-            "mode {}: the level's eigenvalue is {r:.3} of the disc's",
-            j + 1
-        );
-    }
-    assert!(
-        folds > 0.75,
-        "modes 51–100: the level's eigenvalues are {folds:.3} of the disc's on average"
-    );
-    assert!(
-        level_top < 1.5 * fine_top,
-        "the level's stiffest mode is {:.1}× the disc's",
-        level_top / fine_top
-    );
 }

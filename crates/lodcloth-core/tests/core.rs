@@ -8,6 +8,10 @@
 extern crate lodcloth_core as lodcloth;
 
 mod common;
+// Bent-plate fixtures, shared with the lab's stencil tests (not with the
+// root package's tests, which include `common` too).
+#[path = "common/plate.rs"]
+mod plate;
 
 mod bending;
 mod cache;

@@ -36,7 +36,7 @@
 //! mesh with another triangulation's stencils over the same vertices, to
 //! tell the springs' connectivity from the stencils', and `run --stencils`
 //! bends every level with another of the core's stencil rules
-//! (`lodcloth_core::mesh::Stencils`). `write --top-radius` grades a level
+//! (`lodcloth_lab::stencils::Stencils`). `write --top-radius` grades a level
 //! by hand: the cloth inside that radius (the support's top, which stays
 //! flat) is collapsed to a few vertices first, so the level's count is
 //! spent on the overhang.
@@ -102,7 +102,7 @@ enum Command {
         /// How the levels' curvature is read (`vertex`, the scenes' own;
         /// `triangle`, six-point patches; `quartic`, a quartic over the
         /// nearest 19 or more points at every interior vertex;
-        /// `lodcloth_core::mesh::Stencils`).
+        /// `lodcloth_lab::stencils::Stencils`).
         #[arg(long, value_parser = ["vertex", "triangle", "quartic", "mixed", "mixed-exact"], default_value = "vertex")]
         stencils: String,
     },
@@ -529,16 +529,16 @@ fn cut(sim: &Simulation, scene: &Scene) -> String {
 /// (`vertex`: left as it is).
 fn restencil(setup: &mut Setup, stencils: &str) {
     let how = match stencils {
-        "triangle" => lodcloth_core::mesh::Stencils::Triangle,
-        "quartic" => lodcloth_core::mesh::Stencils::Quartic,
-        "mixed" => lodcloth_core::mesh::Stencils::Mixed,
-        "mixed-exact" => lodcloth_core::mesh::Stencils::MixedExact,
+        "triangle" => lodcloth_lab::stencils::Stencils::Triangle,
+        "quartic" => lodcloth_lab::stencils::Stencils::Quartic,
+        "mixed" => lodcloth_lab::stencils::Stencils::Mixed,
+        "mixed-exact" => lodcloth_lab::stencils::Stencils::MixedExact,
         _ => return,
     };
     for cloth in &mut setup.levels {
         let mesh = &cloth.mesh.as_ref().expect("a mesh level").mesh;
         let mut topology = (*cloth.topology).clone();
-        topology.bending = lodcloth_core::mesh::bending_stencils_by(mesh, &[], how).expect("a flat mesh");
+        topology.bending = lodcloth_lab::stencils::bending_stencils_by(mesh, &[], how).expect("a flat mesh");
         println!(
             "{}: bending with {} {stencils} stencils",
             cloth.level,
@@ -659,7 +659,7 @@ fn bent_by(cloth: &ClothLevel, other: &TriMesh) -> Result<ClothLevel, String> {
         *t = t.map(|k| index[k as usize]);
     }
     let mut topology = (*cloth.topology).clone();
-    topology.bending = lodcloth_core::mesh::bending_stencils(&other, &[])?;
+    topology.bending = lodcloth_core::mesh::bending_stencils(&other, &[]).map_err(|e| e.to_string())?;
     let sorted = |t: &[u32; 3]| {
         let mut t = *t;
         t.sort_unstable();
@@ -1627,7 +1627,7 @@ fn remesh(mesh: &mut TriMesh, sweeps: usize, flip: bool) -> usize {
         );
     }
     let mut flips = if flip {
-        lodcloth_core::mesh::delaunay_flips(mesh)
+        lodcloth_lab::stencils::delaunay_flips(mesh)
     } else {
         0
     };
@@ -1649,7 +1649,7 @@ fn remesh(mesh: &mut TriMesh, sweeps: usize, flip: bool) -> usize {
         }
     }
     if flip {
-        flips += lodcloth_core::mesh::delaunay_flips(mesh);
+        flips += lodcloth_lab::stencils::delaunay_flips(mesh);
     }
     for &t in &mesh.triangles {
         let m = normal(&mesh.positions, t);

@@ -9,6 +9,8 @@
 //! - [`error_map`] — cloths side by side coloured by per-node error.
 //! - [`modal`] — a level's bending stiffened mode by mode towards the
 //!   reference's spectrum (explored for the Cusick drape, not shipped).
+//! - [`stencils`] — bending stencil rules other than the scenes' (triangle
+//!   patches, quartics, the mixed finite element Hessian), for measuring.
 //! - The `lodcloth-lab` binary (`src/main.rs`, `src/cli/`) runs each study
 //!   and writes its CSV, markdown and charts; `examples/` holds the drape
 //!   scans and probes; `NOTEBOOK.md` is the dated record of what was tried.
@@ -16,3 +18,4 @@
 pub mod error_map;
 pub mod experiments;
 pub mod modal;
+pub mod stencils;

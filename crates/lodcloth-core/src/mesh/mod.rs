@@ -23,7 +23,7 @@
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 
-mod bending;
+pub mod bending;
 pub mod generate;
 mod io;
 mod locate;
@@ -32,7 +32,7 @@ mod simplify;
 mod springs;
 mod surface;
 
-pub use bending::{bending_stencils, bending_stencils_by, delaunay_flips, Stencils};
+pub use bending::{bending_stencils, BendingError};
 pub use io::load;
 pub use locate::{locate, SurfaceIndex};
 pub use patch::{material_point, patch_weights};

@@ -47,7 +47,7 @@ use crate::sim::{Material, Membrane, Moduli, SpringClass, SpringCoeffs, SpringGr
 ///
 /// # Errors
 /// When the rest shape is not flat (the stencils bend about a flat sheet).
-pub fn plate_topology(mesh: &TriMesh, pinned: &[bool]) -> Result<Topology, String> {
+pub fn plate_topology(mesh: &TriMesh, pinned: &[bool]) -> Result<Topology, super::BendingError> {
     let bending = super::bending::bending_stencils(mesh, pinned)?;
     let mut topology = mesh_topology(mesh);
     topology.groups.retain(|g| g.kind() != SpringKind::Bend);

@@ -227,7 +227,11 @@ fn topology_of(mesh: &TriMesh, bending: Option<SpringCoeffs>, pinned: &[bool]) -
 
 /// [`topology_of`] for a simplified level, which could in principle fail
 /// (a degenerate triangle).
-fn level_topology(mesh: &TriMesh, bending: Option<SpringCoeffs>, pinned: &[bool]) -> Result<Topology, String> {
+fn level_topology(
+    mesh: &TriMesh,
+    bending: Option<SpringCoeffs>,
+    pinned: &[bool],
+) -> Result<Topology, mesh::BendingError> {
     match bending {
         Some(_) => mesh::plate_topology(mesh, pinned),
         None => Ok(mesh::mesh_topology(mesh)),
