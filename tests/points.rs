@@ -489,6 +489,7 @@ fn tether_is_a_harmonic_oscillator() {
         stiffness_adjustment: None,
         strain_limit: None,
         cg: Default::default(),
+        self_contact: None,
     };
     let mut sim = Simulation::new(
         topo.clone(),

@@ -502,6 +502,7 @@ mod tests {
                 tolerance: 1e-13,
                 max_iterations: 100,
             },
+            self_contact: None,
         };
         let pins = (0..9u32)
             .filter(|&k| k != 4)

@@ -28,6 +28,7 @@ mod mesh;
 mod oscillator;
 mod precision;
 mod scenes;
+mod selfcontact;
 mod stability;
 mod strain_control;
 mod symmetry_determinism;

@@ -210,6 +210,7 @@ impl PointModel {
             stiffness_adjustment: None,
             strain_limit: None,
             cg: CgSettings::default(),
+            self_contact: None,
         };
         let state = State::at_rest(&topology);
         if params.dt.is_none() {

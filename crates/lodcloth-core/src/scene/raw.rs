@@ -41,7 +41,31 @@ pub struct RawScene {
     /// `[[colliders]]`: rigid bodies the cloth drapes over; default none.
     #[serde(default)]
     pub colliders: Vec<RawCollider>,
+    /// `[contact]`: the cloth's contact with itself; default off.
+    #[serde(default)]
+    pub contact: RawContact,
 }
+
+/// `[contact]`: `self = true` keeps the cloth from passing through itself
+/// ([`crate::sim::SelfContact`]), with its thickness and friction.
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RawContact {
+    /// `self`: whether the cloth collides with itself; default false.
+    #[serde(rename = "self", default)]
+    pub self_contact: bool,
+    /// The cloth's thickness (m): how close two parts of it come, the same
+    /// at every level; default [`DEFAULT_THICKNESS`].
+    pub thickness: Option<f64>,
+    /// Coulomb friction between two parts of the cloth; default
+    /// [`DEFAULT_SELF_FRICTION`].
+    pub friction: Option<f64>,
+}
+
+/// `[contact] thickness` when not given (m).
+pub const DEFAULT_THICKNESS: f64 = 0.003;
+/// `[contact] friction` when not given.
+pub const DEFAULT_SELF_FRICTION: f64 = 0.3;
 
 /// `[cloth]`: either a width × height rectangle sampled by nx × ny nodes at
 /// the scene's own resolution, with its rest orientation, or a triangle

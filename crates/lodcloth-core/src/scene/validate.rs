@@ -7,16 +7,17 @@
 //! carries on with the value as given, so one mistake never hides another.
 
 use super::raw::{
-    RawCloth, RawCoeffs, RawCollider, RawForce, RawLimit, RawMaterial, RawModuli, RawOrientation, RawPin, RawPinPath,
-    RawProfile, RawScene, RawSelector, RawShape, RawSimulation, RawSprings, RawStrain, RawWind,
+    RawCloth, RawCoeffs, RawCollider, RawContact, RawForce, RawLimit, RawMaterial, RawModuli, RawOrientation, RawPin,
+    RawPinPath, RawProfile, RawScene, RawSelector, RawShape, RawSimulation, RawSprings, RawStrain, RawWind,
+    DEFAULT_SELF_FRICTION, DEFAULT_THICKNESS,
 };
 use super::selector::{Edge, Selector};
 use super::{Scene, SceneError, SceneForce, ScenePin};
 use crate::mesh::TriMesh;
 use crate::problems::Problems;
 use crate::sim::{
-    CgSettings, Collider, GridShape, Material, Membrane, Moduli, Orientation, PinPath, Profile, Shape, SimParams,
-    SpringCoeffs, SpringKind, StabilityCheck, StiffnessAdjustment, StrainLimit, Wind,
+    CgSettings, Collider, GridShape, Material, Membrane, Moduli, Orientation, PinPath, Profile, SelfContact, Shape,
+    SimParams, SpringCoeffs, SpringKind, StabilityCheck, StiffnessAdjustment, StrainLimit, Wind,
 };
 use std::path::{Path, PathBuf};
 
@@ -49,6 +50,7 @@ impl Scene {
         let forces = p.forces(&raw.forces, &reference);
         let wind = raw.wind.as_ref().map(|w| p.wind(w));
         let colliders = p.colliders(&raw.colliders);
+        let self_contact = p.contact(&raw.contact);
 
         if let Err(problems) = p.finish() {
             return Err(SceneError::Invalid {
@@ -79,6 +81,7 @@ impl Scene {
                 stiffness_adjustment,
                 strain_limit,
                 cg,
+                self_contact,
             },
             duration: s.duration,
             stability: if s.force_unstable {
@@ -433,6 +436,22 @@ impl Problems {
         });
         let strain_limit = r.limit.as_ref().map(|l| self.strain_limit(l));
         (stiffness_adjustment, strain_limit)
+    }
+
+    /// `[contact]`: self-contact when `self = true`; thickness and friction
+    /// without it are refused rather than ignored.
+    fn contact(&mut self, r: &RawContact) -> Option<SelfContact> {
+        let thickness = r.thickness.unwrap_or(DEFAULT_THICKNESS);
+        let friction = r.friction.unwrap_or(DEFAULT_SELF_FRICTION);
+        self.positive("contact.thickness", thickness);
+        self.non_negative("contact.friction", friction);
+        if !r.self_contact {
+            if r.thickness.is_some() || r.friction.is_some() {
+                self.push("contact: thickness and friction describe self-contact; add `self = true`".into());
+            }
+            return None;
+        }
+        Some(SelfContact { thickness, friction })
     }
 
     /// `[strain.limit]`, with [`StrainLimit::default`] for what is not given.

@@ -7,6 +7,7 @@
 
 mod bending;
 mod contact;
+mod crossings;
 mod forces;
 mod implicit;
 mod live;
@@ -20,6 +21,7 @@ mod par;
 mod params;
 mod real;
 mod report;
+mod selfcontact;
 mod simd;
 mod stability;
 mod state;
@@ -33,6 +35,7 @@ use std::sync::Arc;
 
 pub use bending::{Assembled, Bending};
 pub use contact::{Collider, Shape};
+pub use crossings::{crossings, segment_meets_triangle, Crossing};
 pub use forces::{SpringKernel, SpringTotals};
 pub use live::GrabHeadroom;
 pub use loads::{Grab, Loads, NodeLoad, Pin, PinPath, PinShift, Profile, Tether, Wind};
@@ -45,6 +48,7 @@ pub use params::{
 };
 pub use real::Real;
 pub use report::StepReport;
+pub use selfcontact::{SelfContact, SelfOutcome};
 pub use simd::{active_isa_name, force_path, VectorPath};
 pub use stability::{amplification, dt_limit, modal_estimate, ModalEstimate};
 pub use state::State;
@@ -486,7 +490,7 @@ impl Simulation {
         let mut solver = (0, 0.0);
         // The report sums of a fused last pass (symplectic Euler, RK4).
         let mut fused = None;
-        if !self.model.loads.colliders.is_empty() {
+        if !self.ws.before.is_empty() {
             self.ws.before.copy_from_slice(&self.state.pos);
         }
         match self.model.params.integrator {
@@ -573,11 +577,27 @@ impl Simulation {
         }
         // Contact last, so no state a reader sees has a node inside a body.
         let contacts = self.resolve_contact(t0);
+        // Self-contact after the bodies': what a reader sees never has the
+        // cloth through itself (sim/selfcontact, "What is guaranteed").
+        let self_contact = match (&self.model.params.self_contact, self.ws.selfc.as_deref_mut()) {
+            (Some(settings), Some(ws)) => selfcontact::resolve(
+                settings,
+                dt,
+                &self.ws.before,
+                &mut self.state.pos,
+                &mut self.state.vel,
+                &self.model.inv_mass,
+                ws,
+            ),
+            _ => SelfOutcome::default(),
+        };
+        let moved_by_self = self_contact.proximities + self_contact.impacts + self_contact.zone_rounds > 0;
         // The fused pass's f32 copies and sums describe the final state when
         // nothing but the pins (which write their copies) moved a node since,
         // and every node was finite before the pins (so the pinned nodes'
         // massless terms were exact zeros, as they are now).
-        let fused = fused.filter(|s: &Sums| pins_finite && strain_iterations == 0 && contacts == 0 && s.finite());
+        let fused = fused
+            .filter(|s: &Sums| pins_finite && strain_iterations == 0 && contacts == 0 && !moved_by_self && s.finite());
         self.invalidate();
         if xpbd {
             // No force evaluation: the report's spring figures from one pass
@@ -597,6 +617,7 @@ impl Simulation {
             None => self.measure(solver, strain_iterations, par, stats),
         };
         report.contacts = contacts;
+        report.self_contact = self_contact;
         self.last = Some(report);
         report
     }

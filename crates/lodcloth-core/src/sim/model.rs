@@ -40,6 +40,8 @@ pub(super) struct Workspace {
     pub(super) mixed: Option<Box<Mixed>>,
     /// XPBD's sweep order and buffers (XPBD only).
     pub(super) xpbd: Option<Box<XpbdWorkspace>>,
+    /// Self-contact's grids and buffers (with self-contact only).
+    pub(super) selfc: Option<Box<super::selfcontact::SelfWorkspace>>,
 }
 
 /// The f32 side of a step with [`SpringPrecision::F32`]: positions and
@@ -118,7 +120,7 @@ impl Workspace {
             stage_acc: Paged::new(rk, colour(4)),
             implicit: (params.integrator == Integrator::ImplicitEuler).then(|| ImplicitWorkspace::new(topology)),
             strain: params.strain_limit.map(|_| StrainWorkspace::new(topology)),
-            before: if loads.colliders.is_empty() {
+            before: if loads.colliders.is_empty() && params.self_contact.is_none() {
                 Vec::new()
             } else {
                 vec![0.0; n3]
@@ -130,6 +132,9 @@ impl Workspace {
             },
             mixed: None,
             xpbd: (params.integrator == Integrator::Xpbd).then(|| Box::new(XpbdWorkspace::new(topology))),
+            selfc: params
+                .self_contact
+                .map(|c| Box::new(super::selfcontact::SelfWorkspace::new(topology, &c))),
         }
     }
 }

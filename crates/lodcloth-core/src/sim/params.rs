@@ -413,4 +413,7 @@ pub struct SimParams {
     pub strain_limit: Option<StrainLimit>,
     /// Implicit-Euler solver settings (ignored by the explicit integrators).
     pub cg: CgSettings,
+    /// Self-contact (see [`super::selfcontact`]); None: the cloth passes
+    /// through itself.
+    pub self_contact: Option<super::SelfContact>,
 }

@@ -31,6 +31,8 @@ pub struct StepReport {
     pub strain_iterations: u32,
     /// Node–body contacts resolved this step (0 without colliders).
     pub contacts: u32,
+    /// What self-contact did this step (all zero without it).
+    pub self_contact: super::SelfOutcome,
 }
 
 impl StepReport {
@@ -125,6 +127,7 @@ impl Simulation {
             solver_residual: solver.1,
             strain_iterations,
             contacts: 0,
+            self_contact: super::SelfOutcome::default(),
         }
     }
 }

@@ -33,6 +33,22 @@ pub(super) fn validate_params(p: &SimParams) -> Result<(), SimError> {
     if !(p.drag.is_finite() && p.drag >= 0.0) {
         return Err(invalid("drag", p.drag, "drag must be finite and ≥ 0"));
     }
+    if let Some(s) = p.self_contact {
+        if !(s.thickness.is_finite() && s.thickness > 0.0) {
+            return Err(invalid(
+                "self_contact.thickness",
+                s.thickness,
+                "the cloth's thickness must be positive and finite (m)",
+            ));
+        }
+        if !(s.friction.is_finite() && s.friction >= 0.0) {
+            return Err(invalid(
+                "self_contact.friction",
+                s.friction,
+                "friction must be finite and ≥ 0",
+            ));
+        }
+    }
     if let Some(a) = p.stiffness_adjustment {
         if !(a.allowed.is_finite() && a.allowed >= 0.0) {
             return Err(invalid(

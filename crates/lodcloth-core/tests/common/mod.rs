@@ -81,6 +81,7 @@ pub fn params(dt: f64, integrator: Integrator, material: Material) -> SimParams 
         stiffness_adjustment: None,
         strain_limit: None,
         cg: CgSettings::default(),
+        self_contact: None,
     }
 }
 

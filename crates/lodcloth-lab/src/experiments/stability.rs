@@ -91,6 +91,7 @@ pub fn perturbed_free_cloth(
         stiffness_adjustment: None,
         strain_limit: None,
         cg: Default::default(),
+        self_contact: None,
     };
     Simulation::new(topology, masses, params, Loads::default(), state, StabilityCheck::Force)
         .expect("a generated free cloth is valid")
