@@ -1250,6 +1250,58 @@ fn a_switch_settle_that_is_not_a_time_or_on_a_surface_is_refused_by_path() {
     );
 }
 
+/// An instance's `contact` turns a cloth scene's self-contact on with its
+/// thickness and friction (the levels and the reference get it through
+/// the scene); a bad value, a thickness without `self = true`, and a
+/// surface's `contact` are each refused naming the field.
+#[test]
+fn an_instance_contact_sets_self_contact_and_bad_ones_are_refused_by_path() {
+    use lodcloth::plan::InstanceKind;
+    let text = config_with(
+        "switch_settle = 0.0167",
+        "contact = { self = true, thickness = 0.004, friction = 0.2 }",
+    );
+    let config = ServiceConfig::from_toml(&text, "small.toml").expect("a valid contact");
+    let InstanceKind::Cloth(scene) = &config.instances[0].kind else {
+        panic!("the hanging instance is a cloth");
+    };
+    let contact = scene.params.self_contact.expect("self-contact on");
+    assert_eq!((contact.thickness, contact.friction), (0.004, 0.2));
+    for (table, field) in [
+        ("{ self = true, thickness = 0.0 }", "instances[0].contact.thickness: "),
+        ("{ self = true, friction = -1.0 }", "instances[0].contact.friction: "),
+        (
+            "{ thickness = 0.004 }",
+            "instances[0].contact: thickness and friction describe self-contact",
+        ),
+    ] {
+        let text = config_with("switch_settle = 0.0167", &format!("contact = {table}"));
+        let err = ServiceConfig::from_toml(&text, "small.toml")
+            .map(|_| ())
+            .expect_err(table);
+        let ConfigError::Invalid { problems, .. } = &err else {
+            panic!("{table}: refused, but not as invalid values: {err}");
+        };
+        assert!(
+            problems.len() == 1 && problems[0].starts_with(field),
+            "{table}: {problems:#?}"
+        );
+    }
+    let surface =
+        "[[instances]]\nname = \"sphere\"\nkind = \"surface\"\nscene = \"config/surfaces/sphere-pulled.toml\"\n\
+                   levels = [85, 327]\nstart = 85\ncontact = { self = true }\n";
+    let err = ServiceConfig::from_toml(&format!("{SMALL_CONFIG}\n{surface}"), "small.toml")
+        .map(|_| ())
+        .expect_err("a surface");
+    let ConfigError::Invalid { problems, .. } = &err else {
+        panic!("refused, but not as invalid values: {err}");
+    };
+    assert!(
+        problems.len() == 1 && problems[0].starts_with("instances[1].contact: self-contact is a cloth's"),
+        "{problems:#?}"
+    );
+}
+
 /// The config load does not know a level's stability limit (it depends on
 /// the coefficients the level is prepared with), so an instance `dt` beyond
 /// it loads; the engine refuses it when the instance starts. (The quick

@@ -14,7 +14,9 @@ use lodcloth::output::{
     TrajectoryWriter, PALETTE, REPORT_CSV_HEADER,
 };
 use lodcloth::scene::Scene;
-use lodcloth::sim::{Integrator, Simulation, StabilityCheck, StepReport};
+use lodcloth::sim::{
+    crossings, GridShape, Integrator, Orientation, SelfOutcome, Simulation, StabilityCheck, StepReport, Topology,
+};
 use lodcloth::touch::Touch;
 
 /// `simulate`'s arguments, as parsed.
@@ -101,6 +103,7 @@ pub(crate) fn simulate(a: SimulateArgs) -> Result<()> {
     let mut last_log = Instant::now();
     let mut last = None;
     let mut first_total = None;
+    let mut selfc = SelfTotals::default();
     for s in 1..=steps {
         if let Some(r) = &replay {
             let at = next_input;
@@ -110,6 +113,7 @@ pub(crate) fn simulate(a: SimulateArgs) -> Result<()> {
         }
         let r = sim.step();
         last = Some(r);
+        selfc.add(&r.self_contact);
         if !r.finite {
             bar.abandon();
             traj.finish()?;
@@ -156,6 +160,13 @@ pub(crate) fn simulate(a: SimulateArgs) -> Result<()> {
     energy_chart(&svg, &title, energy)?;
     let r = last.context("the run has no step (duration shorter than dt)")?;
     print_summary(&scene, &sim, &r, (nx, ny), steps, wall);
+    if let Some(c) = sim.params().self_contact {
+        println!(
+            "self-contact     thickness {} m, μ {}: up to {} pairs within it, {} impacts, {} rounds of impact zones, \
+             {} steps ended with a pair colliding",
+            c.thickness, c.friction, selfc.most_near, selfc.impacts, selfc.zone_rounds, selfc.unresolved_steps
+        );
+    }
     println!("wrote            {} ({} frames)", traj_path.display(), header.n_frames);
     println!(
         "                 {}, {}, {}",
@@ -164,6 +175,24 @@ pub(crate) fn simulate(a: SimulateArgs) -> Result<()> {
         png.display()
     );
     Ok(())
+}
+
+/// What self-contact did over a run.
+#[derive(Default)]
+struct SelfTotals {
+    most_near: u32,
+    impacts: u64,
+    zone_rounds: u64,
+    unresolved_steps: u64,
+}
+
+impl SelfTotals {
+    fn add(&mut self, o: &SelfOutcome) {
+        self.most_near = self.most_near.max(o.proximities);
+        self.impacts += u64::from(o.impacts);
+        self.zone_rounds += u64::from(o.zone_rounds);
+        self.unresolved_steps += u64::from(o.unresolved > 0);
+    }
 }
 
 /// The scene file with the command line's integrator, dt, duration and
@@ -252,6 +281,15 @@ fn print_summary(scene: &Scene, sim: &Simulation, r: &StepReport, (nx, ny): (usi
     );
 }
 
+/// Frames of a trajectory that cross the cloth itself.
+#[derive(Default)]
+struct Crossed {
+    frames: usize,
+    crossing: usize,
+    most: usize,
+    first: Option<f64>,
+}
+
 pub(crate) fn inspect(file: &Path) -> Result<()> {
     let mut reader = TrajectoryReader::open(file)?;
     let h = *reader.header();
@@ -261,8 +299,37 @@ pub(crate) fn inspect(file: &Path) -> Result<()> {
     println!("dt          {:e} s, a frame every {} steps", h.dt, h.frame_every);
     println!("frames      {}", h.n_frames);
     let first = reader.next_frame()?.context("the file has no frame")?;
+    // A grid's triangles follow from its size (Topology::grid), so its
+    // frames can be checked for the cloth crossing itself; a mesh
+    // trajectory holds no triangles.
+    let grid = (h.nx >= 2 && h.ny >= 2 && h.nx as u64 * h.ny as u64 == h.n_nodes as u64).then(|| {
+        let shape = GridShape {
+            nx: h.nx as usize,
+            ny: h.ny as usize,
+            width: 1.0,
+            height: 1.0,
+        };
+        Topology::grid(shape, Orientation::Horizontal)
+    });
+    let mut crossed = Crossed::default();
+    let mut soa = Vec::new();
+    let mut check = |f: &lodcloth::output::Frame, crossed: &mut Crossed| {
+        if let Some(t) = &grid {
+            soa.clear();
+            soa.extend((0..3).flat_map(|c| f.positions.iter().map(move |p| p[c])));
+            let c = crossings(t, &soa).len();
+            crossed.frames += 1;
+            if c > 0 {
+                crossed.crossing += 1;
+                crossed.first.get_or_insert(f.time);
+                crossed.most = crossed.most.max(c);
+            }
+        }
+    };
+    check(&first, &mut crossed);
     let mut last = first.clone();
     while let Some(f) = reader.next_frame()? {
+        check(&f, &mut crossed);
         last = f;
     }
     let max_disp = first
@@ -276,6 +343,14 @@ pub(crate) fn inspect(file: &Path) -> Result<()> {
         first.time, last.time, first.step, last.step
     );
     println!("largest displacement first → last frame: {max_disp:.4} m");
+    match crossed.first {
+        _ if grid.is_none() => println!("crossings   not counted: a mesh cloth's trajectory holds no triangles"),
+        None => println!("crossings   none: the cloth never passes through itself in {} frames", crossed.frames),
+        Some(t) => println!(
+            "crossings   {} of {} frames pass through the cloth itself (up to {} edge–triangle pairs; first at {t:.4} s)",
+            crossed.crossing, crossed.frames, crossed.most
+        ),
+    }
     if h.inputs {
         let inputs = reader.inputs()?;
         let idle = inputs.iter().filter(|e| e.idle).count();

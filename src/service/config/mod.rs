@@ -502,6 +502,9 @@ fn cloth_instance(r: &RawInstance, at: &str, p: &mut Problems) -> Option<(Instan
         Some(mesh) => mesh_levels(r, at, p, &scene, &mesh.file),
         None => grid_levels(r, at, p, &mut scene)?,
     }
+    if let Some(contact) = &r.contact {
+        scene.params.self_contact = crate::scene::self_contact(contact, &format!("{at}.contact"), p);
+    }
     let integrator = scene.params.integrator;
     Some((InstanceKind::Cloth(Box::new(scene)), integrator))
 }
@@ -607,6 +610,11 @@ fn surface_instance(r: &RawInstance, at: &str, p: &mut Problems) -> Option<(Inst
     if r.reference.is_some() {
         p.push(format!(
             "{at}.reference: a surface's reference simulates every point of its cloud; remove this field"
+        ));
+    }
+    if r.contact.is_some() {
+        p.push(format!(
+            "{at}.contact: self-contact is a cloth's; a point-sampled surface has no triangles to keep apart"
         ));
     }
     if r.dt.is_some() {

@@ -316,6 +316,10 @@ pub struct RawInstance {
     pub method: String,
     /// Integrator (default: the scene's).
     pub integrator: Option<String>,
+    /// Self-contact (a cloth's), as a scene's `[contact]`: `{ self = true,
+    /// thickness = 0.003, friction = 0.3 }`; `{ self = false }` turns a
+    /// scene's off. Default: the scene's.
+    pub contact: Option<lodcloth_core::scene::RawContact>,
     /// Fixed time step for every level (s). Default: per level, the largest
     /// dt ≤ 0.75 × the level's predicted stability limit that divides the
     /// reference's metric frame interval.

@@ -49,11 +49,12 @@ mod validate;
 pub use error::SceneError;
 pub use mesh::{ClothLevel, MeshCloth};
 pub use raw::{
-    MassConvention, RawAdjustment, RawCloth, RawCoeffs, RawCollider, RawEllipse, RawForce, RawLimit, RawMaterial,
-    RawModuli, RawOrientation, RawPin, RawPinPath, RawProfile, RawRegion, RawScene, RawSelector, RawShape,
-    RawSimulation, RawSprings, RawStrain, RawWind,
+    MassConvention, RawAdjustment, RawCloth, RawCoeffs, RawCollider, RawContact, RawEllipse, RawForce, RawLimit,
+    RawMaterial, RawModuli, RawOrientation, RawPin, RawPinPath, RawProfile, RawRegion, RawScene, RawSelector, RawShape,
+    RawSimulation, RawSprings, RawStrain, RawWind, DEFAULT_SELF_FRICTION, DEFAULT_THICKNESS,
 };
 pub use selector::{patch_weights, select as select_nodes, select_mesh, Edge, Selector};
+pub use validate::self_contact;
 
 /// A validated pin: its node set, its path, and its field path (`pins[i]`)
 /// for messages at a resolution where it selects no node.

@@ -21,6 +21,25 @@ use crate::sim::{
 };
 use std::path::{Path, PathBuf};
 
+/// A `[contact]` table (a scene's, or a daemon instance's `contact` at
+/// `path`): self-contact when `self = true`, else None; a thickness or
+/// friction without `self = true` is refused rather than ignored.
+pub fn self_contact(r: &RawContact, path: &str, p: &mut Problems) -> Option<SelfContact> {
+    let thickness = r.thickness.unwrap_or(DEFAULT_THICKNESS);
+    let friction = r.friction.unwrap_or(DEFAULT_SELF_FRICTION);
+    p.positive(&format!("{path}.thickness"), thickness);
+    p.non_negative(&format!("{path}.friction"), friction);
+    if !r.self_contact {
+        if r.thickness.is_some() || r.friction.is_some() {
+            p.push(format!(
+                "{path}: thickness and friction describe self-contact; add `self = true`"
+            ));
+        }
+        return None;
+    }
+    Some(SelfContact { thickness, friction })
+}
+
 impl Scene {
     /// Validate a parsed scene, listing every problem with its path.
     pub fn validate(raw: RawScene, origin: &str) -> Result<Scene, SceneError> {
@@ -438,20 +457,9 @@ impl Problems {
         (stiffness_adjustment, strain_limit)
     }
 
-    /// `[contact]`: self-contact when `self = true`; thickness and friction
-    /// without it are refused rather than ignored.
+    /// `[contact]` (see [`self_contact`]).
     fn contact(&mut self, r: &RawContact) -> Option<SelfContact> {
-        let thickness = r.thickness.unwrap_or(DEFAULT_THICKNESS);
-        let friction = r.friction.unwrap_or(DEFAULT_SELF_FRICTION);
-        self.positive("contact.thickness", thickness);
-        self.non_negative("contact.friction", friction);
-        if !r.self_contact {
-            if r.thickness.is_some() || r.friction.is_some() {
-                self.push("contact: thickness and friction describe self-contact; add `self = true`".into());
-            }
-            return None;
-        }
-        Some(SelfContact { thickness, friction })
+        self_contact(r, "contact", self)
     }
 
     /// `[strain.limit]`, with [`StrainLimit::default`] for what is not given.

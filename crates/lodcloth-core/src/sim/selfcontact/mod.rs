@@ -46,10 +46,14 @@
 //! and for `lodcloth inspect`.
 //!
 //! # Broad phase
-//! Every node's swept box, every triangle's swept box grown by h and every
-//! edge's grown by h/2 are hashed into a uniform grid
-//! ([`grid::Grid`]) rebuilt for each detection pass; buffers only grow, so
-//! a running cloth allocates nothing.
+//! Candidate pairs are kept over many steps (a Verlet list): at a rebuild
+//! every node's box is its move grown by a margin (h/2), every triangle's the union of its nodes' grown
+//! by h and every edge's by h/2, hashed into a uniform grid
+//! ([`grid::Grid`]); pairs whose boxes overlap and that are closer than h
+//! plus how far their nodes can go in their boxes are the candidates until
+//! a node's move leaves its box. Each pass checks the candidates alone, with
+//! their swept boxes first. Buffers only grow, so a running cloth
+//! allocates nothing once its lists have reached their size.
 
 mod geometry;
 mod grid;
@@ -92,6 +96,8 @@ pub struct SelfOutcome {
     /// Pairs still colliding at the step's end (module docs, "What is
     /// guaranteed").
     pub unresolved: u32,
+    /// Candidate lists rebuilt (module docs, "Broad phase").
+    pub rebuilds: u32,
 }
 
 /// A colliding or near pair: four nodes (node, a, b, c for a node and a
@@ -143,8 +149,20 @@ pub(crate) struct SelfWorkspace {
     parent: Vec<u32>,
     zoned: Vec<u32>,
     in_zone: Vec<bool>,
-    /// A detection pass's candidates for one node or edge.
+    /// A rebuild's candidates for one node or edge.
     hits: Vec<u32>,
+    /// Candidate node–triangle and edge–edge pairs ([`rebuild`]), valid
+    /// while every node moves within its box (`vbox`).
+    cand_vt: Vec<(u32, u32)>,
+    cand_ee: Vec<(u32, u32)>,
+    built: bool,
+    /// How far past its move a node's box reaches at a rebuild (m).
+    margin: f64,
+    /// Per node, how far from its rebuild position its box lets it go: a
+    /// pair farther apart than the thickness plus its nodes' reaches
+    /// cannot touch before the next rebuild, and is no candidate
+    /// (distances are 1-Lipschitz in each primitive's nodes).
+    reach: Vec<f64>,
 }
 
 impl SelfWorkspace {
@@ -175,6 +193,11 @@ impl SelfWorkspace {
             zoned: Vec::new(),
             in_zone: vec![false; n],
             hits: Vec::new(),
+            cand_vt: Vec::new(),
+            cand_ee: Vec::new(),
+            built: false,
+            margin: 0.0,
+            reach: vec![0.0; n],
         };
         // The rest shape's close pairs, found by a pass over it at rest.
         let free = vec![1.0; n];
@@ -182,6 +205,13 @@ impl SelfWorkspace {
         detect(settings, 1.0, &free, &mut ws, Pass::Rest, &mut outcome);
         ws.rest_vt.sort_unstable();
         ws.rest_ee.sort_unstable();
+        // The margin: half the thickness. Two parts of a flat sheet are
+        // at least 0.7 of a cell apart (a node and the diagonal across its
+        // cell), more than the thickness plus two reaches (h + 2·√3·h/2 =
+        // 2.7 h), so a flat sheet of cells over 4 h has no candidates; a
+        // node moving at 1 m/s with dt = 1e-4 s stays in its box 15 steps.
+        ws.margin = 0.5 * settings.thickness;
+        ws.built = false;
         ws
     }
 
@@ -285,29 +315,37 @@ pub(crate) fn resolve(
     out
 }
 
-/// One detection pass over the current moves; returns the impacts found.
-fn detect(
-    settings: &SelfContact,
-    dt: f64,
-    inv_mass: &[f64],
-    ws: &mut SelfWorkspace,
-    pass: Pass,
-    out: &mut SelfOutcome,
-) -> u32 {
-    let h = settings.thickness;
-    // Boxes of the moves.
-    let mut extent_sum = 0.0;
-    let mut extent_max: f64 = 0.0;
+/// Whether every node's move this step lies within its box of the last
+/// rebuild, so that the candidate pairs still hold every pair that can
+/// come within the thickness.
+fn candidates_hold(ws: &SelfWorkspace, dt: f64) -> bool {
+    ws.built
+        && ws.x0.iter().zip(&ws.vbar).zip(&ws.vbox).all(|((a, v), b)| {
+            let e = add(*a, scale(*v, dt));
+            (0..3).all(|c| b[c] <= a[c].min(e[c]) && a[c].max(e[c]) <= b[c + 3])
+        })
+}
+
+/// The candidate pairs anew (a Verlet list, as molecular dynamics keeps
+/// one): every node's box is its move this step grown by the margin, a
+/// triangle's the union of its nodes' grown by h, an edge's by h/2; a
+/// node–triangle or edge–edge pair whose boxes overlap is a candidate
+/// until some node leaves its box, which at the cloth's usual speeds is
+/// tens of steps later.
+fn rebuild(ws: &mut SelfWorkspace, h: f64, dt: f64, inv_mass: &[f64]) {
+    let margin = ws.margin;
     for k in 0..ws.x0.len() {
         let a = ws.x0[k];
         let b = add(a, scale(ws.vbar[k], dt));
+        // How far from x0 the node can be while inside its box.
+        ws.reach[k] = norm(sub(b, a)) + 3f64.sqrt() * margin;
         ws.vbox[k] = [
-            a[0].min(b[0]),
-            a[1].min(b[1]),
-            a[2].min(b[2]),
-            a[0].max(b[0]),
-            a[1].max(b[1]),
-            a[2].max(b[2]),
+            a[0].min(b[0]) - margin,
+            a[1].min(b[1]) - margin,
+            a[2].min(b[2]) - margin,
+            a[0].max(b[0]) + margin,
+            a[1].max(b[1]) + margin,
+            a[2].max(b[2]) + margin,
         ];
     }
     let union = |boxes: &[Aabb], nodes: &[u32], grow: f64| {
@@ -332,6 +370,8 @@ fn detect(
         }
         u
     };
+    let mut extent_sum = 0.0;
+    let mut extent_max: f64 = 0.0;
     for (t, tri) in ws.tris.iter().enumerate() {
         let b = union(&ws.vbox, tri, h);
         let e = (b[3] - b[0]).max(b[4] - b[1]).max(b[5] - b[2]);
@@ -342,48 +382,41 @@ fn detect(
     for (i, edge) in ws.edges.iter().enumerate() {
         ws.ebox[i] = union(&ws.vbox, edge, 0.5 * h);
     }
+    ws.cand_vt.clear();
+    ws.cand_ee.clear();
+    ws.built = true;
     if ws.tris.is_empty() {
-        return 0;
+        return;
     }
     // Cells about a triangle's box, but never so small that one fast
     // triangle spans more than 16 cells a side.
     let cell = (extent_sum / ws.tris.len() as f64).max(extent_max / 16.0).max(1e-9);
     ws.tgrid.build(&ws.tbox, cell);
     ws.egrid.build(&ws.ebox, cell);
-
-    let mut found = 0u32;
     let mut hits = std::mem::take(&mut ws.hits);
-    // Node–triangle pairs.
+    let pinned = |k: &u32| inv_mass[*k as usize] == 0.0;
     for v in 0..ws.x0.len() as u32 {
         hits.clear();
         ws.tgrid.each_overlap(&ws.vbox[v as usize], &ws.tbox, |t| hits.push(t));
         for &t in &hits {
             let tri = ws.tris[t as usize];
-            if tri.contains(&v) || (!ws.rest_vt.is_empty() && ws.rest_vt.binary_search(&(v, t)).is_ok()) {
+            if tri.contains(&v)
+                || (pinned(&v) && tri.iter().all(pinned))
+                || (!ws.rest_vt.is_empty() && ws.rest_vt.binary_search(&(v, t)).is_ok())
+            {
                 continue;
             }
-            let nodes = [v, tri[0], tri[1], tri[2]];
-            if nodes.iter().all(|&k| inv_mass[k as usize] == 0.0) {
+            // Out of reach: no move within the boxes brings it within h.
+            let x = [v, tri[0], tri[1], tri[2]].map(|k| ws.x0[k as usize]);
+            let b = point_triangle(x[0], x[1], x[2], x[3]);
+            let q = add(add(scale(x[1], b[0]), scale(x[2], b[1])), scale(x[3], b[2]));
+            let reach = ws.reach[v as usize] + tri.iter().map(|&k| ws.reach[k as usize]).fold(0.0, f64::max);
+            if norm(sub(x[0], q)) - reach >= h {
                 continue;
             }
-            if pass == Pass::Rest {
-                if vt_proximity(ws, nodes, h).is_some() {
-                    ws.rest_vt.push((v, t));
-                }
-                continue;
-            }
-            if pass == Pass::First {
-                if let Some(p) = vt_proximity(ws, nodes, h) {
-                    out.proximities += u32::from(repel(ws, inv_mass, &p, dt, h, settings.friction));
-                }
-            }
-            if let Some(p) = vt_impact(ws, nodes, dt, h) {
-                found += 1;
-                respond(ws, inv_mass, &p, pass, dt, h, settings.friction, out);
-            }
+            ws.cand_vt.push((v, t));
         }
     }
-    // Edge–edge pairs.
     for e in 0..ws.edges.len() as u32 {
         hits.clear();
         ws.egrid.each_overlap(&ws.ebox[e as usize], &ws.ebox, |f| {
@@ -393,32 +426,118 @@ fn detect(
         });
         for &f in &hits {
             let (a, b) = (ws.edges[e as usize], ws.edges[f as usize]);
-            if a.iter().any(|k| b.contains(k)) || (!ws.rest_ee.is_empty() && ws.rest_ee.binary_search(&(e, f)).is_ok())
+            if a.iter().any(|k| b.contains(k))
+                || (a.iter().all(pinned) && b.iter().all(pinned))
+                || (!ws.rest_ee.is_empty() && ws.rest_ee.binary_search(&(e, f)).is_ok())
             {
                 continue;
             }
-            let nodes = [a[0], a[1], b[0], b[1]];
-            if nodes.iter().all(|&k| inv_mass[k as usize] == 0.0) {
+            let x = [a[0], a[1], b[0], b[1]].map(|k| ws.x0[k as usize]);
+            let (sa, sb) = segment_segment(x[0], x[1], x[2], x[3]);
+            let gap = norm(sub(geometry::lerp(x[0], x[1], sa), geometry::lerp(x[2], x[3], sb)));
+            let side = |e: [u32; 2]| ws.reach[e[0] as usize].max(ws.reach[e[1] as usize]);
+            if gap - (side(a) + side(b)) >= h {
                 continue;
             }
-            if pass == Pass::Rest {
-                if ee_proximity(ws, nodes, h).is_some() {
-                    ws.rest_ee.push((e, f));
-                }
-                continue;
-            }
-            if pass == Pass::First {
-                if let Some(p) = ee_proximity(ws, nodes, h) {
-                    out.proximities += u32::from(repel(ws, inv_mass, &p, dt, h, settings.friction));
-                }
-            }
-            if let Some(p) = ee_impact(ws, nodes, dt, h) {
-                found += 1;
-                respond(ws, inv_mass, &p, pass, dt, h, settings.friction, out);
-            }
+            ws.cand_ee.push((e, f));
         }
     }
     ws.hits = hits;
+}
+
+/// Whether the swept boxes of `nodes` (the first `split` one side, the
+/// rest the other) come within `h` of each other this step.
+#[inline]
+fn sweeps_meet(ws: &SelfWorkspace, nodes: [u32; 4], split: usize, dt: f64, h: f64) -> bool {
+    let sweep = |range: std::ops::Range<usize>| {
+        let mut u = [
+            f64::INFINITY,
+            f64::INFINITY,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NEG_INFINITY,
+            f64::NEG_INFINITY,
+        ];
+        for i in range {
+            let k = nodes[i] as usize;
+            let (a, v) = (ws.x0[k], ws.vbar[k]);
+            for c in 0..3 {
+                let b = a[c] + dt * v[c];
+                u[c] = u[c].min(a[c].min(b));
+                u[c + 3] = u[c + 3].max(a[c].max(b));
+            }
+        }
+        u
+    };
+    let (p, q) = (sweep(0..split), sweep(split..4));
+    (0..3).all(|c| p[c] - h <= q[c + 3] && q[c] - h <= p[c + 3])
+}
+
+/// One detection pass over the current moves; returns the impacts found.
+fn detect(
+    settings: &SelfContact,
+    dt: f64,
+    inv_mass: &[f64],
+    ws: &mut SelfWorkspace,
+    pass: Pass,
+    out: &mut SelfOutcome,
+) -> u32 {
+    let h = settings.thickness;
+    if !candidates_hold(ws, dt) {
+        rebuild(ws, h, dt, inv_mass);
+        out.rebuilds += 1;
+    }
+    let mut found = 0u32;
+    // Node–triangle pairs.
+    let cand_vt = std::mem::take(&mut ws.cand_vt);
+    for &(v, t) in &cand_vt {
+        let tri = ws.tris[t as usize];
+        let nodes = [v, tri[0], tri[1], tri[2]];
+        if !sweeps_meet(ws, nodes, 1, dt, h) {
+            continue;
+        }
+        if pass == Pass::Rest {
+            if vt_proximity(ws, nodes, h).is_some() {
+                ws.rest_vt.push((v, t));
+            }
+            continue;
+        }
+        if pass == Pass::First {
+            if let Some(p) = vt_proximity(ws, nodes, h) {
+                out.proximities += u32::from(repel(ws, inv_mass, &p, dt, h, settings.friction));
+            }
+        }
+        if let Some(p) = vt_impact(ws, nodes, dt, h) {
+            found += 1;
+            respond(ws, inv_mass, &p, pass, dt, h, settings.friction, out);
+        }
+    }
+    ws.cand_vt = cand_vt;
+    // Edge–edge pairs.
+    let cand_ee = std::mem::take(&mut ws.cand_ee);
+    for &(e, f) in &cand_ee {
+        let (a, b) = (ws.edges[e as usize], ws.edges[f as usize]);
+        let nodes = [a[0], a[1], b[0], b[1]];
+        if !sweeps_meet(ws, nodes, 2, dt, h) {
+            continue;
+        }
+        if pass == Pass::Rest {
+            if ee_proximity(ws, nodes, h).is_some() {
+                ws.rest_ee.push((e, f));
+            }
+            continue;
+        }
+        if pass == Pass::First {
+            if let Some(p) = ee_proximity(ws, nodes, h) {
+                out.proximities += u32::from(repel(ws, inv_mass, &p, dt, h, settings.friction));
+            }
+        }
+        if let Some(p) = ee_impact(ws, nodes, dt, h) {
+            found += 1;
+            respond(ws, inv_mass, &p, pass, dt, h, settings.friction, out);
+        }
+    }
+    ws.cand_ee = cand_ee;
     found
 }
 

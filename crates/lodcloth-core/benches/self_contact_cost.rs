@@ -1,0 +1,122 @@
+//! What self-contact costs a step: the hanging cloth (config/scenes/
+//! hanging.toml) with its bottom-left corner dragged up and across in
+//! front of it and back through it (a grab, as a client's drag is), with
+//! self-contact on, until it is folded over itself; then from that state
+//! 400 steps timed with self-contact and without, best of 5. Prints µs per
+//! step, the pairs in contact, the overhead and its ratio to the step, for
+//! f64 and f32 springs (the daemon's).
+//!
+//! `cargo bench -p lodcloth-core --bench self_contact_cost -- [--levels 32,64] [--thickness 0.003]`
+use std::path::Path;
+use std::sync::Arc;
+use std::time::Instant;
+
+use lodcloth_core::scene::Scene;
+use lodcloth_core::sim::{crossings, Grab, SelfContact, Simulation, SpringPrecision, StabilityCheck, State, Topology};
+
+fn arg<'a>(args: &'a [String], name: &str) -> Option<&'a str> {
+    args.iter()
+        .position(|a| a == name)
+        .and_then(|i| args.get(i + 1))
+        .map(String::as_str)
+}
+
+/// Best µs per step over 5 runs of `steps`, each from `state`.
+fn time(sim: &mut Simulation, state: &State, steps: usize) -> f64 {
+    let mut best = f64::INFINITY;
+    for _ in 0..5 {
+        sim.set_state(state.clone()).expect("state fits");
+        let t = Instant::now();
+        for _ in 0..steps {
+            sim.step_lean();
+        }
+        best = best.min(t.elapsed().as_secs_f64() / steps as f64);
+    }
+    best * 1e6
+}
+
+fn rebuilt(sim: &Simulation, contact: Option<SelfContact>, precision: SpringPrecision) -> Simulation {
+    let mut params = *sim.params();
+    params.self_contact = contact;
+    let mut out = Simulation::new(
+        Arc::clone(sim.topology()),
+        sim.masses().to_vec(),
+        params,
+        sim.loads().clone(),
+        sim.state().clone(),
+        StabilityCheck::Force,
+    )
+    .expect("builds");
+    out.set_grabs(sim.grabs().to_vec()).expect("grabs fit");
+    out.set_spring_precision(precision);
+    out
+}
+
+/// The corner's grab `t` seconds into the drag (1.6 s in all).
+fn drag(topology: &Topology, corner: u32, t: f64) -> Grab {
+    let start = topology.rest_positions[corner as usize];
+    let up = (t / 0.8).min(1.0);
+    let back = ((t - 0.8) / 0.8).clamp(0.0, 1.0);
+    Grab {
+        nodes: vec![corner],
+        weights: vec![1.0],
+        // Up and across, 5 cm in front, then 13 cm back.
+        target: [start[0] + 0.6 * up, start[1] + 0.6 * up, start[2] + 0.1 - 0.26 * back],
+        stiffness: 40.0,
+        damping: 0.4,
+    }
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let levels: Vec<usize> = arg(&args, "--levels")
+        .unwrap_or("32,64")
+        .split(',')
+        .map(|s| s.parse().expect("--levels: node counts per side"))
+        .collect();
+    let thickness: f64 = arg(&args, "--thickness").map_or(0.003, |s| s.parse().expect("--thickness: metres"));
+    let contact = SelfContact {
+        thickness,
+        friction: 0.3,
+    };
+    let path = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../config/scenes/hanging.toml"));
+    let mut scene = Scene::load(path).expect("scene");
+    scene.params.self_contact = Some(contact);
+    println!(
+        "scene {} ({}, dt {:e} s), thickness {thickness} m: the hanging cloth rests 0.5 s, its bottom-left corner is dragged \
+         up, across and back through it for 1.6 s; then 400 steps timed, best of 5",
+        scene.name,
+        scene.params.integrator.name(),
+        scene.params.dt
+    );
+    println!(
+        "| level | springs | pairs in contact | crossings | without µs | with µs | overhead µs | overhead / step |"
+    );
+    println!("|---|---|---|---|---|---|---|---|");
+    for n in levels {
+        let mut sim = scene.build_at(n, n).expect("builds");
+        let dt = scene.params.dt;
+        let corner = ((n - 1) * n) as u32;
+        let mut pairs = 0;
+        for s in 0..((0.5 + 1.6) / dt).round() as usize {
+            let t = s as f64 * dt - 0.5;
+            if t >= 0.0 {
+                let grab = drag(sim.topology(), corner, t);
+                sim.set_grabs(vec![grab]).expect("a valid grab");
+            }
+            pairs = sim.step().self_contact.proximities;
+        }
+        let crossed = crossings(sim.topology(), &sim.state().pos).len();
+        let state = sim.state().clone();
+        for precision in [SpringPrecision::F64, SpringPrecision::F32] {
+            let mut with = rebuilt(&sim, Some(contact), precision);
+            let mut without = rebuilt(&sim, None, precision);
+            let (w, wo) = (time(&mut with, &state, 400), time(&mut without, &state, 400));
+            println!(
+                "| {n}×{n} | {precision:?} | {pairs} | {crossed} | {wo:.1} | {w:.1} | {:.1} | {:.2} |",
+                w - wo,
+                (w - wo) / wo
+            );
+        }
+    }
+}
