@@ -266,6 +266,11 @@ pub(crate) fn resolve(
     }
     ws.touched.fill(false);
     let mut found = detect(settings, dt, inv_mass, ws, Pass::First, &mut out);
+    // The first pass's proximity impulses change moves of pairs it had
+    // already checked for impacts: check again whenever it changed any.
+    if out.proximities > 0 {
+        found = found.max(1);
+    }
     let mut passes = 1;
     while found > 0 && passes <= IMPACT_PASSES {
         found = detect(settings, dt, inv_mass, ws, Pass::Impacts, &mut out);
