@@ -302,7 +302,7 @@ pub(crate) fn inspect(file: &Path) -> Result<()> {
     // A grid's triangles follow from its size (Topology::grid), so its
     // frames can be checked for the cloth crossing itself; a mesh
     // trajectory holds no triangles.
-    let grid = (h.nx >= 2 && h.ny >= 2 && h.nx as u64 * h.ny as u64 == h.n_nodes as u64).then(|| {
+    let grid = (h.nx >= 2 && h.ny >= 2 && h.nx as u64 * h.ny as u64 == h.n_nodes).then(|| {
         let shape = GridShape {
             nx: h.nx as usize,
             ny: h.ny as usize,
