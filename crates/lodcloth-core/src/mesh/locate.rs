@@ -9,6 +9,7 @@
 //! triangle is Ericson's (Real-Time Collision Detection §5.1.5): the point's
 //! Voronoi region among the triangle's vertices, edges and face.
 
+use crate::sim::point_triangle;
 use crate::sim::vec3::{add, dot, scale, sub, V3};
 
 /// Where a point lies on a surface.
@@ -177,7 +178,7 @@ impl<'a> SurfaceIndex<'a> {
     fn on_triangle(&self, k: usize, p: V3) -> Located {
         let nodes = self.triangles[k];
         let [a, b, c] = nodes.map(|i| self.positions[i as usize]);
-        let weights = closest_on_triangle(p, a, b, c);
+        let weights = point_triangle(p, a, b, c);
         let q = add(add(scale(a, weights[0]), scale(b, weights[1])), scale(c, weights[2]));
         let d = sub(p, q);
         Located {
@@ -193,52 +194,4 @@ impl<'a> SurfaceIndex<'a> {
 pub fn locate(positions: &[V3], triangles: &[[u32; 3]], points: &[V3]) -> Vec<Located> {
     let index = SurfaceIndex::new(positions, triangles);
     points.iter().map(|&p| index.closest(p)).collect()
-}
-
-/// Barycentric weights of the point of triangle abc closest to p
-/// (Ericson §5.1.5); a degenerate triangle falls back to its closest vertex.
-fn closest_on_triangle(p: V3, a: V3, b: V3, c: V3) -> [f64; 3] {
-    let ab = sub(b, a);
-    let ac = sub(c, a);
-    let ap = sub(p, a);
-    let d1 = dot(ab, ap);
-    let d2 = dot(ac, ap);
-    if d1 <= 0.0 && d2 <= 0.0 {
-        return [1.0, 0.0, 0.0];
-    }
-    let bp = sub(p, b);
-    let d3 = dot(ab, bp);
-    let d4 = dot(ac, bp);
-    if d3 >= 0.0 && d4 <= d3 {
-        return [0.0, 1.0, 0.0];
-    }
-    let vc = d1 * d4 - d3 * d2;
-    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
-        let v = d1 / (d1 - d3);
-        return [1.0 - v, v, 0.0];
-    }
-    let cp = sub(p, c);
-    let d5 = dot(ab, cp);
-    let d6 = dot(ac, cp);
-    if d6 >= 0.0 && d5 <= d6 {
-        return [0.0, 0.0, 1.0];
-    }
-    let vb = d5 * d2 - d1 * d6;
-    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
-        let w = d2 / (d2 - d6);
-        return [1.0 - w, 0.0, w];
-    }
-    let va = d3 * d6 - d5 * d4;
-    if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
-        let w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
-        return [0.0, 1.0 - w, w];
-    }
-    let denom = va + vb + vc;
-    if !(denom.abs() > 0.0) {
-        return [1.0, 0.0, 0.0];
-    }
-    // Inside the face: rounding can leave a weight a few ulps below zero.
-    let weights = [va / denom, vb / denom, vc / denom].map(|x| x.max(0.0));
-    let sum: f64 = weights.iter().sum();
-    weights.map(|x| x / sum)
 }

@@ -48,6 +48,8 @@ pub use params::{
 };
 pub use real::Real;
 pub use report::StepReport;
+/// Closest point on a triangle (Ericson), shared with `mesh::locate`.
+pub(crate) use selfcontact::point_triangle;
 pub use selfcontact::{SelfContact, SelfOutcome};
 pub use simd::{active_isa_name, force_path, VectorPath};
 pub use stability::{amplification, dt_limit, modal_estimate, ModalEstimate};

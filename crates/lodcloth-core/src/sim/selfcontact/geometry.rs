@@ -7,7 +7,8 @@ use crate::sim::vec3::{add, cross, dot, scale, sub, V3};
 /// The closest point to `p` on triangle `(a, b, c)`, as barycentric
 /// weights `[wa, wb, wc]` (non-negative, summing to 1). Ericson,
 /// *Real-Time Collision Detection* (2005), §5.1.5: the Voronoi region of
-/// the triangle's features that holds `p`.
+/// the triangle's features that holds `p`. Also how a mesh level's
+/// vertices are located on another's surface (`mesh::locate`).
 pub fn point_triangle(p: V3, a: V3, b: V3, c: V3) -> [f64; 3] {
     let ab = sub(b, a);
     let ac = sub(c, a);
@@ -44,14 +45,15 @@ pub fn point_triangle(p: V3, a: V3, b: V3, c: V3) -> [f64; 3] {
         let w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
         return [0.0, 1.0 - w, w];
     }
-    let denom = 1.0 / (va + vb + vc);
-    let v = vb * denom;
-    let w = vc * denom;
-    if !(v.is_finite() && w.is_finite()) {
+    let denom = va + vb + vc;
+    if !(denom.abs() > 0.0) {
         // A degenerate triangle: its first vertex.
         return [1.0, 0.0, 0.0];
     }
-    [1.0 - v - w, v, w]
+    // Inside the face: rounding can leave a weight a few ulps below zero.
+    let weights = [va / denom, vb / denom, vc / denom].map(|x| x.max(0.0));
+    let sum: f64 = weights.iter().sum();
+    weights.map(|x| x / sum)
 }
 
 /// The closest points of segments `p1–q1` and `p2–q2` as their parameters
