@@ -6,10 +6,10 @@
 
 use std::sync::Arc;
 
-use crate::common::{build, grid, lumped_masses, material, params};
+use crate::common::{build, fixed_pins, grid, lumped_masses, material, params};
 use lodcloth::sim::{
-    crossings, Collider, Grab, Integrator, Loads, Orientation, Pin, PinPath, SelfContact, Shape, SimParams,
-    StabilityCheck, State, Topology,
+    crossings, Collider, Grab, Integrator, Loads, Orientation, PinPath, SelfContact, Shape, SimParams, StabilityCheck,
+    State, Topology,
 };
 
 const CONTACT: SelfContact = SelfContact {
@@ -169,13 +169,7 @@ fn a_cloth_at_rest_on_itself_gains_no_energy() {
 fn a_corner_dragged_across_the_hanging_cloth_never_crosses_it() {
     let run = |on: bool| {
         let topology = grid(16, 16, 0.5, 0.5, Orientation::Vertical);
-        let pins: Vec<Pin> = (0..16)
-            .map(|i| Pin {
-                node: i as u32,
-                anchor: topology.rest_positions[i],
-                path: PinPath::Fixed,
-            })
-            .collect();
+        let pins = fixed_pins(&topology, &(0..16).collect::<Vec<_>>());
         let mut p = with_contact(
             params(
                 2e-4,
@@ -275,15 +269,8 @@ fn a_sheet_thrown_through_another_in_one_step_is_stopped() {
         });
         let rim = |k: usize| !(8..56).contains(&k) || matches!(k % 8, 0 | 7);
         // The target's rim and the thrown sheet's top row.
-        let pins: Vec<Pin> = (0..n1)
-            .filter(|&k| rim(k))
-            .chain(n1..n1 + 8)
-            .map(|k| Pin {
-                node: k as u32,
-                anchor: topology.rest_positions[k],
-                path: PinPath::Fixed,
-            })
-            .collect();
+        let held: Vec<usize> = (0..n1).filter(|&k| rim(k)).chain(n1..n1 + 8).collect();
+        let pins = fixed_pins(&topology, &held);
         let mut state = State::at_rest(&topology);
         let n = topology.n_nodes;
         for k in n1 + 8..n {
