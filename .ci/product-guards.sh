@@ -2,7 +2,7 @@
 # The product stays apart from the lab and says what is true today:
 # - the product crates (lodcloth, lodcloth-core) do not depend on the lab,
 #   and on no plotting crate unless their own code draws with it;
-# - the README stays within 200 lines;
+# - the README stays within 200 lines, docs/results.md within 800;
 # - no comment in the product's source carries a date (comments say why;
 #   a measured figure lives in docs/results.md with its date).
 # Fails naming what broke the rule.
@@ -35,6 +35,11 @@ if [ "$lines" -gt 200 ]; then
   echo "product-guards: README.md is $lines lines, over 200: current figures go to docs/results.md, history to the lab's notebook"
   fail=1
 fi
+results=$(wc -l < docs/results.md)
+if [ "$results" -gt 800 ]; then
+  echo "product-guards: docs/results.md is $results lines, over 800: one current table per claim; superseded figures go to the lab's notebook"
+  fail=1
+fi
 # A date (YYYY-MM-DD) on a comment line of the product's source.
 dated=$(grep -rnE '^\s*//.*\b20[0-9]{2}-[0-9]{2}-[0-9]{2}\b' src crates/lodcloth-core/src || true)
 if [ -n "$dated" ]; then
@@ -42,5 +47,5 @@ if [ -n "$dated" ]; then
   echo "$dated"
   fail=1
 fi
-[ "$fail" = 0 ] && echo "product-guards: the product is apart from the lab, README $lines lines, no dated comment"
+[ "$fail" = 0 ] && echo "product-guards: the product is apart from the lab, README $lines lines, results $results, no dated comment"
 exit "$fail"

@@ -163,8 +163,15 @@ pub(crate) fn simulate(a: SimulateArgs) -> Result<()> {
     if let Some(c) = sim.params().self_contact {
         println!(
             "self-contact     thickness {} m, μ {}: up to {} pairs within it, {} impacts, {} rounds of impact zones, \
-             {} steps ended with a pair colliding",
-            c.thickness, c.friction, selfc.most_near, selfc.impacts, selfc.zone_rounds, selfc.unresolved_steps
+             {} steps ended with a pair colliding; up to {} candidate pairs, rebuilt every {:.1} steps",
+            c.thickness,
+            c.friction,
+            selfc.most_near,
+            selfc.impacts,
+            selfc.zone_rounds,
+            selfc.unresolved_steps,
+            selfc.most_candidates,
+            selfc.steps as f64 / selfc.rebuilds.max(1) as f64
         );
     }
     println!("wrote            {} ({} frames)", traj_path.display(), header.n_frames);
@@ -184,6 +191,9 @@ struct SelfTotals {
     impacts: u64,
     zone_rounds: u64,
     unresolved_steps: u64,
+    steps: u64,
+    rebuilds: u64,
+    most_candidates: u32,
 }
 
 impl SelfTotals {
@@ -192,6 +202,9 @@ impl SelfTotals {
         self.impacts += u64::from(o.impacts);
         self.zone_rounds += u64::from(o.zone_rounds);
         self.unresolved_steps += u64::from(o.unresolved > 0);
+        self.steps += 1;
+        self.rebuilds += u64::from(o.rebuilds);
+        self.most_candidates = self.most_candidates.max(o.candidates);
     }
 }
 

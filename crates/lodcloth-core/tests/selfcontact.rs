@@ -8,8 +8,8 @@ use std::sync::Arc;
 
 use crate::common::{build, fixed_pins, grid, lumped_masses, material, params};
 use lodcloth::sim::{
-    crossings, Collider, Grab, Integrator, Loads, Orientation, PinPath, SelfContact, Shape, SimParams, StabilityCheck,
-    State, Topology,
+    crossings, Collider, Grab, Integrator, Lender, Loads, Orientation, PinPath, SelfContact, Shape, SimParams,
+    StabilityCheck, State, Topology, SELF_SPLIT_MIN_CANDIDATES,
 };
 
 const CONTACT: SelfContact = SelfContact {
@@ -25,15 +25,28 @@ fn with_contact(mut p: SimParams, on: bool) -> SimParams {
 /// A 12 × 30 cloth folded in three layers 2 cm apart (an accordion, 3 cm
 /// cells), 10 cm above a floor.
 fn accordion() -> (Arc<Topology>, State) {
-    let topology = grid(12, 30, 0.33, 0.87, Orientation::Horizontal);
+    accordion_of(1)
+}
+
+/// The accordion with `per` times the nodes a side.
+fn accordion_of(per: usize) -> (Arc<Topology>, State) {
+    let (nx, ny, cell) = (12 * per, 30 * per, 0.03 / per as f64);
+    let topology = grid(
+        nx,
+        ny,
+        cell * (nx - 1) as f64,
+        cell * (ny - 1) as f64,
+        Orientation::Horizontal,
+    );
     let mut state = State::at_rest(&topology);
     let n = topology.n_nodes;
-    for j in 0..30 {
-        let (layer, r) = (j / 10, j % 10);
-        let z = if layer % 2 == 0 { r } else { 9 - r } as f64 * 0.03;
-        for i in 0..12 {
-            let k = j * 12 + i;
-            state.pos[k] = i as f64 * 0.03;
+    let rows = ny / 3;
+    for j in 0..ny {
+        let (layer, r) = (j / rows, j % rows);
+        let z = if layer % 2 == 0 { r } else { rows - 1 - r } as f64 * cell;
+        for i in 0..nx {
+            let k = j * nx + i;
+            state.pos[k] = i as f64 * cell;
             state.pos[n + k] = 0.1 + 0.02 * layer as f64;
             state.pos[2 * n + k] = z;
         }
@@ -54,10 +67,15 @@ fn floor() -> Collider {
 }
 
 fn accordion_sim(on: bool) -> lodcloth::sim::Simulation {
-    let (topology, state) = accordion();
+    accordion_sim_of(on, 1)
+}
+
+fn accordion_sim_of(on: bool, per: usize) -> lodcloth::sim::Simulation {
+    let (topology, state) = accordion_of(per);
     let mut p = with_contact(
         params(
-            5e-4,
+            // Within symplectic Euler's limit, which falls with the cell.
+            5e-4 / (per * per) as f64,
             Integrator::SymplecticEuler,
             material((200.0, 0.02), (30.0, 0.003), (2.0, 0.0002)),
         ),
@@ -119,6 +137,55 @@ fn an_accordion_dropped_onto_a_floor_piles_up_without_crossing() {
     let top = (0..n).map(|k| on.state().pos[n + k]).fold(0.0, f64::max);
     println!("pile height {top:.4} m");
     assert!(top > 0.002 + 2.0 * 0.9 * CONTACT.thickness, "the pile is {top} m high");
+}
+
+/// A long candidate list's checks run in two halves at once when the step
+/// has a second thread: the accordion at twice the nodes a side, piled up,
+/// steps to the same bits on one thread and on two.
+#[test]
+fn self_contact_on_two_threads_steps_to_the_same_bits_as_on_one() {
+    use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+    let lender = Arc::new(Lender::new());
+    let stop = Arc::new(AtomicBool::new(false));
+    let ran = Arc::new(AtomicUsize::new(0));
+    let helper = {
+        let (lender, stop, ran) = (lender.clone(), stop.clone(), ran.clone());
+        std::thread::spawn(move || {
+            lender.set_helper(std::thread::current());
+            while !stop.load(Ordering::Relaxed) {
+                if lender.help() {
+                    ran.fetch_add(1, Ordering::Relaxed);
+                } else {
+                    std::thread::park_timeout(std::time::Duration::from_micros(100));
+                }
+            }
+        })
+    };
+    let (mut one, mut two) = (accordion_sim_of(true, 2), accordion_sim_of(true, 2));
+    let mut long = 0;
+    // 0.5 s: the layers fall onto the floor and onto each other.
+    for _ in 0..4000 {
+        let r = one.step();
+        two.step_on(&*lender);
+        assert!(r.finite);
+        let bits = |s: &State| s.pos.iter().chain(&s.vel).map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert!(
+            bits(one.state()) == bits(two.state()),
+            "the states differ after step {}",
+            r.step
+        );
+        long += usize::from(r.self_contact.candidates as usize >= SELF_SPLIT_MIN_CANDIDATES);
+    }
+    stop.store(true, Ordering::Relaxed);
+    helper.join().expect("the helper ends");
+    println!(
+        "{long} of 4000 steps with a candidate list long enough to split; the helper ran {} halves",
+        ran.load(Ordering::Relaxed)
+    );
+    assert!(
+        long > 0 && ran.load(Ordering::Relaxed) > 0,
+        "no step split its checks: the test shows nothing"
+    );
 }
 
 /// A cloth resting in layers on itself does not gain energy: settled for

@@ -50,7 +50,7 @@ pub use real::Real;
 pub use report::StepReport;
 /// Closest point on a triangle (Ericson), shared with `mesh::locate`.
 pub(crate) use selfcontact::point_triangle;
-pub use selfcontact::{SelfContact, SelfOutcome};
+pub use selfcontact::{SelfContact, SelfOutcome, SELF_SPLIT_MIN_CANDIDATES};
 pub use simd::{active_isa_name, force_path, VectorPath};
 pub use stability::{amplification, dt_limit, modal_estimate, ModalEstimate};
 pub use state::State;
@@ -590,6 +590,7 @@ impl Simulation {
                 &mut self.state.vel,
                 &self.model.inv_mass,
                 ws,
+                par.pair,
             ),
             _ => SelfOutcome::default(),
         };

@@ -128,6 +128,14 @@ pub fn coplanar_times(x: [V3; 4], d: [V3; 4], out: &mut [f64; 3]) -> usize {
         out[0] = 0.0;
         return 1;
     }
+    let tol = 1e-12 * scale;
+    // Most pairs a step checks never become coplanar: the cubic's Bernstein
+    // coefficients on [0, 1] all of one sign bound it away from zero there
+    // (it lies in their convex hull), so no root is sought.
+    let bern = [c0, c0 + c1 / 3.0, c0 + (2.0 * c1 + c2) / 3.0, c0 + c1 + c2 + c3];
+    if bern.iter().all(|&b| b > tol) || bern.iter().all(|&b| b < -tol) {
+        return 0;
+    }
     // Split [0, 1] where the derivative vanishes: f is monotone between.
     let mut cuts = [0.0, 1.0, 1.0, 1.0];
     let mut m = 1;
@@ -158,7 +166,6 @@ pub fn coplanar_times(x: [V3; 4], d: [V3; 4], out: &mut [f64; 3]) -> usize {
     cuts[m] = 1.0;
     let cuts = &mut cuts[..=m];
     cuts.sort_by(f64::total_cmp);
-    let tol = 1e-12 * scale;
     let mut count = 0;
     let mut push_root = |t: f64, count: &mut usize| {
         if *count < 3 && (*count == 0 || t > out[*count - 1]) {

@@ -24,6 +24,16 @@ fn key(c: [i64; 3]) -> u64 {
     f(c[0]) | (f(c[1]) << 21) | (f(c[2]) << 42)
 }
 
+/// `⌊x⌋` as an integer. `f64::floor` is a call into libm on a target
+/// without SSE4.1, and the broad phase takes one for every box's every
+/// side and every pair it reports; truncation, then one step down for a
+/// negative non-integer, is the same for every |x| below 2⁶³.
+#[inline(always)]
+fn floor(x: f64) -> i64 {
+    let t = x as i64;
+    t.saturating_sub(i64::from((t as f64) > x))
+}
+
 #[inline]
 fn bucket(key: u64, mask: usize) -> usize {
     // A multiplicative hash of the packed key (Knuth's constant, 64-bit).
@@ -47,27 +57,34 @@ impl Grid {
     /// The cell range a box overlaps.
     #[inline]
     fn range(&self, b: &Aabb) -> ([i64; 3], [i64; 3]) {
-        let lo = [0, 1, 2].map(|c| (b[c] * self.inv_cell).floor() as i64);
-        let hi = [0, 1, 2].map(|c| (b[c + 3] * self.inv_cell).floor() as i64);
+        let lo = [0, 1, 2].map(|c| floor(b[c] * self.inv_cell));
+        let hi = [0, 1, 2].map(|c| floor(b[c + 3] * self.inv_cell));
         (lo, hi)
     }
 
     /// The grid of `boxes` with cubic cells `cell` metres wide.
     pub fn build(&mut self, boxes: &[Aabb], cell: f64) {
         self.inv_cell = 1.0 / cell;
-        let buckets = (2 * boxes.len()).next_power_of_two().max(64);
+        // Twice as many buckets as (cell, box) entries: a query's bucket
+        // then holds little besides its own cell's boxes.
+        let total: usize = boxes
+            .iter()
+            .map(|b| {
+                let (lo, hi) = self.range(b);
+                (0..3).map(|c| (hi[c] - lo[c] + 1) as usize).product::<usize>()
+            })
+            .sum();
+        let buckets = (2 * total).next_power_of_two().max(64);
         self.mask = buckets - 1;
         self.start.clear();
         self.start.resize(buckets + 1, 0);
         // Count every (cell, box), then place them by bucket.
-        let mut total = 0usize;
         for b in boxes {
             let (lo, hi) = self.range(b);
             for x in lo[0]..=hi[0] {
                 for y in lo[1]..=hi[1] {
                     for z in lo[2]..=hi[2] {
                         self.start[bucket(key([x, y, z]), self.mask) + 1] += 1;
-                        total += 1;
                     }
                 }
             }
@@ -117,7 +134,7 @@ impl Grid {
                             continue;
                         }
                         // The intersection's low corner's cell.
-                        let low = [0, 1, 2].map(|c| (query[c].max(other[c]) * self.inv_cell).floor() as i64);
+                        let low = [0, 1, 2].map(|c| floor(query[c].max(other[c]) * self.inv_cell));
                         if low == cell {
                             visit(i);
                         }

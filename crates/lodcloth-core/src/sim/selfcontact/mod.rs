@@ -47,8 +47,10 @@
 //!
 //! # Broad phase
 //! Candidate pairs are kept over many steps (a Verlet list): at a rebuild
-//! every node's box is its move grown by a margin (h/2), every triangle's the union of its nodes' grown
-//! by h and every edge's by h/2, hashed into a uniform grid
+//! every node's box is its move grown by a margin (as far as it moves in
+//! [`BOX_STEPS`] steps at its speed, between h/2 and [`MAX_MARGIN`]·h),
+//! every triangle's the union of its nodes' grown by h and every edge's by
+//! h/2, hashed into a uniform grid
 //! ([`grid::Grid`]); pairs whose boxes overlap and that are closer than h
 //! plus how far their nodes can go in their boxes are the candidates until
 //! a node's move leaves its box. Each pass checks the candidates alone, with
@@ -62,6 +64,7 @@ pub use geometry::{coplanar_times, point_triangle, segment_segment};
 
 use grid::{Aabb, Grid};
 
+use super::pair::{Pair as Lend, Serial};
 use super::topology::Topology;
 use super::vec3::{add, cross, dot, norm, scale, sub, V3};
 
@@ -73,6 +76,14 @@ pub const ZONE_ROUNDS: usize = 40;
 const REPULSION_TIME: f64 = 0.01;
 /// Impacts count within this fraction of the thickness at the coplanar time.
 const IMPACT_TOLERANCE: f64 = 1e-3;
+/// A node's box at a rebuild reaches as far past its move as it goes in
+/// this many steps at its speed: a rebuild costs some hundred checks of the
+/// list, so a list should last about this long (module docs, "Broad
+/// phase").
+pub const BOX_STEPS: f64 = 8.0;
+/// The largest margin of a node's box, in thicknesses: a box any wider
+/// holds more candidates than rebuilding more often costs.
+pub const MAX_MARGIN: f64 = 4.0;
 
 /// Self-contact's settings (a scene's `[contact]`).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -98,6 +109,11 @@ pub struct SelfOutcome {
     pub unresolved: u32,
     /// Candidate lists rebuilt (module docs, "Broad phase").
     pub rebuilds: u32,
+    /// Candidate pairs at the step's end.
+    pub candidates: u32,
+    /// Pairs checked for proximity or impact over all passes (a pass
+    /// after the first checks only pairs whose moves changed since).
+    pub checks: u32,
 }
 
 /// A colliding or near pair: four nodes (node, a, b, c for a node and a
@@ -149,14 +165,23 @@ pub(crate) struct SelfWorkspace {
     parent: Vec<u32>,
     zoned: Vec<u32>,
     in_zone: Vec<bool>,
-    /// A rebuild's candidates for one node or edge.
-    hits: Vec<u32>,
+    /// A rebuild's two halves (see [`rebuild`]).
+    half_a: Half,
+    half_b: Half,
     /// Candidate node–triangle and edge–edge pairs ([`rebuild`]), valid
     /// while every node moves within its box (`vbox`).
     cand_vt: Vec<(u32, u32)>,
     cand_ee: Vec<(u32, u32)>,
     built: bool,
-    /// How far past its move a node's box reaches at a rebuild (m).
+    /// Per node, the detection pass in which its move last changed, and
+    /// the current pass: a pair none of whose moves changed since the pass
+    /// before was checked with these moves already.
+    changed: Vec<u64>,
+    epoch: u64,
+    /// What a pass's checks found, per half (see [`detect`]).
+    found: Vec<Hit>,
+    found_b: Vec<Hit>,
+    /// How far past its move a node's box reaches at a rebuild at least (m).
     margin: f64,
     /// Per node, how far from its rebuild position its box lets it go: a
     /// pair farther apart than the thickness plus its nodes' reaches
@@ -192,24 +217,29 @@ impl SelfWorkspace {
             parent: (0..n as u32).collect(),
             zoned: Vec::new(),
             in_zone: vec![false; n],
-            hits: Vec::new(),
+            half_a: Half::default(),
+            half_b: Half::default(),
             cand_vt: Vec::new(),
             cand_ee: Vec::new(),
             built: false,
+            changed: vec![0; n],
+            epoch: 1,
+            found: Vec::new(),
+            found_b: Vec::new(),
             margin: 0.0,
             reach: vec![0.0; n],
         };
         // The rest shape's close pairs, found by a pass over it at rest.
         let free = vec![1.0; n];
         let mut outcome = SelfOutcome::default();
-        detect(settings, 1.0, &free, &mut ws, Pass::Rest, &mut outcome);
+        detect(settings, 1.0, &free, &mut ws, Pass::Rest, &mut outcome, &Serial);
         ws.rest_vt.sort_unstable();
         ws.rest_ee.sort_unstable();
-        // The margin: half the thickness. Two parts of a flat sheet are
-        // at least 0.7 of a cell apart (a node and the diagonal across its
-        // cell), more than the thickness plus two reaches (h + 2·√3·h/2 =
-        // 2.7 h), so a flat sheet of cells over 4 h has no candidates; a
-        // node moving at 1 m/s with dt = 1e-4 s stays in its box 15 steps.
+        // The least margin: half the thickness. Two parts of a still flat
+        // sheet are at least 0.7 of a cell apart (a node and the diagonal
+        // across its cell), more than the thickness plus two reaches
+        // (h + 2·√3·h/2 = 2.7 h), so a still sheet of cells over 4 h has no
+        // candidates.
         ws.margin = 0.5 * settings.thickness;
         ws.built = false;
         ws
@@ -240,7 +270,7 @@ impl SelfWorkspace {
 
 /// Resolves self-contact for the move from `before` to `pos` (SoA, 3n),
 /// changing `pos` and `vel` of the nodes it moves. `inv_mass` is 0 at
-/// pinned nodes.
+/// pinned nodes; `lend` may run half of a long candidate list's checks.
 pub(crate) fn resolve(
     settings: &SelfContact,
     dt: f64,
@@ -249,6 +279,7 @@ pub(crate) fn resolve(
     vel: &mut [f64],
     inv_mass: &[f64],
     ws: &mut SelfWorkspace,
+    lend: &dyn Lend,
 ) -> SelfOutcome {
     let n = ws.x0.len();
     let mut out = SelfOutcome::default();
@@ -265,7 +296,7 @@ pub(crate) fn resolve(
         return out;
     }
     ws.touched.fill(false);
-    let mut found = detect(settings, dt, inv_mass, ws, Pass::First, &mut out);
+    let mut found = detect(settings, dt, inv_mass, ws, Pass::First, &mut out, lend);
     // The first pass's proximity impulses change moves of pairs it had
     // already checked for impacts: check again whenever it changed any.
     if out.proximities > 0 {
@@ -273,13 +304,13 @@ pub(crate) fn resolve(
     }
     let mut passes = 1;
     while found > 0 && passes <= IMPACT_PASSES {
-        found = detect(settings, dt, inv_mass, ws, Pass::Impacts, &mut out);
+        found = detect(settings, dt, inv_mass, ws, Pass::Impacts, &mut out, lend);
         passes += 1;
     }
     if found > 0 {
         // Impact zones until no pair collides.
         for round in 0..=ZONE_ROUNDS {
-            found = detect(settings, dt, inv_mass, ws, Pass::Zones, &mut out);
+            found = detect(settings, dt, inv_mass, ws, Pass::Zones, &mut out, lend);
             if found == 0 {
                 break;
             }
@@ -292,9 +323,10 @@ pub(crate) fn resolve(
                     let k = ws.zoned[i] as usize;
                     if inv_mass[k] > 0.0 {
                         ws.vbar[k] = [0.0; 3];
+                        ws.changed[k] = ws.epoch;
                     }
                 }
-                found = detect(settings, dt, inv_mass, ws, Pass::Zones, &mut out);
+                found = detect(settings, dt, inv_mass, ws, Pass::Zones, &mut out, lend);
             }
         }
         out.unresolved = found;
@@ -306,6 +338,7 @@ pub(crate) fn resolve(
         }
         ws.zoned.clear();
     }
+    out.candidates = (ws.cand_vt.len() + ws.cand_ee.len()) as u32;
     // The changed moves: positions from them, velocities by the same change.
     for k in 0..n {
         if !ws.touched[k] || inv_mass[k] == 0.0 {
@@ -337,13 +370,14 @@ fn candidates_hold(ws: &SelfWorkspace, dt: f64) -> bool {
 /// node–triangle or edge–edge pair whose boxes overlap is a candidate
 /// until some node leaves its box, which at the cloth's usual speeds is
 /// tens of steps later.
-fn rebuild(ws: &mut SelfWorkspace, h: f64, dt: f64, inv_mass: &[f64]) {
-    let margin = ws.margin;
+fn rebuild(ws: &mut SelfWorkspace, h: f64, dt: f64, inv_mass: &[f64], lend: &dyn Lend) {
     for k in 0..ws.x0.len() {
         let a = ws.x0[k];
         let b = add(a, scale(ws.vbar[k], dt));
+        let step = norm(sub(b, a));
+        let margin = (BOX_STEPS * step).clamp(ws.margin, ws.margin.max(MAX_MARGIN * h));
         // How far from x0 the node can be while inside its box.
-        ws.reach[k] = norm(sub(b, a)) + 3f64.sqrt() * margin;
+        ws.reach[k] = step + 3f64.sqrt() * margin;
         ws.vbox[k] = [
             a[0].min(b[0]) - margin,
             a[1].min(b[1]) - margin,
@@ -396,14 +430,56 @@ fn rebuild(ws: &mut SelfWorkspace, h: f64, dt: f64, inv_mass: &[f64]) {
     // Cells about a triangle's box, but never so small that one fast
     // triangle spans more than 16 cells a side.
     let cell = (extent_sum / ws.tris.len() as f64).max(extent_max / 16.0).max(1e-9);
-    ws.tgrid.build(&ws.tbox, cell);
-    ws.egrid.build(&ws.ebox, cell);
-    let mut hits = std::mem::take(&mut ws.hits);
+    {
+        let (tgrid, egrid) = (&mut ws.tgrid, &mut ws.egrid);
+        let (tbox, ebox) = (&ws.tbox, &ws.ebox);
+        lend.join(&mut || tgrid.build(tbox, cell), &mut || egrid.build(ebox, cell));
+    }
+    // The queries in two halves (the nodes', then the edges'), each into
+    // its own lists, joined in order: the same list on one thread or two.
+    let (mut a, mut b) = (std::mem::take(&mut ws.half_a), std::mem::take(&mut ws.half_b));
+    a.vt = std::mem::take(&mut ws.cand_vt);
+    a.ee = std::mem::take(&mut ws.cand_ee);
+    b.vt.clear();
+    b.ee.clear();
+    {
+        let ws = &*ws;
+        let (n, e) = (ws.x0.len() as u32, ws.edges.len() as u32);
+        lend.join(&mut || query(ws, h, inv_mass, 0..n / 2, 0..e / 2, &mut a), &mut || {
+            query(ws, h, inv_mass, n / 2..n, e / 2..e, &mut b)
+        });
+    }
+    a.vt.extend_from_slice(&b.vt);
+    a.ee.extend_from_slice(&b.ee);
+    ws.cand_vt = std::mem::take(&mut a.vt);
+    ws.cand_ee = std::mem::take(&mut a.ee);
+    (ws.half_a, ws.half_b) = (a, b);
+}
+
+/// One half of a rebuild's candidates, with its scratch list.
+#[derive(Debug, Clone, Default)]
+struct Half {
+    vt: Vec<(u32, u32)>,
+    ee: Vec<(u32, u32)>,
+    hits: Vec<u32>,
+}
+
+/// The candidates of nodes `nodes` with every triangle, and of edges
+/// `edges` with every later edge, appended to `out` (see [`rebuild`]).
+fn query(
+    ws: &SelfWorkspace,
+    h: f64,
+    inv_mass: &[f64],
+    nodes: std::ops::Range<u32>,
+    edges: std::ops::Range<u32>,
+    out: &mut Half,
+) {
     let pinned = |k: &u32| inv_mass[*k as usize] == 0.0;
-    for v in 0..ws.x0.len() as u32 {
+    let hits = &mut out.hits;
+    for v in nodes {
         hits.clear();
         ws.tgrid.each_overlap(&ws.vbox[v as usize], &ws.tbox, |t| hits.push(t));
-        for &t in &hits {
+        for &t in hits.iter() {
             let tri = ws.tris[t as usize];
             if tri.contains(&v)
                 || (pinned(&v) && tri.iter().all(pinned))
@@ -419,17 +495,17 @@ fn rebuild(ws: &mut SelfWorkspace, h: f64, dt: f64, inv_mass: &[f64]) {
             if norm(sub(x[0], q)) - reach >= h {
                 continue;
             }
-            ws.cand_vt.push((v, t));
+            out.vt.push((v, t));
         }
     }
-    for e in 0..ws.edges.len() as u32 {
+    for e in edges {
         hits.clear();
         ws.egrid.each_overlap(&ws.ebox[e as usize], &ws.ebox, |f| {
             if f > e {
                 hits.push(f)
             }
         });
-        for &f in &hits {
+        for &f in hits.iter() {
             let (a, b) = (ws.edges[e as usize], ws.edges[f as usize]);
             if a.iter().any(|k| b.contains(k))
                 || (a.iter().all(pinned) && b.iter().all(pinned))
@@ -444,10 +520,9 @@ fn rebuild(ws: &mut SelfWorkspace, h: f64, dt: f64, inv_mass: &[f64]) {
             if gap - (side(a) + side(b)) >= h {
                 continue;
             }
-            ws.cand_ee.push((e, f));
+            out.ee.push((e, f));
         }
     }
-    ws.hits = hits;
 }
 
 /// Whether the swept boxes of `nodes` (the first `split` one side, the
@@ -478,7 +553,32 @@ fn sweeps_meet(ws: &SelfWorkspace, nodes: [u32; 4], split: usize, dt: f64, h: f6
     (0..3).all(|c| p[c] - h <= q[c + 3] && q[c] - h <= p[c + 3])
 }
 
+/// What checking one candidate found.
+#[derive(Debug, Clone, Copy)]
+struct Hit {
+    pair: Pair,
+    /// Within the thickness at the step's start (else an impact).
+    proximity: bool,
+    /// The candidate: (node, triangle), or (edge, edge) when `edges`.
+    id: (u32, u32),
+    edges: bool,
+}
+
+/// Candidate lists at least this long are checked in two halves at once
+/// when the step has a second thread (the checks are read-only; what they
+/// find is applied in the candidates' order either way, so the result is
+/// the same with one thread or two).
+pub const SELF_SPLIT_MIN_CANDIDATES: usize = 2048;
+
 /// One detection pass over the current moves; returns the impacts found.
+///
+/// The candidates are checked against the moves as they stand at the
+/// pass's start (in two halves at once when `lend` can run them), then
+/// what was found is applied in the candidates' order: proximity
+/// impulses, then each impact's response with the moves as they are by
+/// then. Pairs none of whose moves changed since the last pass checked
+/// them are skipped: they found nothing then, or their nodes would have
+/// changed.
 fn detect(
     settings: &SelfContact,
     dt: f64,
@@ -486,64 +586,137 @@ fn detect(
     ws: &mut SelfWorkspace,
     pass: Pass,
     out: &mut SelfOutcome,
+    lend: &dyn Lend,
 ) -> u32 {
     let h = settings.thickness;
+    ws.epoch += 1;
+    let mut full = matches!(pass, Pass::First | Pass::Rest);
     if !candidates_hold(ws, dt) {
-        rebuild(ws, h, dt, inv_mass);
+        rebuild(ws, h, dt, inv_mass, lend);
         out.rebuilds += 1;
+        full = true;
     }
+    let check = Check {
+        pass,
+        // Moves changed in the last pass (or since, by the zones).
+        since: if full { 0 } else { ws.epoch - 1 },
+        dt,
+        h,
+    };
+    let (mut first, mut second) = (std::mem::take(&mut ws.found), std::mem::take(&mut ws.found_b));
+    first.clear();
+    second.clear();
+    let (vt, ee) = (ws.cand_vt.len(), ws.cand_ee.len());
+    let (mut checks_a, mut checks_b) = (0, 0);
+    {
+        let ws = &*ws;
+        if vt + ee >= SELF_SPLIT_MIN_CANDIDATES {
+            let (vt_a, vt_b) = ws.cand_vt.split_at(vt / 2);
+            let (ee_a, ee_b) = ws.cand_ee.split_at(ee / 2);
+            lend.join(&mut || checks_a = scan(ws, &check, vt_a, ee_a, &mut first), &mut || {
+                checks_b = scan(ws, &check, vt_b, ee_b, &mut second)
+            });
+        } else {
+            checks_a = scan(ws, &check, &ws.cand_vt, &ws.cand_ee, &mut first);
+        }
+    }
+    out.checks += checks_a + checks_b;
+    // In the candidates' order: the first half's node–triangle pairs, then
+    // the second's, then the edge pairs likewise.
+    let order = first
+        .iter()
+        .filter(|x| !x.edges)
+        .chain(second.iter().filter(|x| !x.edges))
+        .chain(first.iter().filter(|x| x.edges))
+        .chain(second.iter().filter(|x| x.edges));
     let mut found = 0u32;
-    // Node–triangle pairs.
-    let cand_vt = std::mem::take(&mut ws.cand_vt);
-    for &(v, t) in &cand_vt {
+    for hit in order {
+        match (pass, hit.proximity) {
+            (Pass::Rest, _) => {
+                if hit.edges {
+                    ws.rest_ee.push(hit.id)
+                } else {
+                    ws.rest_vt.push(hit.id)
+                }
+            }
+            (_, true) => out.proximities += u32::from(repel(ws, inv_mass, &hit.pair, dt, h, settings.friction)),
+            (_, false) => {
+                found += 1;
+                respond(ws, inv_mass, &hit.pair, pass, dt, h, settings.friction, out);
+            }
+        }
+    }
+    (ws.found, ws.found_b) = (first, second);
+    found
+}
+
+/// What a pass checks (see [`detect`]).
+struct Check {
+    pass: Pass,
+    /// Pairs with a node whose move changed in this pass or later are
+    /// checked (0: all).
+    since: u64,
+    dt: f64,
+    h: f64,
+}
+
+/// Checks candidates `vt` and `ee` against the moves in `ws`, appending
+/// what they find to `hits`; returns how many were checked.
+fn scan(ws: &SelfWorkspace, check: &Check, vt: &[(u32, u32)], ee: &[(u32, u32)], hits: &mut Vec<Hit>) -> u32 {
+    let Check { pass, since, dt, h } = *check;
+    let stale = |nodes: [u32; 4]| since == 0 || nodes.iter().any(|&k| ws.changed[k as usize] >= since);
+    let mut checks = 0;
+    for &(v, t) in vt {
         let tri = ws.tris[t as usize];
         let nodes = [v, tri[0], tri[1], tri[2]];
-        if !sweeps_meet(ws, nodes, 1, dt, h) {
+        if !stale(nodes) || !sweeps_meet(ws, nodes, 1, dt, h) {
             continue;
+        }
+        checks += 1;
+        let hit = |pair, proximity| Hit {
+            pair,
+            proximity,
+            id: (v, t),
+            edges: false,
+        };
+        if matches!(pass, Pass::First | Pass::Rest) {
+            if let Some(p) = vt_proximity(ws, nodes, h) {
+                hits.push(hit(p, true));
+            }
         }
         if pass == Pass::Rest {
-            if vt_proximity(ws, nodes, h).is_some() {
-                ws.rest_vt.push((v, t));
-            }
             continue;
-        }
-        if pass == Pass::First {
-            if let Some(p) = vt_proximity(ws, nodes, h) {
-                out.proximities += u32::from(repel(ws, inv_mass, &p, dt, h, settings.friction));
-            }
         }
         if let Some(p) = vt_impact(ws, nodes, dt, h) {
-            found += 1;
-            respond(ws, inv_mass, &p, pass, dt, h, settings.friction, out);
+            hits.push(hit(p, false));
         }
     }
-    ws.cand_vt = cand_vt;
-    // Edge–edge pairs.
-    let cand_ee = std::mem::take(&mut ws.cand_ee);
-    for &(e, f) in &cand_ee {
+    for &(e, f) in ee {
         let (a, b) = (ws.edges[e as usize], ws.edges[f as usize]);
         let nodes = [a[0], a[1], b[0], b[1]];
-        if !sweeps_meet(ws, nodes, 2, dt, h) {
+        if !stale(nodes) || !sweeps_meet(ws, nodes, 2, dt, h) {
             continue;
+        }
+        checks += 1;
+        let hit = |pair, proximity| Hit {
+            pair,
+            proximity,
+            id: (e, f),
+            edges: true,
+        };
+        if matches!(pass, Pass::First | Pass::Rest) {
+            if let Some(p) = ee_proximity(ws, nodes, h) {
+                hits.push(hit(p, true));
+            }
         }
         if pass == Pass::Rest {
-            if ee_proximity(ws, nodes, h).is_some() {
-                ws.rest_ee.push((e, f));
-            }
             continue;
         }
-        if pass == Pass::First {
-            if let Some(p) = ee_proximity(ws, nodes, h) {
-                out.proximities += u32::from(repel(ws, inv_mass, &p, dt, h, settings.friction));
-            }
-        }
         if let Some(p) = ee_impact(ws, nodes, dt, h) {
-            found += 1;
-            respond(ws, inv_mass, &p, pass, dt, h, settings.friction, out);
+            hits.push(hit(p, false));
         }
     }
-    ws.cand_ee = cand_ee;
-    found
+    checks
 }
 
 /// A node–triangle pair within `h` at the step's start: the weights of
@@ -739,6 +912,7 @@ fn push(ws: &mut SelfWorkspace, inv_mass: &[f64], p: &Pair, target: f64, frictio
         let s = p.w[i] * im[i];
         ws.vbar[k] = add(ws.vbar[k], add(scale(p.normal, s * j), scale(tangential, -s * jt)));
         ws.touched[k] = true;
+        ws.changed[k] = ws.epoch;
     }
     true
 }
@@ -773,6 +947,7 @@ fn move_zones(dt: f64, inv_mass: &[f64], ws: &mut SelfWorkspace) {
             let mean = scale(mean, 1.0 / pinned as f64);
             for &k in members.iter().filter(|&&k| inv_mass[k as usize] > 0.0) {
                 ws.vbar[k as usize] = mean;
+                ws.changed[k as usize] = ws.epoch;
             }
             continue;
         }
@@ -814,6 +989,7 @@ fn move_zones(dt: f64, inv_mass: &[f64], ws: &mut SelfWorkspace) {
             };
             let x1 = add(add(centre, scale(velocity, dt)), turned);
             ws.vbar[k as usize] = scale(sub(x1, ws.x0[k as usize]), 1.0 / dt);
+            ws.changed[k as usize] = ws.epoch;
         }
     }
     ws.zoned = zoned;
