@@ -57,8 +57,10 @@ impl Grid {
     /// The cell range a box overlaps.
     #[inline]
     fn range(&self, b: &Aabb) -> ([i64; 3], [i64; 3]) {
-        let lo = [0, 1, 2].map(|c| floor(b[c] * self.inv_cell));
-        let hi = [0, 1, 2].map(|c| floor(b[c + 3] * self.inv_cell));
+        // Written out: `[0, 1, 2].map(…)` stays a call here.
+        let i = self.inv_cell;
+        let lo = [floor(b[0] * i), floor(b[1] * i), floor(b[2] * i)];
+        let hi = [floor(b[3] * i), floor(b[4] * i), floor(b[5] * i)];
         (lo, hi)
     }
 
@@ -134,7 +136,12 @@ impl Grid {
                             continue;
                         }
                         // The intersection's low corner's cell.
-                        let low = [0, 1, 2].map(|c| floor(query[c].max(other[c]) * self.inv_cell));
+                        let inv = self.inv_cell;
+                        let low = [
+                            floor(query[0].max(other[0]) * inv),
+                            floor(query[1].max(other[1]) * inv),
+                            floor(query[2].max(other[2]) * inv),
+                        ];
                         if low == cell {
                             visit(i);
                         }
