@@ -577,8 +577,8 @@ pub const SELF_SPLIT_MIN_CANDIDATES: usize = 2048;
 /// what was found is applied in the candidates' order: proximity
 /// impulses, then each impact's response with the moves as they are by
 /// then. Pairs none of whose moves changed since the last pass checked
-/// them are skipped: they found nothing then, or their nodes would have
-/// changed.
+/// them are skipped: they found nothing then (a pair that met is marked
+/// changed, whatever its response did).
 fn detect(
     settings: &SelfContact,
     dt: f64,
@@ -643,6 +643,12 @@ fn detect(
             (_, false) => {
                 found += 1;
                 respond(ws, inv_mass, &hit.pair, pass, dt, h, settings.friction, out);
+                // Checked again next pass even if its impulse changed no
+                // move (its relative velocity along the normal was already
+                // enough, yet it met): only zones may resolve it then.
+                for k in hit.pair.nodes {
+                    ws.changed[k as usize] = ws.epoch;
+                }
             }
         }
     }
