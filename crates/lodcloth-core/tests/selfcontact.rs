@@ -182,10 +182,9 @@ fn self_contact_on_two_threads_steps_to_the_same_bits_as_on_one() {
         "{long} of 4000 steps with a candidate list long enough to split; the helper ran {} halves",
         ran.load(Ordering::Relaxed)
     );
-    assert!(
-        long > 0 && ran.load(Ordering::Relaxed) > 0,
-        "no step split its checks: the test shows nothing"
-    );
+    // Whether the helper took a half depends on the machine's load (the
+    // stepping thread takes it back rather than wait); the splits do not.
+    assert!(long > 0, "no step split its checks: the test shows nothing");
 }
 
 /// A cloth resting in layers on itself does not gain energy: settled for
