@@ -107,14 +107,7 @@ fn main() {
     let stop = Arc::new(AtomicBool::new(false));
     let helper = {
         let (lender, stop) = (lender.clone(), stop.clone());
-        std::thread::spawn(move || {
-            lender.set_helper(std::thread::current());
-            while !stop.load(Ordering::Relaxed) {
-                if !lender.help() {
-                    std::thread::park_timeout(std::time::Duration::from_micros(50));
-                }
-            }
-        })
+        std::thread::spawn(move || lender.serve_until(&stop))
     };
     println!(
         "| level | springs | pairs in contact | crossings | candidates | checks / step | rebuilds / step | without µs | with µs | overhead µs | overhead / step | with, two threads µs | overhead / step, two threads |"

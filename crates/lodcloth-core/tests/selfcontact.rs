@@ -144,22 +144,12 @@ fn an_accordion_dropped_onto_a_floor_piles_up_without_crossing() {
 /// steps to the same bits on one thread and on two.
 #[test]
 fn self_contact_on_two_threads_steps_to_the_same_bits_as_on_one() {
-    use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+    use std::sync::atomic::{AtomicBool, Ordering};
     let lender = Arc::new(Lender::new());
     let stop = Arc::new(AtomicBool::new(false));
-    let ran = Arc::new(AtomicUsize::new(0));
     let helper = {
-        let (lender, stop, ran) = (lender.clone(), stop.clone(), ran.clone());
-        std::thread::spawn(move || {
-            lender.set_helper(std::thread::current());
-            while !stop.load(Ordering::Relaxed) {
-                if lender.help() {
-                    ran.fetch_add(1, Ordering::Relaxed);
-                } else {
-                    std::thread::park_timeout(std::time::Duration::from_micros(100));
-                }
-            }
-        })
+        let (lender, stop) = (lender.clone(), stop.clone());
+        std::thread::spawn(move || lender.serve_until(&stop))
     };
     let (mut one, mut two) = (accordion_sim_of(true, 2), accordion_sim_of(true, 2));
     let mut long = 0;
@@ -176,12 +166,9 @@ fn self_contact_on_two_threads_steps_to_the_same_bits_as_on_one() {
         );
         long += usize::from(r.self_contact.candidates as usize >= SELF_SPLIT_MIN_CANDIDATES);
     }
-    stop.store(true, Ordering::Relaxed);
-    helper.join().expect("the helper ends");
-    println!(
-        "{long} of 4000 steps with a candidate list long enough to split; the helper ran {} halves",
-        ran.load(Ordering::Relaxed)
-    );
+    stop.store(true, Ordering::Release);
+    let ran = helper.join().expect("the helper ends");
+    println!("{long} of 4000 steps with a candidate list long enough to split; the helper ran {ran} halves");
     // Whether the helper took a half depends on the machine's load (the
     // stepping thread takes it back rather than wait); the splits do not.
     assert!(long > 0, "no step split its checks: the test shows nothing");

@@ -25,18 +25,7 @@ impl Helper {
     fn start(lender: Arc<Lender>) -> Helper {
         let stop = Arc::new(AtomicBool::new(false));
         let s = stop.clone();
-        let thread = std::thread::spawn(move || {
-            lender.set_helper(std::thread::current());
-            let mut ran = 0;
-            while !s.load(Ordering::Relaxed) {
-                if lender.help() {
-                    ran += 1;
-                } else {
-                    std::thread::park_timeout(std::time::Duration::from_micros(200));
-                }
-            }
-            ran
-        });
+        let thread = std::thread::spawn(move || lender.serve_until(&s));
         Helper {
             stop,
             thread: Some(thread),

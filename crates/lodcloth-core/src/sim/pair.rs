@@ -144,6 +144,24 @@ impl Lender {
     }
 }
 
+impl Lender {
+    /// Makes the calling thread this lender's helper and runs posted halves
+    /// until `stop` is set; returns how many it ran. Between halves it
+    /// parks (a join unparks it), so an idle helper costs nothing.
+    pub fn serve_until(&self, stop: &std::sync::atomic::AtomicBool) -> usize {
+        self.set_helper(std::thread::current());
+        let mut ran = 0;
+        while !stop.load(Ordering::Acquire) {
+            if self.help() {
+                ran += 1;
+            } else {
+                std::thread::park_timeout(Duration::from_millis(1));
+            }
+        }
+        ran
+    }
+}
+
 impl Pair for Lender {
     fn join(&self, a: &mut (dyn FnMut() + Send), b: &mut (dyn FnMut() + Send)) {
         let helper = self.helper.lock().unwrap_or_else(|e| e.into_inner()).clone();

@@ -159,14 +159,7 @@ fn a_split_evaluation_adds_every_spring_once() {
     let stop = Arc::new(AtomicBool::new(false));
     let helper = {
         let (lender, stop) = (lender.clone(), stop.clone());
-        std::thread::spawn(move || {
-            lender.set_helper(std::thread::current());
-            while !stop.load(Ordering::Relaxed) {
-                if !lender.help() {
-                    std::thread::park_timeout(std::time::Duration::from_millis(1));
-                }
-            }
-        })
+        std::thread::spawn(move || lender.serve_until(&stop))
     };
     for (nx, ny, orientation) in [
         (12, 9, Orientation::Horizontal),
