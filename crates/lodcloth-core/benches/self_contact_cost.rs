@@ -8,7 +8,16 @@
 //! with a helper thread lent as the daemon lends one, for f64 and f32
 //! springs (the daemon's).
 //!
-//! `cargo bench -p lodcloth-core --bench self_contact_cost -- [--levels 32,64] [--thickness 0.003]`
+//! Then a folding scene (default the paper's scene 2, which the default
+//! daemon serves) run whole from rest at the levels a daemon serves, each
+//! at the daemon's dt (the largest dividing the 8 ms metric frame within
+//! 0.75 of the level's stability limit), f32 springs, one thread: µs per
+//! step with self-contact and without, rebuilds per step, the most
+//! candidates, and the steps that ended crossing (exact check, every 10th
+//! step).
+//!
+//! `cargo bench -p lodcloth-core --bench self_contact_cost -- [--levels 32,64] [--thickness 0.003]
+//!  [--scene config/scenes/paper-2-corner.toml] [--scene-levels 16,24,32]`
 use std::path::Path;
 use std::sync::Arc;
 use std::time::Instant;
@@ -147,4 +156,71 @@ fn main() {
     }
     stop.store(true, Ordering::Relaxed);
     helper.join().expect("the helper thread ends");
+    let path = arg(&args, "--scene").unwrap_or(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../config/scenes/paper-2-corner.toml"
+    ));
+    let levels: Vec<usize> = arg(&args, "--scene-levels")
+        .unwrap_or("16,24,32")
+        .split(',')
+        .map(|s| s.parse().expect("--scene-levels: node counts per side"))
+        .collect();
+    whole_scene(Path::new(path), &levels, contact);
+}
+
+/// The scene run whole from rest at each level, with self-contact and
+/// without (module docs).
+fn whole_scene(path: &Path, levels: &[usize], contact: SelfContact) {
+    let scene = Scene::load(path).expect("scene");
+    // The daemon's metric frame: the reference's dt × 40 (`metric_stride`).
+    let interval = scene.params.dt * 40.0;
+    println!(
+        "\nscene {} ({}, {:.1} s), run whole from rest, f32 springs, one thread, thickness {} m",
+        scene.name,
+        scene.params.integrator.name(),
+        scene.duration,
+        contact.thickness
+    );
+    println!(
+        "| level | dt | steps | without µs | with µs | overhead / step | rebuilds / step | most candidates | most pairs in contact | steps crossing (of checked) |"
+    );
+    println!("|---|---|---|---|---|---|---|---|---|---|");
+    for &n in levels {
+        let limit = scene.build_at(n, n).expect("builds").dt_limit();
+        let dt = interval / (interval / (0.75 * limit)).ceil().max(1.0);
+        let mut at = scene.clone();
+        at.params.dt = dt;
+        let steps = (at.duration / dt).round() as usize;
+        let mut cost = [0.0; 2];
+        let (mut rebuilds, mut candidates, mut pairs, mut crossing, mut checked) = (0u64, 0u32, 0u32, 0, 0);
+        for (i, on) in [false, true].into_iter().enumerate() {
+            at.params.self_contact = on.then_some(contact);
+            let mut sim = at.build_at(n, n).expect("builds");
+            sim.set_spring_precision(SpringPrecision::F32);
+            let mut spent = 0.0;
+            for s in 0..steps {
+                let t = Instant::now();
+                let report = sim.step_on_lean(&Serial);
+                spent += t.elapsed().as_secs_f64();
+                if on {
+                    let c = report.self_contact;
+                    rebuilds += u64::from(c.rebuilds);
+                    candidates = candidates.max(c.candidates);
+                    pairs = pairs.max(c.proximities);
+                    if s % 10 == 9 {
+                        checked += 1;
+                        crossing += usize::from(!crossings(sim.topology(), &sim.state().pos).is_empty());
+                    }
+                }
+            }
+            cost[i] = spent / steps as f64 * 1e6;
+        }
+        println!(
+            "| {n}×{n} | {dt:.3e} | {steps} | {:.1} | {:.1} | {:.2} | {:.3} | {candidates} | {pairs} | {crossing} of {checked} |",
+            cost[0],
+            cost[1],
+            (cost[1] - cost[0]) / cost[0],
+            rebuilds as f64 / steps as f64
+        );
+    }
 }
