@@ -1,8 +1,8 @@
 //! The broad phase: candidate pairs kept over many steps (a Verlet list),
 //! rebuilt when a node's move leaves its box (module docs, "Broad phase").
 
+use super::bvh::{self, Aabb};
 use super::geometry::{self, point_triangle, segment_segment};
-use super::grid::Aabb;
 use super::{SelfWorkspace, BOX_STEPS, MAX_MARGIN};
 use crate::sim::pair::Pair as Lend;
 use crate::sim::vec3::{add, norm, scale, sub};
@@ -42,35 +42,20 @@ pub(super) fn rebuild(ws: &mut SelfWorkspace, h: f64, dt: f64, inv_mass: &[f64],
         ];
     }
     let union = |boxes: &[Aabb], nodes: &[u32], grow: f64| {
-        let mut u = [
-            f64::INFINITY,
-            f64::INFINITY,
-            f64::INFINITY,
-            f64::NEG_INFINITY,
-            f64::NEG_INFINITY,
-            f64::NEG_INFINITY,
-        ];
-        for &k in nodes {
-            let b = &boxes[k as usize];
-            for c in 0..3 {
-                u[c] = u[c].min(b[c]);
-                u[c + 3] = u[c + 3].max(b[c + 3]);
-            }
-        }
-        for c in 0..3 {
-            u[c] -= grow;
-            u[c + 3] += grow;
-        }
-        u
+        let u = nodes
+            .iter()
+            .fold(bvh::EMPTY, |u, &k| bvh::union(&u, &boxes[k as usize]));
+        [
+            u[0] - grow,
+            u[1] - grow,
+            u[2] - grow,
+            u[3] + grow,
+            u[4] + grow,
+            u[5] + grow,
+        ]
     };
-    let mut extent_sum = 0.0;
-    let mut extent_max: f64 = 0.0;
     for (t, tri) in ws.tris.iter().enumerate() {
-        let b = union(&ws.vbox, tri, h);
-        let e = (b[3] - b[0]).max(b[4] - b[1]).max(b[5] - b[2]);
-        extent_sum += e;
-        extent_max = extent_max.max(e);
-        ws.tbox[t] = b;
+        ws.tbox[t] = union(&ws.vbox, tri, h);
     }
     for (i, edge) in ws.edges.iter().enumerate() {
         ws.ebox[i] = union(&ws.vbox, edge, 0.5 * h);
@@ -81,13 +66,10 @@ pub(super) fn rebuild(ws: &mut SelfWorkspace, h: f64, dt: f64, inv_mass: &[f64],
     if ws.tris.is_empty() {
         return;
     }
-    // Cells about a triangle's box, but never so small that one fast
-    // triangle spans more than 16 cells a side.
-    let cell = (extent_sum / ws.tris.len() as f64).max(extent_max / 16.0).max(1e-9);
     {
-        let (tgrid, egrid) = (&mut ws.tgrid, &mut ws.egrid);
+        let (tbvh, ebvh) = (&mut ws.tbvh, &mut ws.ebvh);
         let (tbox, ebox) = (&ws.tbox, &ws.ebox);
-        lend.join(&mut || tgrid.build(tbox, cell), &mut || egrid.build(ebox, cell));
+        lend.join(&mut || tbvh.refit(tbox), &mut || ebvh.refit(ebox));
     }
     // The queries in two halves (the nodes', then the edges'), each into
     // its own lists, joined in order: the same list on one thread or two.
@@ -132,7 +114,7 @@ fn query(
     let hits = &mut out.hits;
     for v in nodes {
         hits.clear();
-        ws.tgrid.each_overlap(&ws.vbox[v as usize], &ws.tbox, |t| hits.push(t));
+        ws.tbvh.each_overlap(&ws.vbox[v as usize], |t| hits.push(t));
         for &t in hits.iter() {
             let tri = ws.tris[t as usize];
             if tri.contains(&v)
@@ -154,7 +136,7 @@ fn query(
     }
     for e in edges {
         hits.clear();
-        ws.egrid.each_overlap(&ws.ebox[e as usize], &ws.ebox, |f| {
+        ws.ebvh.each_overlap(&ws.ebox[e as usize], |f| {
             if f > e {
                 hits.push(f)
             }

@@ -50,22 +50,22 @@
 //! every node's box is its move grown by a margin (as far as it moves in
 //! [`BOX_STEPS`] steps at its speed, between h/2 and [`MAX_MARGIN`]·h),
 //! every triangle's the union of its nodes' grown by h and every edge's by
-//! h/2, hashed into a uniform grid
-//! ([`grid::Grid`]); pairs whose boxes overlap and that are closer than h
-//! plus how far their nodes can go in their boxes are the candidates until
-//! a node's move leaves its box. Each pass checks the candidates alone, with
-//! their swept boxes first. Buffers only grow, so a running cloth
-//! allocates nothing once its lists have reached their size.
+//! h/2, and the triangles' and edges' trees of boxes ([`bvh::Bvh`], built
+//! on the rest shape) refitted to them; pairs whose boxes overlap and that
+//! are closer than h plus how far their nodes can go in their boxes are the
+//! candidates until a node's move leaves its box. Each pass checks the
+//! candidates alone, with their swept boxes first. Buffers only grow, so a
+//! running cloth allocates nothing once its lists have reached their size.
 
 mod broad;
+mod bvh;
 mod geometry;
-mod grid;
 mod response;
 
 pub use geometry::{coplanar_times, point_triangle, segment_segment};
 
 use broad::{candidates_hold, rebuild, sweeps_meet, Half};
-use grid::{Aabb, Grid};
+use bvh::{Aabb, Bvh};
 use response::{move_zones, repel, respond};
 
 use super::pair::{Pair as Lend, Serial};
@@ -161,8 +161,9 @@ pub(crate) struct SelfWorkspace {
     vbox: Vec<Aabb>,
     tbox: Vec<Aabb>,
     ebox: Vec<Aabb>,
-    tgrid: Grid,
-    egrid: Grid,
+    /// The triangles' and the edges' trees (built on the rest shape).
+    tbvh: Bvh,
+    ebvh: Bvh,
     touched: Vec<bool>,
     /// Union–find parents of the impact zones (a node is its own parent
     /// outside any zone).
@@ -194,6 +195,19 @@ pub(crate) struct SelfWorkspace {
     reach: Vec<f64>,
 }
 
+/// The boxes of primitives (triangles or edges) in the rest shape.
+fn rest_boxes<const N: usize>(prims: &[[u32; N]], rest: &[V3]) -> Vec<Aabb> {
+    prims
+        .iter()
+        .map(|p| {
+            p.iter().fold(bvh::EMPTY, |u, &k| {
+                let x = rest[k as usize];
+                bvh::union(&u, &[x[0], x[1], x[2], x[0], x[1], x[2]])
+            })
+        })
+        .collect()
+}
+
 impl SelfWorkspace {
     pub(crate) fn new(topology: &Topology, settings: &SelfContact) -> SelfWorkspace {
         let n = topology.n_nodes;
@@ -205,6 +219,8 @@ impl SelfWorkspace {
             .collect();
         edges.sort_unstable();
         edges.dedup();
+        let tbvh = Bvh::new(&rest_boxes(&tris, &topology.rest_positions));
+        let ebvh = Bvh::new(&rest_boxes(&edges, &topology.rest_positions));
         let mut ws = SelfWorkspace {
             vbox: vec![[0.0; 6]; n],
             tbox: vec![[0.0; 6]; tris.len()],
@@ -215,8 +231,8 @@ impl SelfWorkspace {
             rest_ee: Vec::new(),
             x0: topology.rest_positions.clone(),
             vbar: vec![[0.0; 3]; n],
-            tgrid: Grid::default(),
-            egrid: Grid::default(),
+            tbvh,
+            ebvh,
             touched: vec![false; n],
             parent: (0..n as u32).collect(),
             zoned: Vec::new(),
