@@ -897,3 +897,46 @@ fn drape_recovers_a_known_bending_from_a_wrong_start() {
         }
     }
 }
+
+/// The cache keeps an estimate made with self-contact apart from one made
+/// without, and from one with another thickness: a daemon's instance can
+/// turn self-contact on without changing the scene file the key hashes.
+#[test]
+fn an_estimate_with_self_contact_is_cached_apart() {
+    use lodcloth::cache::CoefficientCache;
+    use lodcloth::plan::Estimator;
+    use lodcloth::sim::SelfContact;
+    let dir = tempfile::tempdir().expect("temp dir");
+    let estimator = Estimator {
+        cache: Some(CoefficientCache::open(dir.path()).expect("cache")),
+        tag: "test".into(),
+    };
+    let options = FitOptions::default();
+    let problem = |contact: Option<SelfContact>| {
+        let mut s = scene(8, "symplectic_euler", 2e-4);
+        s.params.self_contact = contact;
+        let reference = record(&s, 200, 10, 10);
+        own_resolution(&s, &reference)
+    };
+    let on = SelfContact {
+        thickness: 0.003,
+        friction: 0.3,
+    };
+    let est = estimator
+        .estimate(&problem(None), Method::Bcd, &options)
+        .expect("estimates");
+    assert!(!est.cached);
+    assert!(estimator.cached(&problem(None), Method::Bcd, &options).is_some());
+    assert!(
+        estimator.cached(&problem(Some(on)), Method::Bcd, &options).is_none(),
+        "an estimate made without self-contact was served with it on"
+    );
+    estimator
+        .estimate(&problem(Some(on)), Method::Bcd, &options)
+        .expect("estimates");
+    let thicker = SelfContact { thickness: 0.006, ..on };
+    assert!(
+        estimator.cached(&problem(Some(thicker)), Method::Bcd, &options).is_none(),
+        "an estimate made with another thickness was served"
+    );
+}

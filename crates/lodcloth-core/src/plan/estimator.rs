@@ -153,7 +153,12 @@ impl Estimator {
                 fit.short_tolerance,
                 fit.guard_window
             ) + &problem.settling().map_or(String::new(), |h| format!("[settle={h}]"))
-                + &reference_integrator,
+                + &reference_integrator
+                // Self-contact can be set by a daemon's instance, not only by
+                // the scene file, whose text the key hashes.
+                + &problem.scene.params.self_contact.map_or(String::new(), |c| {
+                    format!("[self={},{}]", c.thickness, c.friction)
+                }),
             mass: problem.mass.name().to_string(),
             integrator: problem.integrator.name().to_string(),
             dt: problem.dt,
