@@ -12,9 +12,9 @@
 //! daemon serves) run whole from rest at the levels a daemon serves, each
 //! at the daemon's dt (the largest dividing the 8 ms metric frame within
 //! 0.75 of the level's stability limit), f32 springs, one thread: µs per
-//! step with self-contact and without, rebuilds per step, the most
-//! candidates, and the steps that ended crossing (exact check, every 10th
-//! step).
+//! step with self-contact and without, the steps certified flat, rebuilds
+//! per step, the most candidates, and the steps that ended crossing (exact
+//! check, every 10th step).
 //!
 //! `cargo bench -p lodcloth-core --bench self_contact_cost -- [--levels 32,64] [--thickness 0.003]
 //!  [--scene config/scenes/paper-2-corner.toml] [--scene-levels 16,24,32]`
@@ -182,9 +182,9 @@ fn whole_scene(path: &Path, levels: &[usize], contact: SelfContact) {
         contact.thickness
     );
     println!(
-        "| level | dt | steps | without µs | with µs | overhead / step | rebuilds / step | most candidates | most pairs in contact | steps crossing (of checked) |"
+        "| level | dt | steps | without µs | with µs | overhead / step | flat steps | rebuilds / step | most candidates | most pairs in contact | steps crossing (of checked) |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|");
     for &n in levels {
         let limit = scene.build_at(n, n).expect("builds").dt_limit();
         let dt = interval / (interval / (0.75 * limit)).ceil().max(1.0);
@@ -192,7 +192,8 @@ fn whole_scene(path: &Path, levels: &[usize], contact: SelfContact) {
         at.params.dt = dt;
         let steps = (at.duration / dt).round() as usize;
         let mut cost = [0.0; 2];
-        let (mut rebuilds, mut candidates, mut pairs, mut crossing, mut checked) = (0u64, 0u32, 0u32, 0, 0);
+        let (mut rebuilds, mut candidates, mut pairs, mut crossing, mut checked, mut flat) =
+            (0u64, 0u32, 0u32, 0, 0, 0);
         for (i, on) in [false, true].into_iter().enumerate() {
             at.params.self_contact = on.then_some(contact);
             let mut sim = at.build_at(n, n).expect("builds");
@@ -205,6 +206,7 @@ fn whole_scene(path: &Path, levels: &[usize], contact: SelfContact) {
                 if on {
                     let c = report.self_contact;
                     rebuilds += u64::from(c.rebuilds);
+                    flat += usize::from(c.flat);
                     candidates = candidates.max(c.candidates);
                     pairs = pairs.max(c.proximities);
                     if s % 10 == 9 {
@@ -216,10 +218,11 @@ fn whole_scene(path: &Path, levels: &[usize], contact: SelfContact) {
             cost[i] = spent / steps as f64 * 1e6;
         }
         println!(
-            "| {n}×{n} | {dt:.3e} | {steps} | {:.1} | {:.1} | {:.2} | {:.3} | {candidates} | {pairs} | {crossing} of {checked} |",
+            "| {n}×{n} | {dt:.3e} | {steps} | {:.1} | {:.1} | {:.2} | {:.0} % | {:.3} | {candidates} | {pairs} | {crossing} of {checked} |",
             cost[0],
             cost[1],
             (cost[1] - cost[0]) / cost[0],
+            100.0 * flat as f64 / steps as f64,
             rebuilds as f64 / steps as f64
         );
     }

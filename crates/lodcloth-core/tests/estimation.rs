@@ -936,7 +936,9 @@ fn an_estimate_with_self_contact_is_cached_apart() {
         .expect("estimates");
     let thicker = SelfContact { thickness: 0.006, ..on };
     assert!(
-        estimator.cached(&problem(Some(thicker)), Method::Bcd, &options).is_none(),
+        estimator
+            .cached(&problem(Some(thicker)), Method::Bcd, &options)
+            .is_none(),
         "an estimate made with another thickness was served"
     );
 }

@@ -45,6 +45,15 @@
 //! exact arithmetic. `sim::crossings` counts crossings exactly, for tests
 //! and for `lodcloth inspect`.
 //!
+//! # Flat steps
+//! A step that certainly keeps the cloth a height field over the plane
+//! across its mean normal cannot bring two of its parts together, and
+//! skips everything above ([`flat`]: every triangle keeps its orientation
+//! in that plane over the whole move, and the boundary's shadow in it stays
+//! a simple curve with the thickness to spare). Only a cloth that is a disc
+//! (a grid, or a mesh with one boundary loop) is certified. A hanging or
+//! waving cloth is, a folded one is not.
+//!
 //! # Broad phase
 //! Candidate pairs are kept over many steps (a Verlet list): at a rebuild
 //! every node's box is its move grown by a margin (as far as it moves in
@@ -59,6 +68,7 @@
 
 mod broad;
 mod bvh;
+mod flat;
 mod geometry;
 mod response;
 
@@ -118,6 +128,9 @@ pub struct SelfOutcome {
     /// Pairs checked for proximity or impact over all passes (a pass
     /// after the first checks only pairs whose moves changed since).
     pub checks: u32,
+    /// The step was certified unable to bring two parts of the cloth
+    /// together, and nothing was checked (module docs, "Flat steps").
+    pub flat: bool,
 }
 
 /// A colliding or near pair: four nodes (node, a, b, c for a node and a
@@ -186,6 +199,8 @@ pub(crate) struct SelfWorkspace {
     /// What a pass's checks found, per half (see [`detect`]).
     found: Vec<Hit>,
     found_b: Vec<Hit>,
+    /// The flat-step certificate's data (see [`flat`]).
+    flat: flat::Flat,
     /// How far past its move a node's box reaches at a rebuild at least (m).
     margin: f64,
     /// Per node, how far from its rebuild position its box lets it go: a
@@ -221,7 +236,9 @@ impl SelfWorkspace {
         edges.dedup();
         let tbvh = Bvh::new(&rest_boxes(&tris, &topology.rest_positions));
         let ebvh = Bvh::new(&rest_boxes(&edges, &topology.rest_positions));
+        let flat = flat::Flat::new(topology, &edges);
         let mut ws = SelfWorkspace {
+            flat,
             vbox: vec![[0.0; 6]; n],
             tbox: vec![[0.0; 6]; tris.len()],
             ebox: vec![[0.0; 6]; edges.len()],
@@ -313,6 +330,12 @@ pub(crate) fn resolve(
     }
     if !finite {
         // A diverged step: the step reports it; nothing to resolve.
+        return out;
+    }
+    if ws.flat.certifies(&ws.tris, &ws.x0, &ws.vbar, dt, settings.thickness) {
+        // Nothing can meet; the candidates are not kept up to date meanwhile.
+        ws.built = false;
+        out.flat = true;
         return out;
     }
     ws.touched.fill(false);
