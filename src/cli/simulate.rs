@@ -163,13 +163,15 @@ pub(crate) fn simulate(a: SimulateArgs) -> Result<()> {
     if let Some(c) = sim.params().self_contact {
         println!(
             "self-contact     thickness {} m, μ {}: up to {} pairs within it, {} impacts, {} rounds of impact zones, \
-             {} steps ended with a pair colliding; up to {} candidate pairs, rebuilt every {:.1} steps",
+             {} steps ended with a pair colliding; {:.0} % of steps certified flat; up to {} candidate pairs, \
+             rebuilt every {:.1} steps",
             c.thickness,
             c.friction,
             selfc.most_near,
             selfc.impacts,
             selfc.zone_rounds,
             selfc.unresolved_steps,
+            100.0 * selfc.flat as f64 / selfc.steps.max(1) as f64,
             selfc.most_candidates,
             selfc.steps as f64 / selfc.rebuilds.max(1) as f64
         );
@@ -194,6 +196,7 @@ struct SelfTotals {
     steps: u64,
     rebuilds: u64,
     most_candidates: u32,
+    flat: u64,
 }
 
 impl SelfTotals {
@@ -205,6 +208,7 @@ impl SelfTotals {
         self.steps += 1;
         self.rebuilds += u64::from(o.rebuilds);
         self.most_candidates = self.most_candidates.max(o.candidates);
+        self.flat += u64::from(o.flat);
     }
 }
 

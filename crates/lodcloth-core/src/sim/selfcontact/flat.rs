@@ -19,9 +19,12 @@
 //! loop, connected, Euler characteristic 1, every edge in one or two
 //! triangles), as a grid is; another cloth is never certified.
 //!
-//! The certificate skips the pairs within the thickness as well: two parts
-//! of a height field come within h of each other only where the cloth is
-//! compressed to less than h across a cell, which the springs resist.
+//! Nor can two parts come within the thickness h: every triangle's least
+//! height in the plane is also kept above h plus what its corners' moves
+//! can take off it, so a node is further than h from every triangle it is
+//! not a corner of (in the plane, so in space too), and likewise two edges
+//! that share no node; with the boundary's clearance, a step so certified
+//! has nothing for the proximity pass either.
 //! Volino and Magnenat-Thalmann (1994) cull self-collisions of a patch by
 //! the same two conditions (normals within a half-space, a contour whose
 //! projection does not cross itself); here the patch is the whole cloth
@@ -42,9 +45,20 @@ pub struct Flat {
     /// Per node, its position and its move this step in the plane.
     p: Vec<[f64; 2]>,
     d: Vec<[f64; 2]>,
-    /// Per boundary edge, its box's low x in the plane and its index,
-    /// sorted for the sweep.
+    /// Per boundary edge, its box in the plane grown by h/2 and its ends'
+    /// moves, and the longer move.
+    bounds: Vec<Bound>,
+    /// Per boundary edge, its box's low side along the sweep's axis and
+    /// its index, sorted for the sweep.
     sweep: Vec<(f64, u32)>,
+}
+
+/// A boundary edge's box in the plane (see [`Flat::certifies`]).
+#[derive(Debug, Clone, Copy)]
+struct Bound {
+    lo: [f64; 2],
+    hi: [f64; 2],
+    moved: f64,
 }
 
 /// 2D cross product.
@@ -60,7 +74,8 @@ fn sub2(a: [f64; 2], b: [f64; 2]) -> [f64; 2] {
 
 #[inline]
 fn len2(a: [f64; 2]) -> f64 {
-    a[0].hypot(a[1])
+    // Not `hypot`: a call into libm, and no overflow to guard against here.
+    (a[0] * a[0] + a[1] * a[1]).sqrt()
 }
 
 /// The distance from `p` to the segment `a`–`b` in the plane.
@@ -103,6 +118,7 @@ impl Flat {
         };
         if let Some(ring) = disc_boundary(n, &topology.triangles, edges) {
             flat.sweep = Vec::with_capacity(ring.len());
+            flat.bounds = Vec::with_capacity(ring.len());
             flat.ring = ring;
         }
         flat
@@ -139,10 +155,16 @@ impl Flat {
                 x[0] * e2[0] + x[1] * e2[1] + x[2] * e2[2],
             ]
         };
+        let mut most: f64 = 0.0;
         for k in 0..x0.len() {
             self.p[k] = along(x0[k]);
-            self.d[k] = along(scale(vbar[k], dt));
+            let d = along(scale(vbar[k], dt));
+            self.d[k] = d;
+            most = most.max(d[0] * d[0] + d[1] * d[1]);
         }
+        // The longest move in the plane, for every triangle alike: one
+        // square root, not one per triangle.
+        let reach = h + 2.0 * most.sqrt();
         // Every triangle positively oriented in the plane throughout: its
         // projected area A + Bτ + Cτ² > 0 on τ ∈ [0, 1] ((e1, e2, v) is a
         // right-handed frame, so this is its normal's component along v).
@@ -162,39 +184,63 @@ impl Flat {
             if c0 > 0.0 && b0 < 0.0 && -b0 < 2.0 * c0 && !(a0 - b0 * b0 / (4.0 * c0) > floor) {
                 return false;
             }
+            // Its least height in the plane (twice its area over its longest
+            // side) more than h past what the moves can take off it: a node
+            // is then further than h from any triangle it is not a corner
+            // of, and an edge from any edge it shares no node with.
+            let v = sub2(w, u);
+            let longest = (u[0] * u[0] + u[1] * u[1])
+                .max(w[0] * w[0] + w[1] * w[1])
+                .max(v[0] * v[0] + v[1] * v[1]);
+            if !(a0 * a0 > reach * reach * longest) {
+                return false;
+            }
         }
         // The boundary's projection a simple curve throughout: every pair of
         // its edges whose boxes (grown by h/2 and their ends' moves) overlap
         // is checked, swept along the plane's first axis.
         let len = self.ring.len();
         let edge = |i: usize| (self.ring[i] as usize, self.ring[(i + 1) % len] as usize);
-        let moved = |i: usize| {
+        self.bounds.clear();
+        for i in 0..len {
             let (a, b) = edge(i);
-            len2(self.d[a]).max(len2(self.d[b]))
+            let moved = len2(self.d[a]).max(len2(self.d[b]));
+            let grow = 0.5 * h + moved;
+            let (p, q) = (self.p[a], self.p[b]);
+            self.bounds.push(Bound {
+                lo: [p[0].min(q[0]) - grow, p[1].min(q[1]) - grow],
+                hi: [p[0].max(q[0]) + grow, p[1].max(q[1]) + grow],
+                moved,
+            });
+        }
+        // Along the wider side of the shadow, so fewer boxes share a slab.
+        let spread = |c: usize| {
+            let (lo, hi) = self
+                .bounds
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), b| {
+                    (lo.min(b.lo[c]), hi.max(b.hi[c]))
+                });
+            hi - lo
         };
-        let lo = |i: usize, c: usize| {
-            let (a, b) = edge(i);
-            self.p[a][c].min(self.p[b][c]) - 0.5 * h - moved(i)
-        };
-        let hi = |i: usize, c: usize| {
-            let (a, b) = edge(i);
-            self.p[a][c].max(self.p[b][c]) + 0.5 * h + moved(i)
-        };
+        let (x, y) = if spread(0) >= spread(1) { (0, 1) } else { (1, 0) };
         self.sweep.clear();
-        self.sweep.extend((0..len).map(|i| (lo(i, 0), i as u32)));
-        self.sweep.sort_unstable_by(|x, y| x.0.total_cmp(&y.0));
+        self.sweep
+            .extend(self.bounds.iter().enumerate().map(|(i, b)| (b.lo[x], i as u32)));
+        self.sweep.sort_unstable_by(|s, t| s.0.total_cmp(&t.0));
         for s in 0..len {
             let i = self.sweep[s].1 as usize;
-            let (top, y0, y1) = (hi(i, 0), lo(i, 1), hi(i, 1));
-            for &(x, j) in &self.sweep[s + 1..] {
-                if x > top {
+            let bi = self.bounds[i];
+            for &(start, j) in &self.sweep[s + 1..] {
+                if start > bi.hi[x] {
                     break;
                 }
                 let j = j as usize;
-                if lo(j, 1) > y1 || hi(j, 1) < y0 {
+                let bj = self.bounds[j];
+                if bj.lo[y] > bi.hi[y] || bj.hi[y] < bi.lo[y] {
                     continue;
                 }
-                let clear = h + moved(i) + moved(j);
+                let clear = h + bi.moved + bj.moved;
                 let ((a, b), (c, d)) = (edge(i), edge(j));
                 let gap = if b == c {
                     // Neighbours a–b–d: neither far end near the other edge.
