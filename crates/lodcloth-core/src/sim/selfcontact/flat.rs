@@ -398,7 +398,7 @@ mod tests {
         // One node driven in the plane past its neighbours within the
         // step: its triangles flip over.
         let mut through = still.clone();
-        let mid = (n / 2 * n + n / 2) as usize;
+        let mid = n / 2 * n + n / 2;
         through[mid] = [0.0, 0.0, 0.25 / 1e-3];
         assert!(!flat.certifies(&t.triangles, &rest, &through, 1e-3, h));
     }
