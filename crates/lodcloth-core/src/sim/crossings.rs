@@ -27,13 +27,7 @@ pub fn crossings(topology: &Topology, pos: &[f64]) -> Vec<Crossing> {
         [pos[k], pos[n + k], pos[2 * n + k]]
     };
     let tris = &topology.triangles;
-    let mut edges: Vec<[u32; 2]> = tris
-        .iter()
-        .flat_map(|t| [[t[0], t[1]], [t[1], t[2]], [t[2], t[0]]])
-        .map(|[a, b]| [a.min(b), a.max(b)])
-        .collect();
-    edges.sort_unstable();
-    edges.dedup();
+    let edges = topology.edges();
     // Sweep and prune along x: boxes sorted by their low x, each compared
     // with the boxes still open.
     #[derive(Clone, Copy)]

@@ -185,6 +185,20 @@ pub struct Topology {
 }
 
 impl Topology {
+    /// Every edge of the triangles once, as `[low, high]` node pairs,
+    /// sorted.
+    pub fn edges(&self) -> Vec<[u32; 2]> {
+        let mut edges: Vec<[u32; 2]> = self
+            .triangles
+            .iter()
+            .flat_map(|t| [[t[0], t[1]], [t[1], t[2]], [t[2], t[0]]])
+            .map(|[a, b]| [a.min(b), a.max(b)])
+            .collect();
+        edges.sort_unstable();
+        edges.dedup();
+        edges
+    }
+
     /// Build an `nx × ny` grid cloth of `width × height` metres with
     /// structural, shear and bend springs.
     ///

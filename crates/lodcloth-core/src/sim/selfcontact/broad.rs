@@ -166,14 +166,7 @@ fn query(
 #[inline]
 pub(super) fn sweeps_meet(ws: &SelfWorkspace, nodes: [u32; 4], split: usize, dt: f64, h: f64) -> bool {
     let sweep = |range: std::ops::Range<usize>| {
-        let mut u = [
-            f64::INFINITY,
-            f64::INFINITY,
-            f64::INFINITY,
-            f64::NEG_INFINITY,
-            f64::NEG_INFINITY,
-            f64::NEG_INFINITY,
-        ];
+        let mut u = bvh::EMPTY;
         for i in range {
             let k = nodes[i] as usize;
             let (a, v) = (ws.x0[k], ws.vbar[k]);

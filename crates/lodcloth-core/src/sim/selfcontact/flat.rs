@@ -336,14 +336,7 @@ mod tests {
             height: 1.0,
         };
         let t = Topology::grid(shape, Orientation::Horizontal);
-        let mut edges: Vec<[u32; 2]> = t
-            .triangles
-            .iter()
-            .flat_map(|t| [[t[0], t[1]], [t[1], t[2]], [t[2], t[0]]])
-            .map(|[a, b]| [a.min(b), a.max(b)])
-            .collect();
-        edges.sort_unstable();
-        edges.dedup();
+        let edges = t.edges();
         (t, edges)
     }
 

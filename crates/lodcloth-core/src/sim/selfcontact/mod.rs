@@ -227,13 +227,7 @@ impl SelfWorkspace {
     pub(crate) fn new(topology: &Topology, settings: &SelfContact) -> SelfWorkspace {
         let n = topology.n_nodes;
         let tris = topology.triangles.clone();
-        let mut edges: Vec<[u32; 2]> = tris
-            .iter()
-            .flat_map(|t| [[t[0], t[1]], [t[1], t[2]], [t[2], t[0]]])
-            .map(|[a, b]| [a.min(b), a.max(b)])
-            .collect();
-        edges.sort_unstable();
-        edges.dedup();
+        let edges = topology.edges();
         let tbvh = Bvh::new(&rest_boxes(&tris, &topology.rest_positions));
         let ebvh = Bvh::new(&rest_boxes(&edges, &topology.rest_positions));
         let flat = flat::Flat::new(topology, &edges);
