@@ -506,56 +506,81 @@ struct Check {
 /// Checks candidates `vt` and `ee` against the moves in `ws`, appending
 /// what they find to `hits`; returns how many were checked.
 fn scan(ws: &SelfWorkspace, check: &Check, vt: &[(u32, u32)], ee: &[(u32, u32)], hits: &mut Vec<Hit>) -> u32 {
+    let of_vt = |(v, t): (u32, u32)| {
+        let tri = ws.tris[t as usize];
+        [v, tri[0], tri[1], tri[2]]
+    };
+    let of_ee = |(e, f): (u32, u32)| {
+        let (a, b) = (ws.edges[e as usize], ws.edges[f as usize]);
+        [a[0], a[1], b[0], b[1]]
+    };
+    scan_kind(
+        ws,
+        check,
+        vt,
+        Kind { edges: false, split: 1 },
+        of_vt,
+        vt_proximity,
+        vt_impact,
+        hits,
+    ) + scan_kind(
+        ws,
+        check,
+        ee,
+        Kind { edges: true, split: 2 },
+        of_ee,
+        ee_proximity,
+        ee_impact,
+        hits,
+    )
+}
+
+/// Which candidates [`scan_kind`] checks: node–triangle (the node one side
+/// of the split) or edge–edge (two nodes each side).
+#[derive(Clone, Copy)]
+struct Kind {
+    edges: bool,
+    split: usize,
+}
+
+/// [`scan`] over one kind of candidate, with its nodes, proximity and
+/// impact tests.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn scan_kind(
+    ws: &SelfWorkspace,
+    check: &Check,
+    pairs: &[(u32, u32)],
+    kind: Kind,
+    nodes_of: impl Fn((u32, u32)) -> [u32; 4],
+    proximity: impl Fn(&SelfWorkspace, [u32; 4], f64) -> Option<Pair>,
+    impact: impl Fn(&SelfWorkspace, [u32; 4], f64, f64) -> Option<Pair>,
+    hits: &mut Vec<Hit>,
+) -> u32 {
     let Check { pass, since, dt, h } = *check;
     let stale = |nodes: [u32; 4]| since == 0 || nodes.iter().any(|&k| ws.changed[k as usize] >= since);
     let mut checks = 0;
-    for &(v, t) in vt {
-        let tri = ws.tris[t as usize];
-        let nodes = [v, tri[0], tri[1], tri[2]];
-        if !stale(nodes) || !sweeps_meet(ws, nodes, 1, dt, h) {
+    for &id in pairs {
+        let nodes = nodes_of(id);
+        if !stale(nodes) || !sweeps_meet(ws, nodes, kind.split, dt, h) {
             continue;
         }
         checks += 1;
         let hit = |pair, proximity| Hit {
             pair,
             proximity,
-            id: (v, t),
-            edges: false,
+            id,
+            edges: kind.edges,
         };
         if matches!(pass, Pass::First | Pass::Rest) {
-            if let Some(p) = vt_proximity(ws, nodes, h) {
+            if let Some(p) = proximity(ws, nodes, h) {
                 hits.push(hit(p, true));
             }
         }
         if pass == Pass::Rest {
             continue;
         }
-        if let Some(p) = vt_impact(ws, nodes, dt, h) {
-            hits.push(hit(p, false));
-        }
-    }
-    for &(e, f) in ee {
-        let (a, b) = (ws.edges[e as usize], ws.edges[f as usize]);
-        let nodes = [a[0], a[1], b[0], b[1]];
-        if !stale(nodes) || !sweeps_meet(ws, nodes, 2, dt, h) {
-            continue;
-        }
-        checks += 1;
-        let hit = |pair, proximity| Hit {
-            pair,
-            proximity,
-            id: (e, f),
-            edges: true,
-        };
-        if matches!(pass, Pass::First | Pass::Rest) {
-            if let Some(p) = ee_proximity(ws, nodes, h) {
-                hits.push(hit(p, true));
-            }
-        }
-        if pass == Pass::Rest {
-            continue;
-        }
-        if let Some(p) = ee_impact(ws, nodes, dt, h) {
+        if let Some(p) = impact(ws, nodes, dt, h) {
             hits.push(hit(p, false));
         }
     }
