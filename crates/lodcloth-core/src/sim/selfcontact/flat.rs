@@ -30,8 +30,21 @@
 //! projection does not cross itself); here the patch is the whole cloth
 //! and the conditions hold over the step's whole move, not at its end.
 //!
+//! # Windows
+//! The same conditions hold for every position of each node within a
+//! ball of radius r about where it is now, when every move in them is
+//! replaced by r (a triangle's orientation and heights, and a boundary
+//! edge's distances, change by at most what its corners' perturbations can
+//! take off them). Such a window is certified at a flat step, with r as
+//! far as the fastest node goes in [`BOX_STEPS`](super::BOX_STEPS) steps
+//! (between h/2 and [`MAX_MARGIN`](super::MAX_MARGIN)·h); then every step
+//! whose moves start and end within the balls (which are convex, so the
+//! whole move stays within them) is flat with no more than that test,
+//! until a node leaves its ball.
+//!
 //! Cost: one pass over the nodes and triangles and a sweep over the
-//! boundary's edges; buffers only grow.
+//! boundary's edges at a certificate; one pass over the nodes at a step
+//! within a window; buffers only grow.
 
 use super::super::topology::Topology;
 use super::super::vec3::{add, cross, scale, sub, V3};
@@ -51,6 +64,12 @@ pub struct Flat {
     /// Per boundary edge, its box's low side along the sweep's axis and
     /// its index, sorted for the sweep.
     sweep: Vec<(f64, u32)>,
+    /// The window's centres and radius (0: no window; module docs,
+    /// "Windows").
+    anchor: Vec<V3>,
+    window: f64,
+    /// The last step was certified (a window is sought only then).
+    last: bool,
 }
 
 /// A boundary edge's box in the plane (see [`Flat::certifies`]).
@@ -114,6 +133,7 @@ impl Flat {
         let mut flat = Flat {
             p: vec![[0.0; 2]; n],
             d: vec![[0.0; 2]; n],
+            anchor: vec![[0.0; 3]; n],
             ..Flat::default()
         };
         if let Some(ring) = disc_boundary(n, &topology.triangles, edges) {
@@ -126,11 +146,52 @@ impl Flat {
 
     /// Whether the move of every node from `x0` by `dt·vbar` certainly
     /// keeps the cloth (triangles `tris`) a height field, no two parts
-    /// within `h` (module docs).
+    /// within `h` (module docs): within the current window, or by a new
+    /// window, or by this move's own certificate.
     pub fn certifies(&mut self, tris: &[[u32; 3]], x0: &[V3], vbar: &[V3], dt: f64, h: f64) -> bool {
         if self.ring.is_empty() {
             return false;
         }
+        if self.window > 0.0 {
+            let r2 = self.window * self.window;
+            let inside = |a: V3, c: V3| {
+                let e = sub(a, c);
+                e[0] * e[0] + e[1] * e[1] + e[2] * e[2] <= r2
+            };
+            if x0
+                .iter()
+                .zip(vbar)
+                .zip(&self.anchor)
+                .all(|((x, v), c)| inside(*x, *c) && inside(add(*x, scale(*v, dt)), *c))
+            {
+                return true;
+            }
+            self.window = 0.0;
+        }
+        if self.last {
+            let most = vbar
+                .iter()
+                .map(|v| v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+                .fold(0.0, f64::max)
+                .sqrt()
+                * dt;
+            let r = (super::BOX_STEPS * most).clamp(0.5 * h, (0.5 * h).max(super::MAX_MARGIN * h));
+            // A window that holds this step's move (r ≥ its longest)
+            // certified is this step certified.
+            if r >= most && self.check(tris, x0, vbar, 0.0, h, r) {
+                self.anchor.copy_from_slice(x0);
+                self.window = r;
+                return true;
+            }
+        }
+        self.last = self.check(tris, x0, vbar, dt, h, 0.0);
+        self.last
+    }
+
+    /// The certificate for the moves `dt·vbar` from `x0`, each node's
+    /// position also perturbed anywhere within `slack` of them (module
+    /// docs).
+    fn check(&mut self, tris: &[[u32; 3]], x0: &[V3], vbar: &[V3], dt: f64, h: f64, slack: f64) -> bool {
         // The mean normal, and a basis of the plane across it.
         let mut sum = [0.0; 3];
         for t in tris {
@@ -164,7 +225,7 @@ impl Flat {
         }
         // The longest move in the plane, for every triangle alike: one
         // square root, not one per triangle.
-        let reach = h + 2.0 * most.sqrt();
+        let reach = h + 2.0 * (most.sqrt() + slack);
         // Every triangle positively oriented in the plane throughout: its
         // projected area A + Bτ + Cτ² > 0 on τ ∈ [0, 1] ((e1, e2, v) is a
         // right-handed frame, so this is its normal's component along v).
@@ -177,7 +238,12 @@ impl Flat {
             let c0 = cross2(du, dw);
             // A thin sliver is as good as folded: a millionth of its sides'
             // square, against rounding.
-            let floor = 1e-6 * (u[0] * u[0] + u[1] * u[1] + w[0] * w[0] + w[1] * w[1]);
+            let mut floor = 1e-6 * (u[0] * u[0] + u[1] * u[1] + w[0] * w[0] + w[1] * w[1]);
+            if slack > 0.0 {
+                // What perturbing each corner by `slack` can take off the
+                // doubled area u × w (|Δu|, |Δw| ≤ 2·slack).
+                floor += 2.0 * slack * (len2(u) + len2(w)) + 4.0 * slack * slack;
+            }
             if !(a0 > floor) || !(a0 + b0 + c0 > floor) {
                 return false;
             }
@@ -204,7 +270,7 @@ impl Flat {
         self.bounds.clear();
         for i in 0..len {
             let (a, b) = edge(i);
-            let moved = len2(self.d[a]).max(len2(self.d[b]));
+            let moved = len2(self.d[a]).max(len2(self.d[b])) + slack;
             let grow = 0.5 * h + moved;
             let (p, q) = (self.p[a], self.p[b]);
             self.bounds.push(Bound {
@@ -394,5 +460,33 @@ mod tests {
         let mid = n / 2 * n + n / 2;
         through[mid] = [0.0, 0.0, 0.25 / 1e-3];
         assert!(!flat.certifies(&t.triangles, &rest, &through, 1e-3, h));
+    }
+
+    /// A window is certified at the step after a flat one, and holds the
+    /// steps whose moves stay in it without the certificate's checks; a
+    /// node driven out of it and through the sheet ends it, and that step
+    /// is not certified.
+    #[test]
+    fn a_window_holds_the_steps_within_it_and_ends_when_a_node_leaves() {
+        let n = 11;
+        let (t, edges) = grid(n);
+        let mut flat = Flat::new(&t, &edges);
+        let (h, dt) = (0.003, 1e-3);
+        let rest = t.rest_positions.clone();
+        let slow = vec![[0.0, 0.1, 0.0]; rest.len()];
+        assert!(flat.certifies(&t.triangles, &rest, &slow, dt, h));
+        assert_eq!(flat.window, 0.0, "the first flat step has its own certificate");
+        assert!(flat.certifies(&t.triangles, &rest, &slow, dt, h));
+        assert!(flat.window >= 0.5 * h, "a window after a flat step: {}", flat.window);
+        let r = flat.window;
+        let later: Vec<V3> = rest.iter().map(|x| add(*x, [0.0, 0.5 * r, 0.0])).collect();
+        let up = vec![[0.0, 0.4 * r / dt, 0.0]; rest.len()];
+        assert!(flat.certifies(&t.triangles, &later, &up, dt, h));
+        assert_eq!(flat.window, r, "still within the same window");
+        let mut through = up.clone();
+        let mid = n / 2 * n + n / 2;
+        through[mid] = [0.25 / dt, -0.1 / dt, 0.0];
+        assert!(!flat.certifies(&t.triangles, &later, &through, dt, h));
+        assert_eq!(flat.window, 0.0);
     }
 }
