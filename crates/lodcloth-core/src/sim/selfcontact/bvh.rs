@@ -133,111 +133,24 @@ impl Bvh {
         }
     }
 
-    /// Whether tree node `i` is a leaf.
+    /// Calls `visit(primitive)` once for every primitive whose box (as of
+    /// the last refit) overlaps `query`.
     #[inline]
-    fn leaf(&self, i: usize) -> bool {
-        self.first[i] < self.last[i]
-    }
-
-    /// Tree node `i`'s two children (`i` is not a leaf).
-    #[inline]
-    fn children(&self, i: usize) -> [usize; 2] {
-        [i + 1, self.skip[i + 1] as usize]
-    }
-
-    /// Calls `visit(a, b)` once for every primitive `a` of this tree and
-    /// `b` of `other` whose boxes (as of the last refits) overlap: both
-    /// trees descended together, so that a pair of far subtrees is
-    /// dismissed at once. `stack` is scratch.
-    pub fn each_pair(&self, other: &Bvh, stack: &mut Vec<(u32, u32)>, mut visit: impl FnMut(u32, u32)) {
-        stack.clear();
-        if self.skip.is_empty() || other.skip.is_empty() {
-            return;
-        }
-        stack.push((0, 0));
-        while let Some((i, j)) = stack.pop() {
-            let (i, j) = (i as usize, j as usize);
-            if !overlap(&self.boxes[i], &other.boxes[j]) {
+    pub fn each_overlap(&self, query: &Aabb, mut visit: impl FnMut(u32)) {
+        let mut node = 0;
+        let end = self.skip.len();
+        while node < end {
+            if !overlap(query, &self.boxes[node]) {
+                node = self.skip[node] as usize;
                 continue;
             }
-            match (self.leaf(i), other.leaf(j)) {
-                (true, true) => {
-                    for p in self.first[i] as usize..self.last[i] as usize {
-                        let bp = &self.leaf_boxes[p];
-                        for q in other.first[j] as usize..other.last[j] as usize {
-                            if overlap(bp, &other.leaf_boxes[q]) {
-                                visit(self.order[p], other.order[q]);
-                            }
-                        }
-                    }
-                }
-                // The larger subtree is split (sizes by their nodes' count).
-                (false, leaf_j) if leaf_j || self.skip[i] as usize - i >= other.skip[j] as usize - j => {
-                    for c in self.children(i) {
-                        stack.push((c as u32, j as u32));
-                    }
-                }
-                _ => {
-                    for c in other.children(j) {
-                        stack.push((i as u32, c as u32));
-                    }
+            let (first, last) = (self.first[node] as usize, self.last[node] as usize);
+            for j in first..last {
+                if overlap(query, &self.leaf_boxes[j]) {
+                    visit(self.order[j]);
                 }
             }
-        }
-    }
-
-    /// Calls `visit(a, b)` once for every two primitives `a` ≠ `b` of this
-    /// tree whose boxes overlap (as [`Bvh::each_pair`]; each unordered pair
-    /// once). A task `(i, i)` is a subtree against itself.
-    pub fn each_self_pair(&self, stack: &mut Vec<(u32, u32)>, mut visit: impl FnMut(u32, u32)) {
-        stack.clear();
-        if self.skip.is_empty() {
-            return;
-        }
-        stack.push((0, 0));
-        while let Some((i, j)) = stack.pop() {
-            let (i, j) = (i as usize, j as usize);
-            if i == j {
-                if self.leaf(i) {
-                    let (first, last) = (self.first[i] as usize, self.last[i] as usize);
-                    for p in first..last {
-                        for q in p + 1..last {
-                            if overlap(&self.leaf_boxes[p], &self.leaf_boxes[q]) {
-                                visit(self.order[p], self.order[q]);
-                            }
-                        }
-                    }
-                } else {
-                    let [l, r] = self.children(i);
-                    stack.extend([(l as u32, l as u32), (r as u32, r as u32), (l as u32, r as u32)]);
-                }
-                continue;
-            }
-            if !overlap(&self.boxes[i], &self.boxes[j]) {
-                continue;
-            }
-            match (self.leaf(i), self.leaf(j)) {
-                (true, true) => {
-                    for p in self.first[i] as usize..self.last[i] as usize {
-                        let bp = &self.leaf_boxes[p];
-                        for q in self.first[j] as usize..self.last[j] as usize {
-                            if overlap(bp, &self.leaf_boxes[q]) {
-                                visit(self.order[p], self.order[q]);
-                            }
-                        }
-                    }
-                }
-                (false, leaf_j) if leaf_j || self.skip[i] as usize - i >= self.skip[j] as usize - j => {
-                    for c in self.children(i) {
-                        stack.push((c as u32, j as u32));
-                    }
-                }
-                _ => {
-                    for c in self.children(j) {
-                        stack.push((i as u32, c as u32));
-                    }
-                }
-            }
+            node += 1;
         }
     }
 }
@@ -246,56 +159,45 @@ impl Bvh {
 mod tests {
     use super::*;
 
-    fn rand_boxes(seed: &mut u64, n: usize) -> Vec<Aabb> {
-        let mut rand = || {
-            *seed ^= *seed << 13;
-            *seed ^= *seed >> 7;
-            *seed ^= *seed << 17;
-            (*seed >> 11) as f64 / (1u64 << 53) as f64
-        };
-        (0..n)
-            .map(|_| {
-                let c = [rand() - 0.5, rand() - 0.5, rand() - 0.5];
-                let h = [0.1 * rand(), 0.1 * rand(), 0.1 * rand()];
-                [
-                    c[0] - h[0],
-                    c[1] - h[1],
-                    c[2] - h[2],
-                    c[0] + h[0],
-                    c[1] + h[1],
-                    c[2] + h[2],
-                ]
-            })
-            .collect()
-    }
-
-    /// Every two primitives of two trees, or two of one tree, whose boxes
-    /// overlap are visited exactly once, and no others, after a refit:
-    /// against all pairs.
+    /// Every primitive whose box overlaps a query is visited exactly once,
+    /// and no other, after the boxes moved far from those the tree was
+    /// built on.
     #[test]
-    fn every_overlapping_pair_is_visited_once() {
-        let mut seed = 0x1234_5678_9abc_u64;
-        let mut stack = Vec::new();
-        for (n, m) in [(0, 5), (1, 1), (3, 9), (4, 4), (5, 17), (300, 200)] {
-            let (rest_a, rest_b) = (rand_boxes(&mut seed, n), rand_boxes(&mut seed, m));
-            let (a, b) = (rand_boxes(&mut seed, n), rand_boxes(&mut seed, m));
-            let (mut ta, mut tb) = (Bvh::new(&rest_a), Bvh::new(&rest_b));
-            ta.refit(&a);
-            tb.refit(&b);
-            let mut seen = vec![0u32; n * m];
-            ta.each_pair(&tb, &mut stack, |p, q| seen[p as usize * m + q as usize] += 1);
-            let mut own = vec![0u32; n * n];
-            ta.each_self_pair(&mut stack, |p, q| {
-                let (p, q) = (p.min(q) as usize, p.max(q) as usize);
-                own[p * n + q] += 1;
-            });
-            for p in 0..n {
-                for q in 0..m {
-                    assert_eq!(seen[p * m + q], u32::from(overlap(&a[p], &b[q])), "{n}×{m}: {p}, {q}");
-                }
-                for q in 0..n {
-                    let want = q > p && overlap(&a[p], &a[q]);
-                    assert_eq!(own[p * n + q], u32::from(want), "{n}: {p}, {q} with itself");
+    fn every_overlap_is_visited_once_after_a_refit() {
+        let mut seed = 0x9abc_def0_u64;
+        let mut rand = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let mut random_boxes = |n: usize| -> Vec<Aabb> {
+            (0..n)
+                .map(|_| {
+                    let c = [rand() - 0.5, rand() - 0.5, rand() - 0.5];
+                    let h = [0.1 * rand(), 0.1 * rand(), 0.1 * rand()];
+                    [
+                        c[0] - h[0],
+                        c[1] - h[1],
+                        c[2] - h[2],
+                        c[0] + h[0],
+                        c[1] + h[1],
+                        c[2] + h[2],
+                    ]
+                })
+                .collect()
+        };
+        for n in [0, 1, 3, 4, 5, 17, 300] {
+            let rest = random_boxes(n);
+            let moved = random_boxes(n);
+            let queries = random_boxes(200);
+            let mut tree = Bvh::new(&rest);
+            tree.refit(&moved);
+            for (i, q) in queries.iter().enumerate() {
+                let mut seen = vec![0u32; n];
+                tree.each_overlap(q, |j| seen[j as usize] += 1);
+                for (j, b) in moved.iter().enumerate() {
+                    assert_eq!(seen[j], u32::from(overlap(q, b)), "{n} boxes: query {i}, box {j}");
                 }
             }
         }

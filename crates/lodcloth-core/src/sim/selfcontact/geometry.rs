@@ -163,9 +163,9 @@ pub fn coplanar_times(x: [V3; 4], d: [V3; 4], out: &mut [f64; 3]) -> usize {
             push(-qc / qb);
         }
     }
-    // Ascending already: 0, the derivative's roots in (0, 1) in order, 1.
     cuts[m] = 1.0;
-    let cuts = &cuts[..=m];
+    let cuts = &mut cuts[..=m];
+    cuts.sort_by(f64::total_cmp);
     let mut count = 0;
     let mut push_root = |t: f64, count: &mut usize| {
         if *count < 3 && (*count == 0 || t > out[*count - 1]) {

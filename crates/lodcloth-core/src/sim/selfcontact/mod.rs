@@ -59,16 +59,12 @@
 //! every node's box is its move grown by a margin (as far as it moves in
 //! [`BOX_STEPS`] steps at its speed, between h/2 and [`MAX_MARGIN`]·h),
 //! every triangle's the union of its nodes' grown by h and every edge's by
-//! h/2, and the nodes', triangles' and edges' trees of boxes ([`bvh::Bvh`],
-//! built on the rest shape) refitted to them. The nodes' tree and the
-//! triangles' are descended together, as is the edges' tree against
-//! itself: pairs whose boxes overlap and that are closer than h plus how
-//! far their nodes can go in their boxes are the candidates until a
-//! node's move leaves its box (flat steps in between included: the list
-//! holds every pair that can come within h while the nodes stay in their
-//! boxes, whenever that is). Each pass checks the candidates alone, with
-//! their swept boxes first. Buffers only grow, so a running cloth
-//! allocates nothing once its lists have reached their size.
+//! h/2, and the triangles' and edges' trees of boxes ([`bvh::Bvh`], built
+//! on the rest shape) refitted to them; pairs whose boxes overlap and that
+//! are closer than h plus how far their nodes can go in their boxes are the
+//! candidates until a node's move leaves its box. Each pass checks the
+//! candidates alone, with their swept boxes first. Buffers only grow, so a
+//! running cloth allocates nothing once its lists have reached their size.
 
 mod broad;
 mod bvh;
@@ -178,11 +174,9 @@ pub(crate) struct SelfWorkspace {
     vbox: Vec<Aabb>,
     tbox: Vec<Aabb>,
     ebox: Vec<Aabb>,
-    /// The triangles', the edges' and the nodes' trees (built on the rest
-    /// shape).
+    /// The triangles' and the edges' trees (built on the rest shape).
     tbvh: Bvh,
     ebvh: Bvh,
-    vbvh: Bvh,
     touched: Vec<bool>,
     /// Union–find parents of the impact zones (a node is its own parent
     /// outside any zone).
@@ -236,8 +230,6 @@ impl SelfWorkspace {
         let edges = topology.edges();
         let tbvh = Bvh::new(&rest_boxes(&tris, &topology.rest_positions));
         let ebvh = Bvh::new(&rest_boxes(&edges, &topology.rest_positions));
-        let nodes: Vec<[u32; 1]> = (0..n as u32).map(|k| [k]).collect();
-        let vbvh = Bvh::new(&rest_boxes(&nodes, &topology.rest_positions));
         let flat = flat::Flat::new(topology, &edges);
         let mut ws = SelfWorkspace {
             flat,
@@ -252,7 +244,6 @@ impl SelfWorkspace {
             vbar: vec![[0.0; 3]; n],
             tbvh,
             ebvh,
-            vbvh,
             touched: vec![false; n],
             parent: (0..n as u32).collect(),
             zoned: Vec::new(),
@@ -336,9 +327,8 @@ pub(crate) fn resolve(
         return out;
     }
     if ws.flat.certifies(&ws.tris, &ws.x0, &ws.vbar, dt, settings.thickness) {
-        // Nothing can meet. The candidates stay valid: they hold every pair
-        // that can come within h while the nodes stay in their boxes,
-        // whenever that is.
+        // Nothing can meet; the candidates are not kept up to date meanwhile.
+        ws.built = false;
         out.flat = true;
         return out;
     }
