@@ -47,7 +47,7 @@
 //! within a window; buffers only grow.
 
 use super::super::topology::Topology;
-use super::super::vec3::{add, cross, scale, sub, V3};
+use super::super::vec3::{add, cross, dot, scale, sub, V3};
 
 /// A cloth's certificate data (see the module docs).
 #[derive(Debug, Clone, Default)]
@@ -156,7 +156,7 @@ impl Flat {
             let r2 = self.window * self.window;
             let inside = |a: V3, c: V3| {
                 let e = sub(a, c);
-                e[0] * e[0] + e[1] * e[1] + e[2] * e[2] <= r2
+                dot(e, e) <= r2
             };
             if x0
                 .iter()
@@ -169,12 +169,7 @@ impl Flat {
             self.window = 0.0;
         }
         if self.last {
-            let most = vbar
-                .iter()
-                .map(|v| v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
-                .fold(0.0, f64::max)
-                .sqrt()
-                * dt;
+            let most = vbar.iter().map(|v| dot(*v, *v)).fold(0.0, f64::max).sqrt() * dt;
             let r = (super::BOX_STEPS * most).clamp(0.5 * h, (0.5 * h).max(super::MAX_MARGIN * h));
             // A window that holds this step's move (r ≥ its longest)
             // certified is this step certified.
