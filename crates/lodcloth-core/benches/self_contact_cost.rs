@@ -126,15 +126,26 @@ fn main() {
         let mut sim = scene.build_at(n, n).expect("builds");
         let dt = scene.params.dt;
         let corner = ((n - 1) * n) as u32;
-        let mut pairs = 0;
+        let (mut pairs, mut unresolved, mut first_crossing) = (0, 0, None);
         for s in 0..((0.5 + 1.6) / dt).round() as usize {
             let t = s as f64 * dt - 0.5;
             if t >= 0.0 {
                 let grab = drag(sim.topology(), corner, t);
                 sim.set_grabs(vec![grab]).expect("a valid grab");
             }
-            pairs = sim.step().self_contact.proximities;
+            let report = sim.step().self_contact;
+            pairs = report.proximities;
+            unresolved += usize::from(report.unresolved > 0);
+            if first_crossing.is_none() && s % 10 == 9 && !crossings(sim.topology(), &sim.state().pos).is_empty() {
+                first_crossing = Some(s as f64 * dt);
+            }
         }
+        println!(
+            "{n}×{n} drag: {unresolved} steps left pairs colliding; {}",
+            first_crossing.map_or("no crossing (exact check, every 10th step)".into(), |t| format!(
+                "first crossing at {t:.4} s"
+            ))
+        );
         let crossed = crossings(sim.topology(), &sim.state().pos).len();
         let state = sim.state().clone();
         for precision in [SpringPrecision::F64, SpringPrecision::F32] {

@@ -33,14 +33,15 @@
 //!    pinned nodes' mean velocity), and detection runs again over the new
 //!    moves, merging zones, until no pair collides. After
 //!    [`ZONE_ROUNDS`] rounds the free nodes of every zone stay where they
-//!    were at the step's start.
+//!    were at the step's start, and so does every free node of a pair
+//!    that still collides, until none does.
 //!
 //! # What is guaranteed
 //! When no edge crosses a triangle at a step's start, none crosses at its
-//! end, unless a pinned node's prescribed move itself drives a triangle
-//! through a stationary one (a pin cannot be pushed back), or the last
-//! fallback leaves a crossing that only pinned nodes' moves make: the step's
-//! [`SelfOutcome::unresolved`] counts the pairs left colliding. Detection
+//! end, unless pinned nodes' prescribed moves drive the cloth through
+//! itself (a pin cannot be pushed back): the step's
+//! [`SelfOutcome::unresolved`] counts the pairs left colliding, which only
+//! such moves leave. Detection
 //! is in floating point with a tolerance of a thousandth of h; it is not
 //! exact arithmetic. `sim::crossings` counts crossings exactly, for tests
 //! and for `lodcloth inspect`.
@@ -71,6 +72,8 @@ mod bvh;
 mod flat;
 mod geometry;
 mod response;
+#[cfg(test)]
+mod tests;
 
 pub use geometry::{coplanar_times, point_triangle, segment_segment};
 
@@ -312,17 +315,8 @@ pub(crate) fn resolve(
     ws: &mut SelfWorkspace,
     lend: &dyn Lend,
 ) -> SelfOutcome {
-    let n = ws.x0.len();
     let mut out = SelfOutcome::default();
-    let mut finite = true;
-    for k in 0..n {
-        let x0 = [before[k], before[n + k], before[2 * n + k]];
-        let x1 = [pos[k], pos[n + k], pos[2 * n + k]];
-        ws.x0[k] = x0;
-        ws.vbar[k] = scale(sub(x1, x0), 1.0 / dt);
-        finite &= x0.iter().chain(&x1).all(|x| x.is_finite());
-    }
-    if !finite {
+    if !load(ws, before, pos, dt) {
         // A diverged step: the step reports it; nothing to resolve.
         return out;
     }
@@ -355,15 +349,7 @@ pub(crate) fn resolve(
             if round < ZONE_ROUNDS {
                 move_zones(dt, inv_mass, ws);
             } else {
-                // The last fallback: the zones' free nodes stay put.
-                for i in 0..ws.zoned.len() {
-                    let k = ws.zoned[i] as usize;
-                    if inv_mass[k] > 0.0 {
-                        ws.vbar[k] = [0.0; 3];
-                        ws.changed[k] = ws.epoch;
-                    }
-                }
-                found = detect(settings, dt, inv_mass, ws, Pass::Zones, &mut out, lend);
+                found = hold(settings, dt, inv_mass, ws, &mut out, lend);
             }
         }
         out.unresolved = found;
@@ -376,7 +362,29 @@ pub(crate) fn resolve(
         ws.zoned.clear();
     }
     out.candidates = (ws.cand_vt.len() + ws.cand_ee.len()) as u32;
-    // The changed moves: positions from them, velocities by the same change.
+    store(ws, dt, before, pos, vel, inv_mass);
+    out
+}
+
+/// The step's moves into `ws` (`x0`, `vbar`); false when a position is not
+/// finite (a diverged step).
+fn load(ws: &mut SelfWorkspace, before: &[f64], pos: &[f64], dt: f64) -> bool {
+    let n = ws.x0.len();
+    let mut finite = true;
+    for k in 0..n {
+        let x0 = [before[k], before[n + k], before[2 * n + k]];
+        let x1 = [pos[k], pos[n + k], pos[2 * n + k]];
+        ws.x0[k] = x0;
+        ws.vbar[k] = scale(sub(x1, x0), 1.0 / dt);
+        finite &= x0.iter().chain(&x1).all(|x| x.is_finite());
+    }
+    finite
+}
+
+/// The changed moves back: positions from them, velocities by the same
+/// change.
+fn store(ws: &SelfWorkspace, dt: f64, before: &[f64], pos: &mut [f64], vel: &mut [f64], inv_mass: &[f64]) {
+    let n = ws.x0.len();
     for k in 0..n {
         if !ws.touched[k] || inv_mass[k] == 0.0 {
             continue;
@@ -387,7 +395,40 @@ pub(crate) fn resolve(
             pos[c * n + k] = ws.x0[k][c] + dt * ws.vbar[k][c];
         }
     }
-    out
+}
+
+/// The last fallback (Harmon et al. 2008's fail-safe, on the nodes that
+/// need it): the free nodes of every zone stay at the step's start, and so
+/// does every free node of a pair that then collides, until none collides.
+/// A still node cannot meet another still node (the step's start crosses
+/// nothing), so what is left colliding is driven by pinned nodes' moves
+/// alone. Each round holds at least one more node, so it ends. Returns
+/// the pairs left colliding.
+fn hold(
+    settings: &SelfContact,
+    dt: f64,
+    inv_mass: &[f64],
+    ws: &mut SelfWorkspace,
+    out: &mut SelfOutcome,
+    lend: &dyn Lend,
+) -> u32 {
+    loop {
+        // Pairs found by the last pass were merged into `zoned`.
+        let mut held = 0;
+        for i in 0..ws.zoned.len() {
+            let k = ws.zoned[i] as usize;
+            if inv_mass[k] > 0.0 && ws.vbar[k] != [0.0; 3] {
+                ws.vbar[k] = [0.0; 3];
+                ws.touched[k] = true;
+                ws.changed[k] = ws.epoch;
+                held += 1;
+            }
+        }
+        let found = detect(settings, dt, inv_mass, ws, Pass::Zones, out, lend);
+        if found == 0 || held == 0 {
+            return found;
+        }
+    }
 }
 
 /// What checking one candidate found.
