@@ -16,10 +16,6 @@
 //! half nobody picked up is run by the stepping thread itself, so a busy
 //! partner never delays a step; the result does not depend on who ran it.
 //!
-//! Instances are placed by what a step costs at the start, and moved
-//! between stepping threads as that changes ([`balance`]): a cloth that
-//! folds with self-contact on, a switch, an input.
-//!
 //! Commands (switch, pause, reset) arrive on a channel and are applied
 //! between steps. States and metrics leave through `watch` channels that
 //! hold only the newest value, so a slow publisher drops frames and never
@@ -28,7 +24,6 @@
 //! reach the bus.
 
 mod apply;
-mod balance;
 mod command;
 mod divergence;
 mod error;
@@ -121,9 +116,7 @@ impl InstanceSetup {
 pub struct InstanceHandle {
     pub name: String,
     commands: Sender<Command>,
-    /// The stepping threads, and which one the instance is on now.
-    threads: Arc<[std::thread::Thread]>,
-    home: balance::Home,
+    thread: std::thread::Thread,
     pub states: watch::Receiver<Option<Arc<StateFrame>>>,
     pub metrics: watch::Receiver<Option<Arc<MetricsFrame>>>,
     pub transitions: Arc<tokio::sync::Mutex<tokio::sync::mpsc::UnboundedReceiver<Arc<StateFrame>>>>,
@@ -138,7 +131,7 @@ impl InstanceHandle {
     /// has stopped.
     pub fn send(&self, command: Command) -> Result<(), Stopped> {
         self.commands.send(command).map_err(|_| Stopped)?;
-        self.thread().unpark();
+        self.thread.unpark();
         Ok(())
     }
 
@@ -146,13 +139,9 @@ impl InstanceHandle {
         lock(&self.status).clone()
     }
 
-    fn thread(&self) -> &std::thread::Thread {
-        &self.threads[self.home.load(Ordering::Acquire)]
-    }
-
-    /// The stepping thread this instance runs on now.
+    /// The stepping thread this instance runs on.
     pub fn stepping_thread(&self) -> std::thread::ThreadId {
-        self.thread().id()
+        self.thread.id()
     }
 }
 
@@ -189,8 +178,7 @@ pub struct Engine {
 
 impl Engine {
     /// Start stepping `instances`, spread over `settings.threads` threads by
-    /// their cost, measured ([`measured_cost`]), and moved as it changes
-    /// ([`balance`]).
+    /// their cost, measured ([`measured_cost`]).
     pub fn start(instances: Vec<InstanceSetup>, settings: EngineSettings) -> std::io::Result<Engine> {
         let stop = Arc::new(AtomicBool::new(false));
         let n_threads = settings.threads.clamp(1, instances.len().max(1));
@@ -203,21 +191,20 @@ impl Engine {
             .map(|(i, s)| (i, measured_cost(&s.sim), s))
             .collect();
         order.sort_by(|a, b| b.1.total_cmp(&a.1));
+        let mut receivers = Vec::new();
         let mut pending = Vec::new();
         let mut names: Vec<Vec<String>> = vec![Vec::new(); n_threads];
         for (index, c, setup) in order {
             let (tx, rx) = mpsc::channel();
-            let (mut runner, handle_parts) = Runner::new(setup, rx, settings);
+            let (runner, handle_parts) = Runner::new(setup, rx, settings);
             let b = (0..n_threads)
                 .min_by(|&i, &j| buckets[i].0.total_cmp(&buckets[j].0))
                 .unwrap_or(0);
-            runner.load = balance::Load::new(Instant::now(), c);
-            runner.home.store(b, Ordering::Release);
-            let home = runner.home.clone();
             buckets[b].0 += c;
             names[b].push(format!("{} ({c:.2})", runner.name));
             buckets[b].1.push(runner);
-            pending.push((index, tx, handle_parts, home));
+            receivers.push(b);
+            pending.push((index, tx, handle_parts));
         }
         for (i, ((load, _), names)) in buckets.iter().zip(&names).enumerate() {
             tracing::info!(
@@ -237,20 +224,16 @@ impl Engine {
         // Thread i posts halves to lenders[i]; its partner (i ^ 1, or a
         // helper when it has none) serves them.
         let lenders: Vec<Arc<Lender>> = (0..n_threads).map(|_| Arc::new(Lender::new())).collect();
-        let balance = Arc::new(balance::Balance::new(buckets.iter().map(|b| b.0).collect()));
         let mut threads = Vec::new();
         for (i, (_, runners)) in buckets.into_iter().enumerate() {
             let stop = stop.clone();
             let own = lenders[i].clone();
             let serves = lenders.get(i ^ 1).cloned();
-            let balance = balance.clone();
             let h = std::thread::Builder::new()
                 .name(format!("lodcloth-step-{i}"))
-                .spawn(move || worker(i, runners, stop, own, serves, &balance))?;
+                .spawn(move || worker(runners, stop, settings, own, serves))?;
             threads.push(h);
         }
-        let stepping: Arc<[std::thread::Thread]> = threads.iter().map(|t| t.thread().clone()).collect();
-        balance.set_threads(stepping.to_vec());
         let mut helpers = Vec::new();
         if settings.threads >= 2 && n_threads % 2 == 1 {
             // The last stepping thread has no partner: a helper of its own.
@@ -275,14 +258,14 @@ impl Engine {
         threads.extend(helpers);
         let mut handles: Vec<(usize, InstanceHandle)> = pending
             .into_iter()
-            .map(|(index, tx, parts, home)| {
+            .zip(receivers)
+            .map(|((index, tx, parts), b)| {
                 (
                     index,
                     InstanceHandle {
                         name: parts.name,
                         commands: tx,
-                        threads: stepping.clone(),
-                        home,
+                        thread: threads[b].thread().clone(),
                         states: parts.states,
                         metrics: parts.metrics,
                         transitions: Arc::new(tokio::sync::Mutex::new(parts.transitions)),
@@ -383,24 +366,15 @@ const MAX_IDLE: Duration = Duration::from_millis(5);
 /// a partner's half it ran meanwhile at most a few ms.
 pub const STALL: Duration = Duration::from_millis(10);
 
-/// Stepping thread `i`: its instances (and those [`balance`] hands it),
-/// paced until `stop`.
 fn worker(
-    i: usize,
     mut runners: Vec<Runner>,
     stop: Arc<AtomicBool>,
+    _settings: EngineSettings,
     own: Arc<Lender>,
     serves: Option<Arc<Lender>>,
-    balance: &balance::Balance,
 ) {
-    let mut next_report = Instant::now() + balance::REPORT_EVERY;
     while !stop.load(Ordering::Relaxed) {
-        balance.take(i, &mut runners);
         let now = Instant::now();
-        if now >= next_report {
-            next_report = now + balance::REPORT_EVERY;
-            balance.report(i, &mut runners, now);
-        }
         let mut wake = now + MAX_IDLE;
         for r in &mut runners {
             r.poll_commands();

@@ -8,7 +8,6 @@
 use std::sync::mpsc::{Receiver, TryRecvError};
 use std::time::{Duration, Instant};
 
-use super::balance::{Home, Load};
 use super::divergence::{is_diverged, Divergence};
 use super::input::Inputs;
 use super::live::LiveError;
@@ -46,10 +45,6 @@ pub(super) struct Runner {
     pub(super) inputs: Inputs,
     pub(super) divergence: Divergence,
     pub(super) publishing: Publishing,
-    /// What it costs its thread ([`super::balance`]).
-    pub(super) load: Load,
-    /// The stepping thread it runs on.
-    pub(super) home: Home,
 }
 
 /// Pacing to the wall clock: step `steps_since_origin` is due at
@@ -209,8 +204,6 @@ impl Runner {
             inputs: Inputs::new(setup.touch, now, Duration::from_secs_f64(setup.input_idle)),
             divergence: Divergence::new(setup.sim.state().clone()),
             publishing,
-            load: Load::new(now, 0.0),
-            home: Home::default(),
             sim: setup.sim,
             cloud: setup.cloud,
         };
@@ -258,9 +251,7 @@ impl Runner {
                 break;
             }
         }
-        let busy = t0.elapsed();
-        self.publishing.count_steps(busy, n, n as f64 * dt);
-        self.load.count(busy, n as f64 * dt);
+        self.publishing.count_steps(t0.elapsed(), n, n as f64 * dt);
         self.pacing.stepped(n);
     }
 
