@@ -71,6 +71,7 @@ fn trial(n: usize, integrator: Integrator, precision: SpringPrecision, count: us
             threads: 2,
             max_catch_up: 0.1,
             max_lag: 0.25,
+            slice: lodcloth::engine::PASS_SLICE,
             // The frame count read below is refreshed with the metrics: at
             // 100 Hz it is at most 10 ms stale, 0.3 % of a trial.
             metrics_hz: 100.0,

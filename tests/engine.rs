@@ -123,30 +123,8 @@ fn instances_are_spread_by_their_measured_step_cost() {
         .expect("scene")
         .build()
         .expect("builds");
-    let grid = |n: usize, dt: f64| {
-        let mut scene = Scene::load(std::path::Path::new("config/scenes/paper-1-top-edge.toml")).expect("scene");
-        scene.params.integrator = Integrator::SymplecticEuler;
-        scene.params.dt = dt;
-        scene.stability = StabilityCheck::Force;
-        scene.build_at(n, n).expect("builds")
-    };
     let (big, small) = (grid(64, 7.5e-5), grid(16, 1e-3));
-    // Seconds of a core per simulated second, timed here: the fastest of
-    // five runs of 10 steps (other tests run beside this one).
-    let per_second = |sim: &lodcloth::sim::Simulation| {
-        let mut sim = sim.clone();
-        let fastest = (0..5)
-            .map(|_| {
-                let t = std::time::Instant::now();
-                for _ in 0..10 {
-                    sim.step();
-                }
-                t.elapsed().as_secs_f64() / 10.0
-            })
-            .fold(f64::INFINITY, f64::min);
-        fastest / sim.params().dt
-    };
-    let (c_skirt, c_big) = (per_second(&skirt), per_second(&big));
+    let (c_skirt, c_big) = (cores_per_second(&skirt), cores_per_second(&big));
     eprintln!("cores per simulated second: mesh {c_skirt:.2}, 64x64 grid {c_big:.2}");
     assert!(
         c_skirt > 1.5 * c_big,
@@ -173,6 +151,47 @@ fn instances_are_spread_by_their_measured_step_cost() {
     engine.stop();
     assert_ne!(thread[1], thread[0], "the mesh shares a thread with the 64x64 grid");
     assert_ne!(thread[1], thread[2], "the mesh shares a thread with the small grid");
+}
+
+/// An instance that needs more than its thread falls behind alone: a
+/// 64×64 grid at a dt that asks 2.5 cores of it (timed here) shares one
+/// stepping thread with the paper-1 scene at 16×16. Each pass of the big
+/// one ends at the engine's slice, so the small one's turn comes every
+/// ~10 ms and it keeps real time: no overrun, no lag reset, while the big
+/// one drops its backlog again and again. Without the slice a pass of the
+/// big one caught up 0.1 s of simulated time, 0.25 s of wall time, and the
+/// small one fell behind with it.
+#[test]
+fn an_instance_that_needs_more_than_its_thread_falls_behind_alone() {
+    let step = cores_per_second(&grid(64, 1e-4)) * 1e-4;
+    let big = grid(64, step / 2.5);
+    let scene = Scene::load(std::path::Path::new("config/scenes/paper-1-top-edge.toml")).expect("scene");
+    let small = scene.build_at(16, 16).expect("builds");
+    let engine = Engine::start(
+        vec![
+            InstanceSetup::new("big", big, Level::new(64, 64)),
+            InstanceSetup::new("small", small, Level::new(16, 16)),
+        ],
+        settings(1),
+    )
+    .expect("engine");
+    std::thread::sleep(Duration::from_secs(2));
+    let metrics = |i: usize| engine.handles()[i].metrics.borrow().clone().expect("metrics at 10 Hz");
+    let (big, small) = (metrics(0), metrics(1));
+    engine.stop();
+    eprintln!(
+        "big: {} overruns, {} lag resets; small: {} overruns, {} lag resets, {} steps",
+        big.overruns, big.lag_resets, small.overruns, small.lag_resets, small.frame
+    );
+    assert!(
+        big.lag_resets + big.overruns > 0,
+        "the big grid kept up: the test needs it not to"
+    );
+    assert_eq!(
+        (small.overruns, small.lag_resets),
+        (0, 0),
+        "the small grid fell behind with the big one"
+    );
 }
 
 /// A switch to a coarser cloth level settles the carried shape when the
@@ -274,12 +293,38 @@ fn a_switch_down_settles_the_carried_shape_when_asked() {
     engine.stop();
 }
 
+/// paper-1 at n×n in symplectic Euler at `dt` (stable or not: only costs matter).
+fn grid(n: usize, dt: f64) -> lodcloth::sim::Simulation {
+    let mut scene = Scene::load(std::path::Path::new("config/scenes/paper-1-top-edge.toml")).expect("scene");
+    scene.params.integrator = Integrator::SymplecticEuler;
+    scene.params.dt = dt;
+    scene.stability = StabilityCheck::Force;
+    scene.build_at(n, n).expect("builds")
+}
+
+/// Seconds of a core per simulated second, timed here: the fastest of five
+/// runs of 10 steps (other tests run beside this one).
+fn cores_per_second(sim: &lodcloth::sim::Simulation) -> f64 {
+    let mut sim = sim.clone();
+    let fastest = (0..5)
+        .map(|_| {
+            let t = std::time::Instant::now();
+            for _ in 0..10 {
+                sim.step();
+            }
+            t.elapsed().as_secs_f64() / 10.0
+        })
+        .fold(f64::INFINITY, f64::min);
+    fastest / sim.params().dt
+}
+
 /// The daemon's default pacing on `threads` stepping threads.
 fn settings(threads: usize) -> EngineSettings {
     EngineSettings {
         threads,
         max_catch_up: 0.1,
         max_lag: 0.25,
+        slice: lodcloth::engine::PASS_SLICE,
         metrics_hz: 10.0,
         replay_class: || {},
     }

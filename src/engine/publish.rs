@@ -26,7 +26,7 @@ pub(super) struct Publishing {
     window_steps: u64,
     window_busy: Duration,
     /// The report of the last full step, which the metrics show.
-    last: Option<StepReport>,
+    pub(super) last: Option<StepReport>,
     states: watch::Sender<Option<Arc<StateFrame>>>,
     metrics: watch::Sender<Option<Arc<MetricsFrame>>>,
     transitions: mpsc::UnboundedSender<Arc<StateFrame>>,

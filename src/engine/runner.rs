@@ -63,6 +63,8 @@ pub(super) struct Pacing {
     max_catch_up: f64,
     /// See [`EngineSettings::max_lag`].
     max_lag: f64,
+    /// See [`EngineSettings::slice`].
+    slice: Duration,
 }
 
 impl Pacing {
@@ -77,6 +79,7 @@ impl Pacing {
             lag_resets: 0,
             max_catch_up: settings.max_catch_up,
             max_lag: settings.max_lag,
+            slice: settings.slice,
         }
     }
 
@@ -232,27 +235,34 @@ impl Runner {
         }
     }
 
-    /// Take the steps due at `now`.
-    pub(super) fn advance(&mut self, now: Instant, pair: &dyn Pair) {
+    /// Take the steps due at `now`, for at most the pass's slice of wall
+    /// time (and one step); returns how many it took.
+    pub(super) fn advance(&mut self, now: Instant, pair: &dyn Pair) -> u64 {
         if self.pacing.stopped() {
             self.pacing.reanchor(now);
-            return;
+            return 0;
         }
         self.let_go_if_idle(now);
         let dt = self.dt();
         let n = self.pacing.steps_due(now, dt, &self.name);
         if n == 0 {
-            return;
+            return 0;
         }
         let t0 = Instant::now();
-        for k in 0..n {
-            self.step_once(pair, k + 1 == n);
-            if self.pacing.paused() {
+        let mut taken = 0;
+        while taken < n {
+            // The pass's last step is a full one (see `step_once`), also
+            // when the slice ends the pass before every due step is taken.
+            let last = taken + 1 == n || t0.elapsed() >= self.pacing.slice;
+            self.step_once(pair, last);
+            taken += 1;
+            if last || self.pacing.paused() {
                 break;
             }
         }
-        self.publishing.count_steps(t0.elapsed(), n, n as f64 * dt);
-        self.pacing.stepped(n);
+        self.publishing.count_steps(t0.elapsed(), taken, taken as f64 * dt);
+        self.pacing.stepped(taken);
+        taken
     }
 
     /// One step. `last`: the tick's last, whose report the metrics show. The
@@ -322,6 +332,8 @@ mod tests {
             threads: 1,
             max_catch_up: 0.1,
             max_lag: 0.25,
+            // No pass is cut short here: the test is of catching up.
+            slice: Duration::from_secs(60),
             metrics_hz: 10.0,
             replay_class: || {},
         };
@@ -330,6 +342,26 @@ mod tests {
             ..InstanceSetup::new("hanging", sim, Level::new(8, 8))
         };
         Runner::new(setup, rx, settings).0
+    }
+
+    /// A pass ends at its slice, its last step a full one, and leaves the
+    /// rest due for the next pass without counting an overrun.
+    #[test]
+    fn a_pass_ends_at_its_slice_and_leaves_the_rest_due() {
+        let mut r = runner();
+        r.pacing.slice = Duration::ZERO;
+        let t0 = r.pacing.origin;
+        let at = t0 + Duration::from_millis(40);
+        assert_eq!(r.advance(at, &Serial), 1, "one step in a slice of nothing");
+        assert_eq!(r.advance(at, &Serial), 1);
+        assert_eq!((r.pacing.steps_since_origin, r.pacing.overruns), (2, 0));
+        assert_eq!(
+            r.publishing.last.map(|rep| rep.step),
+            Some(2),
+            "the pass's step was a full one"
+        );
+        r.pacing.slice = Duration::from_secs(60);
+        assert_eq!(r.advance(at, &Serial), due(40) - 2, "the rest in the next pass");
     }
 
     /// Steps due `ms` milliseconds after the origin at dt = 0.25 ms.

@@ -241,6 +241,7 @@ impl ServiceConfig {
                 threads,
                 max_catch_up: e.max_catch_up,
                 max_lag: e.max_lag,
+                slice: crate::engine::PASS_SLICE,
                 metrics_hz: e.metrics_hz,
                 replay_class: super::client_priority,
             },
