@@ -361,17 +361,16 @@ struct HandleParts {
     status: Arc<Mutex<Status>>,
 }
 
-/// The daemon's [`EngineSettings::slice`]. An instance that needs more
-/// than its thread for a while (paper-2 with self-contact while it folds:
-/// 0.6–0.9 ms a step at a dt of 0.73 ms) caught up 0.1 s of simulated
-/// time in one pass, 50–110 ms of wall time, and every instance on its
-/// thread waited that long and overran with it. With a slice it falls
-/// behind alone.
+/// The daemon's [`EngineSettings::slice`]. Without it, an instance that
+/// needs more than its thread for a while (paper-2 with self-contact while
+/// it folds: 0.6–0.9 ms a step at a dt of 0.73 ms) catches up 0.1 s of
+/// simulated time in one pass, 50–110 ms of wall time, and every instance
+/// on its thread waits that long and overruns with it. With it, that
+/// instance falls behind alone.
 pub const PASS_SLICE: Duration = Duration::from_millis(10);
 
 /// An instance's pass (its commands, steps and publishing) longer than this
-/// is logged by part: every other instance on the thread waited for it,
-/// and at half of `max_catch_up` it is most of an overrun.
+/// is logged by part: every other instance on the thread waited for it.
 const SLOW_PASS: Duration = Duration::from_millis(50);
 
 /// Longest a stepping thread sleeps before looking at its commands again.
