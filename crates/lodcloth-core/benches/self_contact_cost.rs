@@ -16,8 +16,11 @@
 //! per step, the most candidates, and the steps that ended crossing (exact
 //! check, every 10th step).
 //!
+//! With `--timeline N`, only the scene at N×N with self-contact, per half
+//! second of its run (mean and slowest step, flat steps, rebuilds, checks).
+//!
 //! `cargo bench -p lodcloth-core --bench self_contact_cost -- [--levels 32,64] [--thickness 0.003]
-//!  [--scene config/scenes/paper-2-corner.toml] [--scene-levels 16,24,32]`
+//!  [--scene config/scenes/paper-2-corner.toml] [--scene-levels 16,24,32] [--timeline 24]`
 use std::path::Path;
 use std::sync::Arc;
 use std::time::Instant;
@@ -100,6 +103,15 @@ fn main() {
         thickness,
         friction: 0.3,
     };
+    let scene_path = arg(&args, "--scene").unwrap_or(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../config/scenes/paper-2-corner.toml"
+    ));
+    if let Some(n) = arg(&args, "--timeline") {
+        let n = n.parse().expect("--timeline: nodes per side");
+        timeline(Path::new(scene_path), n, contact);
+        return;
+    }
     let path = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../config/scenes/hanging.toml"));
     let mut scene = Scene::load(path).expect("scene");
     scene.params.self_contact = Some(contact);
@@ -167,24 +179,82 @@ fn main() {
     }
     stop.store(true, Ordering::Relaxed);
     helper.join().expect("the helper thread ends");
-    let path = arg(&args, "--scene").unwrap_or(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../../config/scenes/paper-2-corner.toml"
-    ));
     let levels: Vec<usize> = arg(&args, "--scene-levels")
         .unwrap_or("16,24,32")
         .split(',')
         .map(|s| s.parse().expect("--scene-levels: node counts per side"))
         .collect();
-    whole_scene(Path::new(path), &levels, contact);
+    whole_scene(Path::new(scene_path), &levels, contact);
+}
+
+/// The daemon's dt at level `n`: the largest dividing the metric frame
+/// (the reference's dt × 40, `metric_stride`) within 0.75 of the level's
+/// stability limit.
+fn daemon_dt(scene: &Scene, n: usize) -> f64 {
+    let interval = scene.params.dt * 40.0;
+    let limit = scene.build_at(n, n).expect("builds").dt_limit();
+    interval / (interval / (0.75 * limit)).ceil().max(1.0)
+}
+
+/// The scene at one level with self-contact, whole from rest, f32 springs,
+/// one thread: per half second, the mean and slowest step, the share of
+/// steps certified flat, rebuilds and checks per step, the most candidates
+/// and pairs in contact: where in the run self-contact costs what.
+fn timeline(path: &Path, n: usize, contact: SelfContact) {
+    let mut scene = Scene::load(path).expect("scene");
+    scene.params.dt = daemon_dt(&scene, n);
+    scene.params.self_contact = Some(contact);
+    let dt = scene.params.dt;
+    let mut sim = scene.build_at(n, n).expect("builds");
+    sim.set_spring_precision(SpringPrecision::F32);
+    println!(
+        "scene {} at {n}×{n}, dt {dt:.3e} s, self-contact (thickness {} m), f32 springs, one thread; per 0.5 s:",
+        scene.name, contact.thickness
+    );
+    println!("| from s | mean µs | slowest µs | flat | rebuilds / step | checks / step | most candidates | most in contact | impacts |");
+    println!("|---|---|---|---|---|---|---|---|---|");
+    let window = (0.5 / dt).round() as usize;
+    let steps = (scene.duration / dt).round() as usize;
+    for w in 0..steps.div_ceil(window) {
+        let (mut spent, mut slowest, mut flat, mut rebuilds, mut checks) = (0.0, 0.0f64, 0, 0u64, 0u64);
+        let (mut candidates, mut contact_pairs, mut impacts) = (0, 0, 0u64);
+        let count = window.min(steps - w * window);
+        for _ in 0..count {
+            let t = Instant::now();
+            let c = sim.step_on_lean(&Serial).self_contact;
+            let took = t.elapsed().as_secs_f64();
+            spent += took;
+            slowest = slowest.max(took);
+            flat += usize::from(c.flat);
+            rebuilds += u64::from(c.rebuilds);
+            checks += u64::from(c.checks);
+            candidates = candidates.max(c.candidates);
+            contact_pairs = contact_pairs.max(c.proximities);
+            impacts += u64::from(c.impacts);
+        }
+        println!(
+            "| {:.1} | {:.1} | {:.0} | {:.0} % | {:.3} | {:.0} | {candidates} | {contact_pairs} | {impacts} |",
+            w as f64 * 0.5,
+            spent / count as f64 * 1e6,
+            slowest * 1e6,
+            100.0 * flat as f64 / count as f64,
+            rebuilds as f64 / count as f64,
+            checks as f64 / count as f64
+        );
+    }
+    // The same run gives the same bits: a change meant to leave the
+    // trajectory alone shows here whether it did.
+    let sum = sim.state().pos.iter().fold(0.0, |s, x| s + x);
+    println!(
+        "final positions' sum {sum:e}, {} crossings",
+        crossings(sim.topology(), &sim.state().pos).len()
+    );
 }
 
 /// The scene run whole from rest at each level, with self-contact and
 /// without (module docs).
 fn whole_scene(path: &Path, levels: &[usize], contact: SelfContact) {
     let scene = Scene::load(path).expect("scene");
-    // The daemon's metric frame: the reference's dt × 40 (`metric_stride`).
-    let interval = scene.params.dt * 40.0;
     println!(
         "\nscene {} ({}, {:.1} s), run whole from rest, f32 springs, one thread, thickness {} m",
         scene.name,
@@ -197,8 +267,7 @@ fn whole_scene(path: &Path, levels: &[usize], contact: SelfContact) {
     );
     println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     for &n in levels {
-        let limit = scene.build_at(n, n).expect("builds").dt_limit();
-        let dt = interval / (interval / (0.75 * limit)).ceil().max(1.0);
+        let dt = daemon_dt(&scene, n);
         let mut at = scene.clone();
         at.params.dt = dt;
         let steps = (at.duration / dt).round() as usize;

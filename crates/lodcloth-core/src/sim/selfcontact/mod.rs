@@ -561,6 +561,7 @@ fn scan(ws: &SelfWorkspace, check: &Check, vt: &[(u32, u32)], ee: &[(u32, u32)],
         vt,
         Kind { edges: false, split: 1 },
         of_vt,
+        vt_closest,
         vt_proximity,
         vt_impact,
         hits,
@@ -570,6 +571,7 @@ fn scan(ws: &SelfWorkspace, check: &Check, vt: &[(u32, u32)], ee: &[(u32, u32)],
         ee,
         Kind { edges: true, split: 2 },
         of_ee,
+        ee_closest,
         ee_proximity,
         ee_impact,
         hits,
@@ -594,7 +596,8 @@ fn scan_kind(
     pairs: &[(u32, u32)],
     kind: Kind,
     nodes_of: impl Fn((u32, u32)) -> [u32; 4],
-    proximity: impl Fn(&SelfWorkspace, [u32; 4], f64) -> Option<Pair>,
+    closest: impl Fn([V3; 4]) -> Closest,
+    proximity: impl Fn(&SelfWorkspace, [u32; 4], &Closest, f64) -> Option<Pair>,
     impact: impl Fn(&SelfWorkspace, [u32; 4], f64, f64) -> Option<Pair>,
     hits: &mut Vec<Hit>,
 ) -> u32 {
@@ -613,12 +616,21 @@ fn scan_kind(
             id,
             edges: kind.edges,
         };
+        let near = closest(nodes.map(|k| ws.x0[k as usize]));
         if matches!(pass, Pass::First | Pass::Rest) {
-            if let Some(p) = proximity(ws, nodes, h) {
+            if let Some(p) = proximity(ws, nodes, &near, h) {
                 hits.push(hit(p, true));
             }
         }
         if pass == Pass::Rest {
+            continue;
+        }
+        // Two sides further apart than they can close in the step cannot
+        // meet in it (a distance is 1-Lipschitz in each side's nodes): no
+        // root of the coplanarity cubic is sought for them. Twice the
+        // impact tolerance, so rounding never skips a pair the impact test
+        // would report.
+        if near.dist > approach(ws, nodes, kind.split, dt) + 2.0 * IMPACT_TOLERANCE * h {
             continue;
         }
         if let Some(p) = impact(ws, nodes, dt, h) {
@@ -628,22 +640,66 @@ fn scan_kind(
     checks
 }
 
+/// A candidate's closest points at the step's start: their weights (the
+/// gap `Σ wᵢ x0ᵢ` runs from the second side's point to the first's), the
+/// gap and its length.
+struct Closest {
+    w: [f64; 4],
+    gap: V3,
+    dist: f64,
+}
+
+/// The closest points of a node `x[0]` and a triangle `x[1..4]`.
+#[inline]
+fn vt_closest(x: [V3; 4]) -> Closest {
+    let b = point_triangle(x[0], x[1], x[2], x[3]);
+    let q = add(add(scale(x[1], b[0]), scale(x[2], b[1])), scale(x[3], b[2]));
+    let gap = sub(x[0], q);
+    Closest {
+        w: [1.0, -b[0], -b[1], -b[2]],
+        gap,
+        dist: norm(gap),
+    }
+}
+
+/// The closest points of edges `x[0]`–`x[1]` and `x[2]`–`x[3]`.
+#[inline]
+fn ee_closest(x: [V3; 4]) -> Closest {
+    let (s, t) = segment_segment(x[0], x[1], x[2], x[3]);
+    let gap = sub(geometry::lerp(x[0], x[1], s), geometry::lerp(x[2], x[3], t));
+    Closest {
+        w: [1.0 - s, s, -(1.0 - t), -t],
+        gap,
+        dist: norm(gap),
+    }
+}
+
+/// How much closer the pair's two sides (the first `split` nodes, the
+/// rest) can come in the step: the longest move of each side, added.
+#[inline]
+fn approach(ws: &SelfWorkspace, nodes: [u32; 4], split: usize, dt: f64) -> f64 {
+    let longest = |side: &[u32]| {
+        side.iter()
+            .map(|&k| dot(ws.vbar[k as usize], ws.vbar[k as usize]))
+            .fold(0.0, f64::max)
+            .sqrt()
+    };
+    dt * (longest(&nodes[..split]) + longest(&nodes[split..]))
+}
+
 /// A node–triangle pair within `h` at the step's start: the weights of
 /// the node and of the triangle's closest point, the unit normal from
 /// that point to the node, and their distance as `gap0`.
-fn vt_proximity(ws: &SelfWorkspace, nodes: [u32; 4], h: f64) -> Option<Pair> {
-    let x = nodes.map(|k| ws.x0[k as usize]);
-    let b = point_triangle(x[0], x[1], x[2], x[3]);
-    let q = add(add(scale(x[1], b[0]), scale(x[2], b[1])), scale(x[3], b[2]));
-    let d = sub(x[0], q);
-    let dist = norm(d);
+fn vt_proximity(ws: &SelfWorkspace, nodes: [u32; 4], near: &Closest, h: f64) -> Option<Pair> {
+    let dist = near.dist;
     if !(dist < h) {
         return None;
     }
     let normal = if dist > 1e-9 * h {
-        scale(d, 1.0 / dist)
+        scale(near.gap, 1.0 / dist)
     } else {
         // On the triangle: its normal, towards where the node moves from.
+        let x = nodes.map(|k| ws.x0[k as usize]);
         let n = unit(cross(sub(x[2], x[1]), sub(x[3], x[1])))?;
         if dot(n, ws.vbar[nodes[0] as usize]) > 0.0 {
             scale(n, -1.0)
@@ -653,24 +709,22 @@ fn vt_proximity(ws: &SelfWorkspace, nodes: [u32; 4], h: f64) -> Option<Pair> {
     };
     Some(Pair {
         nodes,
-        w: [1.0, -b[0], -b[1], -b[2]],
+        w: near.w,
         normal,
         gap0: dist,
     })
 }
 
 /// An edge–edge pair within `h` at the step's start (as [`vt_proximity`]).
-fn ee_proximity(ws: &SelfWorkspace, nodes: [u32; 4], h: f64) -> Option<Pair> {
-    let x = nodes.map(|k| ws.x0[k as usize]);
-    let (s, t) = segment_segment(x[0], x[1], x[2], x[3]);
-    let d = sub(geometry::lerp(x[0], x[1], s), geometry::lerp(x[2], x[3], t));
-    let dist = norm(d);
+fn ee_proximity(ws: &SelfWorkspace, nodes: [u32; 4], near: &Closest, h: f64) -> Option<Pair> {
+    let dist = near.dist;
     if !(dist < h) {
         return None;
     }
     let normal = if dist > 1e-9 * h {
-        scale(d, 1.0 / dist)
+        scale(near.gap, 1.0 / dist)
     } else {
+        let x = nodes.map(|k| ws.x0[k as usize]);
         let n = unit(cross(sub(x[1], x[0]), sub(x[3], x[2])))?;
         let rel = sub(ws.vbar[nodes[0] as usize], ws.vbar[nodes[2] as usize]);
         if dot(n, rel) > 0.0 {
@@ -681,7 +735,7 @@ fn ee_proximity(ws: &SelfWorkspace, nodes: [u32; 4], h: f64) -> Option<Pair> {
     };
     Some(Pair {
         nodes,
-        w: [1.0 - s, s, -(1.0 - t), -t],
+        w: near.w,
         normal,
         gap0: dist,
     })
