@@ -789,6 +789,50 @@ fn an_instance_steps_its_springs_in_the_configured_precision() {
         .all(|i| i.spring_precision == SpringPrecision::F64));
 }
 
+/// The default daemon serves paper-2, which hangs from one corner and
+/// folds over itself, with self-contact: its live level does not pass
+/// through itself over the scene's first 4 s (exact check, every 10th
+/// step), where the same level without the config's `contact` does (from
+/// about 2.1 s at 16x16).
+#[test]
+fn the_default_daemon_keeps_paper_2_from_passing_through_itself() {
+    let text = std::fs::read_to_string("config/default.toml").expect("default config");
+    let crossing_frames = |text: &str| {
+        let config = ServiceConfig::from_toml(text, "default.toml").expect("valid");
+        let plan = config
+            .instances
+            .iter()
+            .find(|i| i.name == "paper-2")
+            .expect("paper-2 served");
+        let preparer = Preparer::new(Arc::new(plan.clone()), config.estimation, None);
+        let mut sim = preparer.quick_start().expect("builds").sim;
+        let steps = (4.0 / sim.params().dt).round() as usize;
+        let mut frames = 0;
+        for s in 0..steps {
+            sim.step();
+            if s % 10 == 9 && !lodcloth::sim::crossings(sim.topology(), &sim.state().pos).is_empty() {
+                frames += 1;
+            }
+        }
+        (frames, steps / 10)
+    };
+    let (crossed, checked) = crossing_frames(&text);
+    assert_eq!(
+        crossed, 0,
+        "paper-2 crossed itself in {crossed} of {checked} checked frames"
+    );
+    let without: String = text
+        .lines()
+        .filter(|l| !l.starts_with("contact"))
+        .map(|l| format!("{l}\n"))
+        .collect();
+    let (crossed, checked) = crossing_frames(&without);
+    assert!(
+        crossed > 0,
+        "without self-contact paper-2 crossed itself in none of {checked} frames: this test would show nothing"
+    );
+}
+
 // ---------------------------------------------------------------- surfaces
 
 /// A small surface scene: an 800-point sphere, bottom cap pinned, sagging
