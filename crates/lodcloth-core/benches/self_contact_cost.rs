@@ -191,9 +191,8 @@ fn main() {
 /// (the reference's dt × 40, `metric_stride`) within 0.75 of the level's
 /// stability limit.
 fn daemon_dt(scene: &Scene, n: usize) -> f64 {
-    let interval = scene.params.dt * 40.0;
     let limit = scene.build_at(n, n).expect("builds").dt_limit();
-    interval / (interval / (0.75 * limit)).ceil().max(1.0)
+    lodcloth_core::plan::frame_dt(scene.params.dt * 40.0, limit, 0.75)
 }
 
 /// The scene at one level with self-contact, whole from rest, f32 springs,

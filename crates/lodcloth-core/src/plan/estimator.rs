@@ -240,6 +240,12 @@ fn cache_pair(level: Level) -> (usize, usize) {
     }
 }
 
+/// The largest dt ≤ `margin` × `limit` that divides `interval` (a metric
+/// frame holds a whole number of steps), or `interval` when it is smaller.
+pub fn frame_dt(interval: f64, limit: f64, margin: f64) -> f64 {
+    interval / (interval / (margin * limit)).ceil().max(1.0)
+}
+
 /// The largest dt ≤ `margin` × the predicted stability limit of `material` at
 /// `level` that divides the reference's metric frame interval.
 pub fn level_dt(
@@ -254,8 +260,7 @@ pub fn level_dt(
     let interval = reference.dt * reference.spec.metric_stride as f64;
     let probe = LodProblem::at(scene, reference.clone(), level.into(), mass, integrator, interval)?;
     let limit = probe.simulation(material)?.dt_limit();
-    let k = (interval / (margin * limit)).ceil().max(1.0);
-    Ok((interval / k, limit))
+    Ok((frame_dt(interval, limit, margin), limit))
 }
 
 /// `level` of `scene` (a grid `(nx, ny)` or any [`Level`]) as the daemon
@@ -274,7 +279,7 @@ pub fn default_problem(
     // material, then given the largest dt ≤ 0.75 of that limit dividing it.
     let probe = LodProblem::at(scene, reference.clone(), level, mass, integrator, interval)?;
     let limit = probe.simulation(probe.same_material())?.dt_limit();
-    let dt = interval / (interval / (0.75 * limit)).ceil().max(1.0);
+    let dt = frame_dt(interval, limit, 0.75);
     Ok(probe.with_dt(dt)?)
 }
 
@@ -288,7 +293,7 @@ pub fn stable_problem(problem: &LodProblem, material: Material) -> Result<(LodPr
     }
     // The limit does not depend on dt: the same level at a dividing dt.
     let interval = problem.reference.dt * problem.reference.spec.metric_stride as f64;
-    let dt = interval / (interval / (0.8 * limit)).ceil().max(1.0);
+    let dt = frame_dt(interval, limit, 0.8);
     Ok((problem.with_dt(dt)?, limit))
 }
 

@@ -12,7 +12,8 @@ mod touched;
 
 pub use crate::level::{GridLevel, Level};
 pub use estimator::{
-    default_problem, level_dt, notes, progress_every, record_reference, stable_problem, Estimated, Estimator, PlanError,
+    default_problem, frame_dt, level_dt, notes, progress_every, record_reference, stable_problem, Estimated, Estimator,
+    PlanError,
 };
 pub use instance::{EstimationPlan, InstanceKind, InstancePlan};
 pub use prepare::{allowed, Basis, PrepareError, PrepareFailure, Prepared, Preparer, Start};

@@ -660,7 +660,7 @@ impl Preparer {
             Some(dt) => dt,
             None => {
                 let limit = build(interval, StabilityCheck::Force)?.dt_limit();
-                interval / (interval / (0.75 * limit)).ceil().max(1.0)
+                super::estimator::frame_dt(interval, limit, 0.75)
             }
         };
         // A scene that says `force_unstable` gets its configured dt even
