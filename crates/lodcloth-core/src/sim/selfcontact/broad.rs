@@ -92,6 +92,22 @@ pub(super) fn rebuild(ws: &mut SelfWorkspace, h: f64, dt: f64, inv_mass: &[f64],
     (ws.half_a, ws.half_b) = (a, b);
 }
 
+/// Marks a candidate's second index (a triangle or an edge) when the pair
+/// is closer than the thickness in the rest shape: such a pair gets no
+/// proximity impulse (it would keep the cloth from resting) but is still
+/// checked for impacts, so it cannot pass through itself either.
+pub(super) const REST_PAIR: u32 = 1 << 31;
+
+/// `index`, marked [`REST_PAIR`] when `rest`.
+#[inline]
+fn flagged(index: u32, rest: bool) -> u32 {
+    if rest {
+        index | REST_PAIR
+    } else {
+        index
+    }
+}
+
 /// One half of a rebuild's candidates, with its scratch list.
 #[derive(Debug, Clone, Default)]
 pub(super) struct Half {
@@ -117,10 +133,7 @@ fn query(
         ws.tbvh.each_overlap(&ws.vbox[v as usize], |t| hits.push(t));
         for &t in hits.iter() {
             let tri = ws.tris[t as usize];
-            if tri.contains(&v)
-                || (pinned(&v) && tri.iter().all(pinned))
-                || (!ws.rest_vt.is_empty() && ws.rest_vt.binary_search(&(v, t)).is_ok())
-            {
+            if tri.contains(&v) || (pinned(&v) && tri.iter().all(pinned)) {
                 continue;
             }
             // Out of reach: no move within the boxes brings it within h.
@@ -131,7 +144,8 @@ fn query(
             if norm(sub(x[0], q)) - reach >= h {
                 continue;
             }
-            out.vt.push((v, t));
+            let rest = !ws.rest_vt.is_empty() && ws.rest_vt.binary_search(&(v, t)).is_ok();
+            out.vt.push((v, flagged(t, rest)));
         }
     }
     for e in edges {
@@ -143,10 +157,7 @@ fn query(
         });
         for &f in hits.iter() {
             let (a, b) = (ws.edges[e as usize], ws.edges[f as usize]);
-            if a.iter().any(|k| b.contains(k))
-                || (a.iter().all(pinned) && b.iter().all(pinned))
-                || (!ws.rest_ee.is_empty() && ws.rest_ee.binary_search(&(e, f)).is_ok())
-            {
+            if a.iter().any(|k| b.contains(k)) || (a.iter().all(pinned) && b.iter().all(pinned)) {
                 continue;
             }
             let x = [a[0], a[1], b[0], b[1]].map(|k| ws.x0[k as usize]);
@@ -156,7 +167,8 @@ fn query(
             if gap - (side(a) + side(b)) >= h {
                 continue;
             }
-            out.ee.push((e, f));
+            let rest = !ws.rest_ee.is_empty() && ws.rest_ee.binary_search(&(e, f)).is_ok();
+            out.ee.push((e, flagged(f, rest)));
         }
     }
 }

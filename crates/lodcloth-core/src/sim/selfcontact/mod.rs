@@ -8,10 +8,10 @@
 //! node's velocity gets the same change as `v̄` (Bridson, Fedkiw and
 //! Anderson 2002, "Robust treatment of collisions, contact and friction
 //! for cloth animation"), whatever the integrator. Pairs are a node and a
-//! triangle, or two edges, that share no node and are not closer than the
+//! triangle, or two edges, that share no node. A pair closer than the
 //! thickness in the rest shape (a sliver of a simplified mesh holds a node
-//! that close to its neighbour's triangle: pushing them apart would keep
-//! the cloth from resting).
+//! that close to its neighbour's triangle) gets no proximity impulse,
+//! which would keep the cloth from resting, but impacts as any other.
 //!
 //! 1. **Proximity.** A pair closer than the `thickness` h at `x0` gets an
 //!    impulse along the line between its closest points, so that the two
@@ -77,7 +77,7 @@ mod tests;
 
 pub use geometry::{coplanar_times, point_triangle, segment_segment};
 
-use broad::{candidates_hold, rebuild, sweeps_meet, Half};
+use broad::{candidates_hold, rebuild, sweeps_meet, Half, REST_PAIR};
 use bvh::{Aabb, Bvh};
 use response::{move_zones, repel, respond};
 
@@ -604,7 +604,8 @@ fn scan_kind(
     let Check { pass, since, dt, h } = *check;
     let stale = |nodes: [u32; 4]| since == 0 || nodes.iter().any(|&k| ws.changed[k as usize] >= since);
     let mut checks = 0;
-    for &id in pairs {
+    for &marked in pairs {
+        let (id, rest) = ((marked.0, marked.1 & !REST_PAIR), marked.1 & REST_PAIR != 0);
         let nodes = nodes_of(id);
         if !stale(nodes) || !sweeps_meet(ws, nodes, kind.split, dt, h) {
             continue;
@@ -617,7 +618,7 @@ fn scan_kind(
             edges: kind.edges,
         };
         let near = closest(nodes.map(|k| ws.x0[k as usize]));
-        if matches!(pass, Pass::First | Pass::Rest) {
+        if matches!(pass, Pass::First | Pass::Rest) && !rest {
             if let Some(p) = proximity(ws, nodes, &near, h) {
                 hits.push(hit(p, true));
             }

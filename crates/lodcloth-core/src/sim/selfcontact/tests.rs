@@ -115,3 +115,40 @@ fn nodes_that_collide_with_held_ones_are_held_too() {
     let crossing = crossings(&topology, &pos);
     assert!(crossing.is_empty(), "{} crossings after the fallback", crossing.len());
 }
+
+/// Two sheets half the thickness apart at rest, as a simplified mesh's
+/// sliver holds a node that close to a triangle it does not share: at rest
+/// nothing pushes them apart (the cloth could not rest), yet when one is
+/// thrown through the other in a step the impacts stop it.
+#[test]
+fn pairs_closer_than_the_thickness_at_rest_are_not_pushed_apart_yet_cannot_cross() {
+    let settings = SelfContact {
+        thickness: 0.003,
+        friction: 0.3,
+    };
+    let dt = 1e-3;
+    let topology = sheets(&[[0.0; 3], [0.004, -0.007, 0.0015]]);
+    let n = topology.n_nodes;
+    let inv_mass = vec![1.0; n];
+    let mut ws = SelfWorkspace::new(&topology, &settings);
+    assert!(
+        !ws.rest_vt.is_empty() && !ws.rest_ee.is_empty(),
+        "the sheets are closer than h at rest"
+    );
+    let before = moved(&topology, &[]);
+
+    // At rest: nothing moves.
+    let (mut pos, mut vel) = (before.clone(), vec![0.0; 3 * n]);
+    resolve(&settings, dt, &before, &mut pos, &mut vel, &inv_mass, &mut ws, &Serial);
+    assert_eq!(pos, before, "a pair that close at rest is not pushed apart");
+
+    // The upper sheet's left half thrown 1 cm down through the lower one
+    // in a step.
+    let after = moved(&topology, &[(1, M / 2, -0.01)]);
+    assert!(!crossings(&topology, &after).is_empty(), "the move crosses");
+    let (mut pos, mut vel) = (after.clone(), vec![0.0; 3 * n]);
+    let out = resolve(&settings, dt, &before, &mut pos, &mut vel, &inv_mass, &mut ws, &Serial);
+    assert!(out.impacts > 0 || out.zone_rounds > 0, "{out:?}");
+    let crossing = crossings(&topology, &pos);
+    assert!(crossing.is_empty(), "{} crossings: {out:?}", crossing.len());
+}
