@@ -101,6 +101,7 @@ pub(super) const REST_PAIR: u32 = 1 << 31;
 /// `index`, marked [`REST_PAIR`] when `rest`.
 #[inline]
 fn flagged(index: u32, rest: bool) -> u32 {
+    debug_assert!(index < REST_PAIR, "triangle or edge {index} past the mark's bit");
     if rest {
         index | REST_PAIR
     } else {

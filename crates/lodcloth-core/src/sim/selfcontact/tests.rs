@@ -1,6 +1,7 @@
-//! The last fallback ([`hold`]) on its own, by the exact count of
-//! `sim::crossings`: holding the nodes of the pairs that collide can make
-//! others collide with them, and those are held too.
+//! Self-contact's parts on their own, judged by the exact count of
+//! `sim::crossings`: the last fallback ([`hold`]), where holding the nodes
+//! of the pairs that collide can make others collide with them, and those
+//! are held too; and pairs closer than the thickness at rest.
 
 use super::*;
 use crate::sim::crossings;
