@@ -17,13 +17,13 @@
 use std::sync::Arc;
 use std::time::Instant;
 
-use lodcloth::estimate::touched::{probes, record_touched};
+use lodcloth::estimate::touched::{probes, record_touched, Hand};
 use lodcloth::estimate::Method;
 use lodcloth::plan::{Basis, Preparer};
 use lodcloth::scene::Scene;
 use lodcloth::service::config::ServiceConfig;
 use lodcloth::sim::{crossings, Simulation, Topology};
-use lodcloth::touch::{Input, Script, Touch, TouchError, SOFTEN_AT_SWITCH};
+use lodcloth::touch::Script;
 
 /// The config's text with instance `name`'s `contact` line set (`Some`)
 /// or removed (`None`: the scene's own, which for the shipped scenes is
@@ -56,42 +56,11 @@ type Count = (usize, usize, usize);
 fn run(sim: &mut Simulation, script: Option<&Script>, scene: &Scene, seconds: f64, check: bool, why: bool) -> Count {
     let dt = sim.params().dt;
     let steps = (seconds / dt).round() as usize;
-    let mut touch = Touch::new(scene);
-    let mut next = 0;
+    let mut hand = script.map(|script| Hand::new(script, scene));
     let (mut frames, mut worst) = (0, 0);
     for s in 0..steps {
-        if let Some(script) = script {
-            let due = sim.state().time + 0.5 * dt;
-            while let Some((t, input)) = script.events().get(next) {
-                if *t > due {
-                    break;
-                }
-                match touch.apply(input, sim) {
-                    Ok(()) => {}
-                    Err(TouchError::Unstable { max, .. }) if max > 0.0 => {
-                        let Input::Grab {
-                            id,
-                            at,
-                            target,
-                            damping,
-                            ..
-                        } = *input
-                        else {
-                            unreachable!("only a grab can be unstable")
-                        };
-                        let softer = Input::Grab {
-                            id,
-                            at,
-                            target,
-                            stiffness: SOFTEN_AT_SWITCH * max,
-                            damping,
-                        };
-                        touch.apply(&softer, sim).expect("a softened grab");
-                    }
-                    Err(e) => panic!("the drag's input at {t} s was refused: {e}"),
-                }
-                next += 1;
-            }
+        if let Some(hand) = &mut hand {
+            hand.apply_due("the drag", sim).expect("the drag's inputs are accepted");
         }
         if !sim.step().finite {
             println!("    diverged at step {s}");

@@ -502,8 +502,10 @@ impl LodProblem {
 }
 
 /// A script applied to one simulation, softening a grab its step cannot
-/// hold (as the daemon does at a switch).
-struct Hand<'a> {
+/// hold (as the daemon does at a switch): how the standard drags are put on
+/// the reference and on each level.
+#[derive(Debug)]
+pub struct Hand<'a> {
     script: &'a Script,
     touch: Touch,
     next: usize,
@@ -511,7 +513,8 @@ struct Hand<'a> {
 }
 
 impl<'a> Hand<'a> {
-    fn new(script: &'a Script, scene: &Scene) -> Hand<'a> {
+    /// `script` on a cloth of `scene`, nothing applied yet.
+    pub fn new(script: &'a Script, scene: &Scene) -> Hand<'a> {
         Hand {
             script,
             touch: Touch::new(scene),
@@ -520,7 +523,14 @@ impl<'a> Hand<'a> {
         }
     }
 
-    fn apply_due(&mut self, probe: &str, sim: &mut Simulation) -> Result<(), TouchedError> {
+    /// The stiffness a grab was softened to, if one was (N/m).
+    pub fn softened(&self) -> Option<f64> {
+        self.softened
+    }
+
+    /// Apply every event due at `sim`'s current time (within half a step);
+    /// `probe` names the drag in an error.
+    pub fn apply_due(&mut self, probe: &str, sim: &mut Simulation) -> Result<(), TouchedError> {
         let due = sim.state().time + 0.5 * sim.params().dt;
         while let Some((t, input)) = self.script.events().get(self.next) {
             if *t > due {
