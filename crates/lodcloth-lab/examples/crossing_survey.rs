@@ -25,10 +25,8 @@ use lodcloth::service::config::ServiceConfig;
 use lodcloth::sim::{crossings, Simulation, Topology};
 use lodcloth::touch::Script;
 
-/// The config's text with instance `name`'s `contact` line set (`Some`)
-/// or removed (`None`: the scene's own, which for the shipped scenes is
-/// off).
-fn with_contact(text: &str, name: &str, on: Option<bool>) -> String {
+/// The config's text with instance `name`'s `contact` line set to `on`.
+fn with_contact(text: &str, name: &str, on: bool) -> String {
     let mut out = String::new();
     let mut inside = false;
     for line in text.lines() {
@@ -40,7 +38,7 @@ fn with_contact(text: &str, name: &str, on: Option<bool>) -> String {
         }
         out.push_str(line);
         out.push('\n');
-        if let (true, Some(on)) = (inside && line.starts_with("name = "), on) {
+        if inside && line.starts_with("name = ") {
             out.push_str(&format!("contact = {{ self = {on} }}\n"));
         }
     }
@@ -123,7 +121,7 @@ fn main() {
     let why = args.iter().any(|a| a == "--why");
     let text = std::fs::read_to_string("config/default.toml").expect("run from the repository's root");
     let text = match contact {
-        Some(on) => with_contact(&text, &name, Some(on)),
+        Some(on) => with_contact(&text, &name, on),
         None => text,
     };
     let config = ServiceConfig::from_toml(&text, "default.toml").expect("a valid config");
